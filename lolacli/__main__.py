@@ -1,0 +1,3 @@
+from lolacli.cli.main import main
+
+main()

@@ -1,0 +1,66 @@
+"""Options and output helpers shared by every command group.
+
+Data goes to stdout (JSON, tables); hints, warnings and progress go to stderr. Commands
+raise :class:`~lolacli.errors.LolaError`; :func:`lolacli.cli.main.main` maps them to one line
+on stderr and the exit code of DESIGN.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+
+class OutputFormat(str, Enum):
+    human = "human"
+    json = "json"
+
+
+FormatOption = Annotated[
+    OutputFormat,
+    typer.Option("--format", "-f", help="Output format: human (tables) or json (stdout)."),
+]
+
+EniArgument = Annotated[
+    Path,
+    typer.Argument(help="ENI file (EtherCATConfig XML).", show_default=False),
+]
+
+
+def default_eni() -> Path:
+    """The embedded LOLA chain, used wherever an ENI is optional."""
+    from importlib.resources import files
+
+    return Path(str(files("lolacli.eni_examples").joinpath("lola.xml")))
+
+
+def emit_json(data: Any) -> None:
+    """Write one JSON document to stdout."""
+    sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+    sys.stdout.flush()
+
+
+def stdout_console() -> Any:
+    from rich.console import Console
+
+    return Console(highlight=False, soft_wrap=False)
+
+
+def stderr_console() -> Any:
+    from rich.console import Console
+
+    return Console(stderr=True, highlight=False)
+
+
+def warn(message: str) -> None:
+    sys.stderr.write(f"lolacli: {message}\n")
+
+
+def debug_enabled() -> bool:
+    return os.environ.get("LOLACLI_DEBUG", "") not in ("", "0")

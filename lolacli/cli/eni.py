@@ -1,0 +1,7 @@
+"""`lolacli eni …` commands."""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(no_args_is_help=True, help="eni commands.")

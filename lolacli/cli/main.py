@@ -1,0 +1,64 @@
+"""Entry point: ``lolacli``. Sub-apps are registered here; each imports its library lazily."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+from typer.core import TyperGroup
+
+from lolacli import __version__
+from lolacli.cli import bus, capture, eni
+from lolacli.cli.common import debug_enabled
+
+class _LolaGroup(TyperGroup):
+    """Root group: maps library errors to one stderr line and the documented exit code."""
+
+    def invoke(self, ctx: click.Context) -> object:
+        from lolacli.errors import LolaError
+
+        try:
+            return super().invoke(ctx)
+        except LolaError as exc:
+            if debug_enabled():
+                raise
+            sys.stderr.write(f"lolacli: error: {exc}\n")
+            raise click.exceptions.Exit(exc.exit_code) from None
+        except KeyboardInterrupt:
+            sys.stderr.write("lolacli: interrupted\n")
+            raise click.exceptions.Exit(130) from None
+
+
+app = typer.Typer(
+    cls=_LolaGroup,
+    name="lolacli",
+    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation.",
+    rich_markup_mode=None,
+    pretty_exceptions_enable=False,
+    no_args_is_help=True,
+    add_completion=False,
+)
+app.add_typer(eni.app, name="eni")
+app.add_typer(bus.app, name="bus")
+app.add_typer(capture.app, name="capture")
+
+
+def _version(value: bool) -> None:
+    if value:
+        sys.stdout.write(f"lolacli {__version__}\n")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Show the version and exit."
+    ),
+) -> None:
+    """EtherCAT bus commissioning and diagnostics."""
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the CLI (the ``lolacli`` console script)."""
+    app(args=argv)

@@ -1,0 +1,1 @@
+"""ENI model and parser (pure: strings and bytes in, values out)."""

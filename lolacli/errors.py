@@ -1,0 +1,99 @@
+"""The error tree of lolacli.
+
+Every error the library raises on purpose is a :class:`LolaError`. Each class carries the
+fields a caller needs to act on it, and the process exit code the CLI maps it to (see the
+exit-code table in DESIGN.md): 1 check failed, 2 usage, 3 bad input, 4 bus or transport.
+"""
+
+from __future__ import annotations
+
+
+class LolaError(Exception):
+    """Base of every error lolacli raises on purpose."""
+
+    exit_code: int = 1
+
+
+class UsageError(LolaError):
+    """The caller asked for something that cannot be done as asked (exit 2)."""
+
+    exit_code = 2
+
+
+class InputError(LolaError):
+    """An input file or byte string is unreadable or invalid (exit 3).
+
+    ``path`` names the file where there is one; ``line`` (1-based) or ``offset`` (bytes)
+    say where in it, when known.
+    """
+
+    exit_code = 3
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        path: str | None = None,
+        line: int | None = None,
+        offset: int | None = None,
+    ) -> None:
+        self.message = message
+        self.path = path
+        self.line = line
+        self.offset = offset
+        super().__init__(self.one_line())
+
+    def one_line(self) -> str:
+        where = ""
+        if self.path is not None:
+            where = self.path
+            if self.line is not None:
+                where += f":{self.line}"
+            elif self.offset is not None:
+                where += f"@{self.offset}"
+            where += ": "
+        elif self.offset is not None:
+            where = f"offset {self.offset}: "
+        return where + " ".join(self.message.split())
+
+
+class WireError(InputError):
+    """Bytes that are not a well-formed EtherCAT frame, datagram, mailbox or CoE message."""
+
+
+class EniError(InputError):
+    """An ENI file that cannot be read or is not an ENI."""
+
+
+class CaptureError(InputError):
+    """A capture file that cannot be read at all (bad magic, not a capture)."""
+
+
+class TransportError(LolaError):
+    """A bus or transport failure: no interface, no permission, timeout, no answer (exit 4)."""
+
+    exit_code = 4
+
+
+class WorkingCounterError(LolaError):
+    """A datagram came back with a working counter other than the expected one."""
+
+    def __init__(self, cmd: str, expected: int, received: int) -> None:
+        self.cmd = cmd
+        self.expected = expected
+        self.received = received
+        super().__init__(f"{cmd}: working counter {received}, expected {expected}")
+
+
+class SdoAbortError(LolaError):
+    """An SDO transfer ended with an abort (CiA 301 abort code)."""
+
+    def __init__(self, index: int, subindex: int, code: int, message: str = "") -> None:
+        self.index = index
+        self.subindex = subindex
+        self.code = code
+        self.text = message
+        super().__init__(
+            f"SDO 0x{index:04X}:{subindex:02X} aborted: code 0x{code:08X}"
+            + (f", {message}" if message else "")
+        )

@@ -1,0 +1,46 @@
+"""Shared fixtures: the corpus beside the repo (LOLACLI_CORPUS), the CLI runner."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+CORPUS = Path(os.environ.get("LOLACLI_CORPUS", ROOT.parent / "shared" / "corpus"))
+
+
+def corpus_files(kind: str, pattern: str = "*") -> list[Path]:
+    """Files of one corpus folder (eni, pcap, esi, eds); empty when the corpus is absent."""
+    folder = CORPUS / kind
+    return sorted(folder.glob(pattern)) if folder.is_dir() else []
+
+
+def corpus_ids(paths: list[Path]) -> list[str]:
+    return [p.name for p in paths]
+
+
+@pytest.fixture
+def corpus() -> Path:
+    if not CORPUS.is_dir():
+        pytest.skip(f"corpus not found at {CORPUS}")
+    return CORPUS
+
+
+@pytest.fixture
+def cli():
+    """Run the CLI in-process: returns (exit_code, stdout, stderr)."""
+    from typer.testing import CliRunner
+
+    from lolacli.cli.main import app
+
+    runner = CliRunner()
+
+    def run(*args: str) -> tuple[int, str, str]:
+        result = runner.invoke(app, [str(a) for a in args])
+        if result.exception is not None and not isinstance(result.exception, SystemExit):
+            raise result.exception
+        return result.exit_code, result.stdout, result.stderr
+
+    return run
