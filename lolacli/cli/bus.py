@@ -1,7 +1,8 @@
-"""`lolacli bus …` commands."""
+"""`lolacli bus …`: the group. Commands live in their own modules (bus_timing, bus_emulate)
+and register themselves on :data:`app` when :mod:`lolacli.cli.main` imports them."""
 
 from __future__ import annotations
 
 import typer
 
-app = typer.Typer(no_args_is_help=True, help="bus commands.")
+app = typer.Typer(no_args_is_help=True, help="Bus timing model, emulated chain, scanning.")

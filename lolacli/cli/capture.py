@@ -4,4 +4,4 @@ from __future__ import annotations
 
 import typer
 
-app = typer.Typer(no_args_is_help=True, help="capture commands.")
+app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captures.")

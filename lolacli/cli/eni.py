@@ -4,4 +4,4 @@ from __future__ import annotations
 
 import typer
 
-app = typer.Typer(no_args_is_help=True, help="eni commands.")
+app = typer.Typer(no_args_is_help=True, help="Read, check and compare ENI files.")

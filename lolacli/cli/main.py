@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 import sys
+from typing import Any
 
-import click
 import typer
 from typer.core import TyperGroup
 
 from lolacli import __version__
-from lolacli.cli import bus, capture, eni
+from lolacli.cli import bus, bus_emulate, bus_timing, capture, eni  # noqa: F401
 from lolacli.cli.common import debug_enabled
+
 
 class _LolaGroup(TyperGroup):
     """Root group: maps library errors to one stderr line and the documented exit code."""
 
-    def invoke(self, ctx: click.Context) -> object:
+    def invoke(self, ctx: Any) -> Any:  # typer.Context; click is vendored in typer
         from lolacli.errors import LolaError
 
         try:
@@ -24,10 +25,10 @@ class _LolaGroup(TyperGroup):
             if debug_enabled():
                 raise
             sys.stderr.write(f"lolacli: error: {exc}\n")
-            raise click.exceptions.Exit(exc.exit_code) from None
+            raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
             sys.stderr.write("lolacli: interrupted\n")
-            raise click.exceptions.Exit(130) from None
+            raise typer.Exit(130) from None
 
 
 app = typer.Typer(

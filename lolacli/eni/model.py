@@ -10,10 +10,10 @@ model, never the XML.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 
 
-class Direction(str, Enum):
+class Direction(StrEnum):
     """Process-data direction, seen from the master."""
 
     INPUT = "input"  # slave -> master (TxPDO)

@@ -1,0 +1,5 @@
+"""`lolacli bus emulate`."""
+
+from __future__ import annotations
+
+from lolacli.cli.bus import app  # noqa: F401  (commands register on the bus group)
