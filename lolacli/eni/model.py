@@ -99,6 +99,7 @@ class InitCmd:
     validate_mask: bytes | None = None
     validate_timeout_ms: int | None = None
     logical_address: int | None = None  # set instead of adp/ado for logical commands
+    timeout_ms: int | None = None  # <Timeout> of the InitCmd itself
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,6 +193,7 @@ class CyclicCommand:
 class CyclicFrame:
     commands: tuple[CyclicCommand, ...]
     comment: str = ""
+    cycle_time_factor: int | None = None  # <Frame CycleTimeFactor=…> (Elmo Application Studio)
 
     @property
     def frame_bytes(self) -> int:
@@ -236,6 +238,7 @@ class Master:
     source_mac: bytes = b"\x00" * 6
     ethertype: int = 0x88A4
     init_cmds: tuple[InitCmd, ...] = ()
+    cycle_time_ns: int | None = None  # <Master><CycleTime> (Elmo Application Studio exports)
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,672 @@
+"""Parse an ENI (ETG.2100 EtherCAT Network Information) document into :mod:`lolacli.eni.model`.
+
+Pure: bytes in, an :class:`~lolacli.eni.model.Eni` out; every failure is an
+:class:`~lolacli.errors.EniError` naming ``source`` and, where known, the line.
+
+Hostile XML is refused in two layers. First defusedxml's expat parser with DTDs forbidden
+reads the document: a ``<!DOCTYPE`` (and with it every entity, internal or external, so
+billion laughs, quadratic blow-up and XXE) stops it at once, and malformed or truncated
+XML fails with expat's line. Then lxml, with entity resolution, DTD loading and network
+access off, builds the tree we read (lxml gives ``sourceline`` for later messages).
+
+The reader follows the exports found in the wild, not only the schema's order: TwinCAT,
+acontis EC-Engineer/EniEngine (``<EncryptedEtherCATConfig>`` with a plain body, whole
+file on one line) and Elmo Application Studio (vendor elements before ``<Config>``, no
+``<CycleTime>``, ``<Frame CycleTimeFactor=…>``). Numbers are decimal, ``#x…`` or ``0x…``.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from collections.abc import Iterable, Iterator
+from decimal import Decimal, InvalidOperation
+from typing import Any
+from xml.etree.ElementTree import ParseError
+
+from lolacli.eni.model import (
+    CoeInitCmd,
+    Cyclic,
+    CyclicCommand,
+    CyclicFrame,
+    Direction,
+    DistributedClock,
+    Eni,
+    Fmmu,
+    Identity,
+    InitCmd,
+    Mailbox,
+    Master,
+    Pdo,
+    PdoEntry,
+    ProcessDataArea,
+    ProcessImage,
+    Slave,
+    SyncManager,
+    Variable,
+)
+from lolacli.errors import EniError
+
+#: Root elements we accept. acontis tools write the second with a plain (unencrypted) body.
+ENI_ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
+
+#: ESC registers (ETG.1000.4 Table 56 FMMU, Table 58 sync manager; ETG.1000.6 §5.6 DC).
+FMMU_REGISTER = 0x0600
+FMMU_BYTES = 16
+FMMU_COUNT = 16
+SM_REGISTER = 0x0800
+SM_BYTES = 8
+SM_COUNT = 16
+DC_ACTIVATION_REGISTER = 0x0980
+
+_FMMU = struct.Struct("<IHBBHBBB3x")  # ETG.1000.4 Table 56
+_SM = struct.Struct("<HHBBBB")  # ETG.1000.4 Table 58: start, length, control, status, activate, pdi
+_U16 = struct.Struct("<H")
+
+_El = Any  # an lxml element (lxml ships no type information)
+
+_TRUE = frozenset({"1", "true", "yes"})
+_FIRST_ELEMENT = re.compile(rb"<[A-Za-z_:]")
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def parse_eni(data: bytes | str, source: str = "<string>") -> Eni:
+    """Parse an ENI document. Raises :class:`EniError` (path ``source``, line) on any defect."""
+    raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    root = _safe_tree(raw, source)
+    return _Reader(source).eni(root)
+
+
+def _safe_tree(raw: bytes, source: str) -> _El:
+    """The lxml root of ``raw`` after the defusedxml gate; refuses DTDs and entities."""
+    if not raw.strip():
+        raise EniError("empty file, not an ENI", path=source)
+    _refuse_doctype_prolog(raw, source)
+    _defused_gate(raw, source)
+    return _lxml_root(raw, source)
+
+
+def _refuse_doctype_prolog(raw: bytes, source: str) -> None:
+    """Fast path for ASCII-compatible encodings: a DOCTYPE before the root element."""
+    first = _FIRST_ELEMENT.search(raw)
+    prolog = raw if first is None else raw[: first.start()]
+    at = prolog.find(b"<!DOCTYPE")
+    if at >= 0:
+        raise EniError(_DTD_MESSAGE, path=source, line=raw.count(b"\n", 0, at) + 1)
+
+
+_DTD_MESSAGE = "DOCTYPE/DTD not allowed in an ENI (entities and external references are refused)"
+
+
+def _defused_gate(raw: bytes, source: str) -> None:
+    from defusedxml import DefusedXmlException
+    from defusedxml.ElementTree import DefusedXMLParser
+
+    parser = DefusedXMLParser(
+        target=_NullTarget(), forbid_dtd=True, forbid_entities=True, forbid_external=True
+    )
+    try:
+        parser.feed(raw)
+        parser.close()
+    except DefusedXmlException as exc:
+        line = int(parser.parser.CurrentLineNumber)
+        raise EniError(f"{_DTD_MESSAGE} ({type(exc).__name__})", path=source, line=line) from exc
+    except ParseError as exc:
+        line, _column = exc.position
+        message = str(exc).split(": line ")[0]
+        raise EniError(f"not well-formed XML: {message}", path=source, line=line) from exc
+
+
+class _NullTarget:
+    """An expat target that builds nothing: the gate only checks, lxml builds the tree."""
+
+
+def _lxml_root(raw: bytes, source: str) -> _El:
+    from lxml import etree
+
+    parser = etree.XMLParser(
+        resolve_entities=False,
+        no_network=True,
+        load_dtd=False,
+        dtd_validation=False,
+        huge_tree=False,
+        remove_comments=True,
+        remove_pis=True,
+    )
+    try:
+        root = etree.fromstring(raw, parser)
+    except etree.XMLSyntaxError as exc:
+        raise EniError(f"not well-formed XML: {exc.msg}", path=source, line=exc.lineno) from exc
+    docinfo = root.getroottree().docinfo
+    if docinfo.doctype or docinfo.internalDTD is not None:
+        raise EniError(_DTD_MESSAGE, path=source, line=1)
+    _strip_namespaces(root)
+    return root
+
+
+def _strip_namespaces(root: _El) -> None:
+    """Local names only, so that plain ``find`` paths work on namespaced exports too."""
+    for el in root.iter():
+        tag = el.tag
+        if isinstance(tag, str) and tag.startswith("{"):
+            el.tag = tag.rsplit("}", 1)[-1]
+
+
+# --------------------------------------------------------------------------- scalars
+
+
+def parse_number(text: str) -> int:
+    """An ENI integer: decimal, ``#x1A00`` or ``0x1A00`` (optionally signed). ValueError if not."""
+    t = text.strip().replace("_", "")
+    sign = -1 if t.startswith("-") else 1
+    t = t.lstrip("+-")
+    if t[:2] in ("#x", "#X", "0x", "0X"):
+        return sign * int(t[2:], 16)
+    if not t.isdigit():
+        raise ValueError(text)
+    return sign * int(t, 10)
+
+
+def _local(tag: object) -> str:
+    if not isinstance(tag, str):
+        return ""  # comments, processing instructions
+    return tag.rsplit("}", 1)[-1]
+
+
+class _Reader:
+    """Element helpers bound to one source name (for error messages)."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    # -- element access (namespace-agnostic) --
+
+    def children(self, el: _El, name: str) -> list[_El]:
+        return list(el.iterchildren(name))
+
+    def child(self, el: _El | None, path: str) -> _El | None:
+        return None if el is None else el.find(path)
+
+    def text(self, el: _El | None, path: str, default: str = "") -> str:
+        node = self.child(el, path)
+        if node is None or node.text is None:
+            return default
+        return str(node.text)
+
+    def error(self, el: _El | None, message: str) -> EniError:
+        line = None if el is None else el.sourceline
+        return EniError(message, path=self.source, line=line)
+
+    def number(self, el: _El | None, path: str, default: int | None = None) -> int | None:
+        node = self.child(el, path)
+        if node is None or node.text is None or not node.text.strip():
+            return default
+        try:
+            return parse_number(node.text)
+        except ValueError:
+            raise self.error(node, f"<{path}>: not a number: {node.text.strip()!r}") from None
+
+    def need(self, el: _El, path: str) -> int:
+        value = self.number(el, path)
+        if value is None:
+            raise self.error(el, f"<{_local(el.tag)}> has no <{path}>")
+        return value
+
+    def flag(self, el: _El | None, path: str) -> bool:
+        return self.text(el, path).strip().lower() in _TRUE
+
+    def attr_flag(self, el: _El, name: str) -> bool:
+        return str(el.get(name, "")).strip().lower() in _TRUE
+
+    def hexdata(self, el: _El | None, path: str) -> bytes | None:
+        node = self.child(el, path)
+        if node is None:
+            return None
+        text = "".join((node.text or "").split())
+        try:
+            return bytes.fromhex(text)
+        except ValueError:
+            raise self.error(node, f"<{path}>: not hex data: {text[:40]!r}") from None
+
+    def texts(self, el: _El, name: str) -> tuple[str, ...]:
+        return tuple(str(c.text).strip() for c in self.children(el, name) if c.text)
+
+    # -- document --
+
+    def eni(self, root: _El) -> Eni:
+        name = _local(root.tag)
+        if name not in ENI_ROOTS:
+            raise self.error(root, f"not an ENI: root element is <{name}>, not <EtherCATConfig>")
+        config = self.child(root, "Config")
+        if config is None:
+            raise self.error(root, f"<{name}> has no <Config>")
+        slaves = tuple(self.slave(el, i + 1) for i, el in enumerate(self.children(config, "Slave")))
+        return Eni(
+            master=self.master(self.child(config, "Master")),
+            slaves=slaves,
+            cyclic=tuple(self.cyclic(el) for el in self.children(config, "Cyclic")),
+            process_image=self.process_image(self.child(config, "ProcessImage")),
+            root=name,
+            source=self.source,
+        )
+
+    # -- master --
+
+    def master(self, el: _El | None) -> Master:
+        if el is None:
+            return Master()
+        info = self.child(el, "Info")
+        cycle_us = self.text(el, "CycleTime").strip()  # Elmo Application Studio only
+        return Master(
+            name=self.text(info, "Name").strip(),
+            destination_mac=self.mac(info, "Destination", b"\xff" * 6),
+            source_mac=self.mac(info, "Source", b"\x00" * 6),
+            ethertype=self.ethertype(info),
+            init_cmds=self.init_cmds(self.child(el, "InitCmds")),
+            cycle_time_ns=self.microseconds_ns(el, cycle_us) if cycle_us else None,
+        )
+
+    def mac(self, info: _El | None, name: str, default: bytes) -> bytes:
+        data = self.hexdata(info, name)
+        if data is None:
+            return default
+        if len(data) != 6:
+            raise self.error(self.child(info, name), f"<{name}>: a MAC address has 6 bytes")
+        return data
+
+    def ethertype(self, info: _El | None) -> int:
+        data = self.hexdata(info, "EtherType")
+        if not data:
+            return 0x88A4
+        return int.from_bytes(data, "little")  # the ENI writes the wire bytes: "a488"
+
+    # -- InitCmds --
+
+    def init_cmds(self, el: _El | None) -> tuple[InitCmd, ...]:
+        if el is None:
+            return ()
+        return tuple(self.init_cmd(c) for c in self.children(el, "InitCmd"))
+
+    def init_cmd(self, el: _El) -> InitCmd:
+        cmd = self.need(el, "Cmd")
+        data = self.hexdata(el, "Data")
+        if data is None:
+            data = bytes(self.number(el, "DataLength", 0) or 0)
+        logical = self.number(el, "Addr")
+        adp = self.number(el, "Adp", 0) or 0
+        ado = self.number(el, "Ado", 0) or 0
+        if logical is not None:
+            adp, ado = logical & 0xFFFF, (logical >> 16) & 0xFFFF
+        validate = self.child(el, "Validate")
+        return InitCmd(
+            transitions=self.texts(el, "Transition"),
+            cmd=cmd,
+            adp=adp & 0xFFFF,
+            ado=ado & 0xFFFF,
+            data=data,
+            expected_wkc=self.number(el, "Cnt"),
+            comment=self.text(el, "Comment").strip(),
+            requires=self.text(el, "Requires").strip(),
+            retries=self.number(el, "Retries", 0) or 0,
+            validate_data=self.hexdata(validate, "Data"),
+            validate_mask=self.hexdata(validate, "DataMask"),
+            validate_timeout_ms=self.number(validate, "Timeout"),
+            logical_address=logical,
+            timeout_ms=self.number(el, "Timeout"),
+        )
+
+    # -- slave --
+
+    def slave(self, el: _El, position: int) -> Slave:
+        info = self.child(el, "Info")
+        if info is None:
+            raise self.error(el, f"slave {position}: <Slave> has no <Info>")
+        init_cmds = self.init_cmds(self.child(el, "InitCmds"))
+        process_data = self.child(el, "ProcessData")
+        mailbox = self.mailbox(self.child(el, "Mailbox"))
+        port, port_address = self.previous_port(el)
+        return Slave(
+            position=position,
+            name=self.text(info, "Name"),
+            identity=self.identity(info, position),
+            station_address=self.need(info, "PhysAddr") & 0xFFFF,
+            auto_inc_address=self.auto_inc(info, position),
+            previous_port=port,
+            previous_station_address=port_address,
+            mailbox=mailbox,
+            sync_managers=self.sync_managers(process_data, init_cmds, mailbox),
+            fmmus=fmmus_from_init_cmds(init_cmds),
+            pdos=self.pdos(process_data),
+            init_cmds=init_cmds,
+            dc=self.dc(self.child(el, "DC"), init_cmds),
+            inputs=self.areas(process_data, "Recv"),
+            outputs=self.areas(process_data, "Send"),
+        )
+
+    def auto_inc(self, info: _El, position: int) -> int:
+        """AutoIncAddr as a 16-bit word (the ENI may write 65535 or -1); absent: from position."""
+        value = self.number(info, "AutoIncAddr")
+        return (-(position - 1) if value is None else value) & 0xFFFF
+
+    def identity(self, info: _El, position: int) -> Identity:
+        for name in ("PhysAddr", "VendorId", "ProductCode"):
+            if self.child(info, name) is None:
+                raise self.error(info, f"slave {position}: <Info> has no <{name}>")
+        return Identity(
+            vendor_id=self.need(info, "VendorId") & 0xFFFFFFFF,
+            product_code=self.need(info, "ProductCode") & 0xFFFFFFFF,
+            revision=(self.number(info, "RevisionNo", 0) or 0) & 0xFFFFFFFF,
+            serial=(self.number(info, "SerialNo", 0) or 0) & 0xFFFFFFFF,
+        )
+
+    def previous_port(self, el: _El) -> tuple[str | None, int | None]:
+        ports = list(self.children(el, "PreviousPort"))
+        if not ports:
+            return None, None
+        chosen = next((p for p in ports if self.attr_flag(p, "Selected")), ports[0])
+        return self.text(chosen, "Port").strip() or None, self.number(chosen, "PhysAddr")
+
+    def mailbox(self, el: _El | None) -> Mailbox | None:
+        if el is None:
+            return None
+        send, recv = self.child(el, "Send"), self.child(el, "Recv")
+        return Mailbox(
+            out_start=self.number(send, "Start", 0) or 0,
+            out_length_bytes=self.number(send, "Length", 0) or 0,
+            in_start=self.number(recv, "Start", 0) or 0,
+            in_length_bytes=self.number(recv, "Length", 0) or 0,
+            protocols=self.texts(el, "Protocol"),
+            coe_init_cmds=self.coe_init_cmds(self.child(el, "CoE/InitCmds")),
+            poll_time_ms=self.number(recv, "PollTime"),
+            status_bit_address=self.number(recv, "StatusBitAddr"),
+        )
+
+    def coe_init_cmds(self, el: _El | None) -> tuple[CoeInitCmd, ...]:
+        if el is None:
+            return ()
+        return tuple(self.coe_init_cmd(c) for c in self.children(el, "InitCmd"))
+
+    def coe_init_cmd(self, el: _El) -> CoeInitCmd:
+        return CoeInitCmd(
+            transitions=self.texts(el, "Transition"),
+            index=self.need(el, "Index"),
+            subindex=self.number(el, "SubIndex", 0) or 0,
+            data=self.hexdata(el, "Data") or b"",
+            complete_access=self.attr_flag(el, "CompleteAccess"),
+            fixed=self.attr_flag(el, "Fixed"),
+            comment=self.text(el, "Comment").strip(),
+            ccs=self.number(el, "Ccs", 2) or 2,
+            timeout_ms=self.number(el, "Timeout"),
+        )
+
+    def dc(self, el: _El | None, init_cmds: tuple[InitCmd, ...]) -> DistributedClock | None:
+        if el is None:
+            return None
+        assign = self.number(el, "AssignActivate")
+        if assign is None:
+            assign = dc_activation_from_init_cmds(init_cmds)
+        return DistributedClock(
+            cycle_time0_ns=self.number(el, "CycleTime0"),
+            cycle_time1_ns=self.number(el, "CycleTime1"),
+            shift_time_ns=self.number(el, "ShiftTime"),
+            assign_activate=assign,
+            reference_clock=self.flag(el, "ReferenceClock"),
+        )
+
+    def areas(self, process_data: _El | None, name: str) -> tuple[ProcessDataArea, ...]:
+        if process_data is None:
+            return ()
+        return tuple(
+            ProcessDataArea(self.need(a, "BitStart"), self.need(a, "BitLength"))
+            for a in self.children(process_data, name)
+        )
+
+    # -- sync managers and PDOs --
+
+    def sm_elements(self, process_data: _El | None) -> dict[int, _El]:
+        if process_data is None:
+            return {}
+        out: dict[int, _El] = {}
+        for c in process_data:
+            name = _local(c.tag)
+            if re.fullmatch(r"Sm\d+", name):
+                out[int(name[2:])] = c
+        return out
+
+    def sync_managers(
+        self, process_data: _El | None, init_cmds: tuple[InitCmd, ...], mailbox: Mailbox | None
+    ) -> tuple[SyncManager, ...]:
+        """Sync managers as written by the InitCmds (0x0800 + 8·n), else as ``<SmN>`` says."""
+        declared = self.sm_elements(process_data)
+        written = sync_managers_from_init_cmds(init_cmds)
+        kinds = {n: self.text(el, "Type").strip() for n, el in declared.items()}
+        if mailbox is not None:
+            kinds.setdefault(0, "MBoxOut")
+            kinds.setdefault(1, "MBoxIn")
+        result = {sm.index: sm for sm in written}
+        for n, el in declared.items():
+            if n not in result:
+                result[n] = self.declared_sm(n, el)
+        return tuple(_with_kind(result[n], kinds.get(n, "")) for n in sorted(result))
+
+    def declared_sm(self, index: int, el: _El) -> SyncManager:
+        size = self.number(el, "DefaultSize")
+        if size is None:
+            size = self.number(el, "MaxSize", 0) or 0
+        return SyncManager(
+            index=index,
+            start_address=self.number(el, "StartAddress", 0) or 0,
+            length_bytes=size,
+            control=self.number(el, "ControlByte", 0) or 0,
+            enable=self.flag(el, "Enable"),
+        )
+
+    def pdos(self, process_data: _El | None) -> tuple[Pdo, ...]:
+        if process_data is None:
+            return ()
+        assigned: dict[int, int] = {}
+        for n, el in self.sm_elements(process_data).items():
+            for p in self.children(el, "Pdo"):
+                if p.text and p.text.strip():
+                    assigned[parse_number(p.text)] = n
+        pdos: list[Pdo] = []
+        for tag, direction in (("RxPdo", Direction.OUTPUT), ("TxPdo", Direction.INPUT)):
+            for el in self.children(process_data, tag):
+                pdos.append(self.pdo(el, direction, assigned))
+        return tuple(pdos)
+
+    def pdo(self, el: _El, direction: Direction, assigned: dict[int, int]) -> Pdo:
+        index = self.need(el, "Index")
+        sm_attr = el.get("Sm")
+        try:
+            sm = parse_number(sm_attr) if sm_attr is not None else assigned.get(index)
+        except ValueError:
+            raise self.error(el, f"<{_local(el.tag)} Sm={sm_attr!r}>: not a number") from None
+        return Pdo(
+            index=index,
+            name=self.text(el, "Name").strip(),
+            direction=direction,
+            sync_manager=sm,
+            entries=tuple(self.entry(e) for e in self.children(el, "Entry")),
+            fixed=self.attr_flag(el, "Fixed"),
+            mandatory=self.attr_flag(el, "Mandatory"),
+        )
+
+    def entry(self, el: _El) -> PdoEntry:
+        return PdoEntry(
+            index=self.need(el, "Index"),
+            subindex=self.number(el, "SubIndex", 0) or 0,
+            bit_size=self.need(el, "BitLen"),
+            name=self.text(el, "Name").strip(),
+            data_type=self.text(el, "DataType").strip(),
+        )
+
+    # -- cyclic --
+
+    def microseconds_ns(self, el: _El, text: str) -> int:
+        try:
+            return int(Decimal(text.strip()) * 1000)
+        except (InvalidOperation, ValueError):
+            raise self.error(el, f"<CycleTime>: not a number of µs: {text.strip()!r}") from None
+
+    def cyclic(self, el: _El) -> Cyclic:
+        cycle = self.child(el, "CycleTime")
+        cycle_ns = None
+        if cycle is not None and cycle.text and cycle.text.strip():
+            cycle_ns = self.microseconds_ns(cycle, cycle.text)
+        frames = [self.frame(f) for f in self.children(el, "Frame")]
+        factors = [f.cycle_time_factor for f in frames if f.cycle_time_factor is not None]
+        return Cyclic(
+            cycle_time_ns=cycle_ns,
+            frames=tuple(frames),
+            comment=self.text(el, "Comment").strip(),
+            cycle_time_factor=factors[0] if factors else None,
+        )
+
+    def frame(self, el: _El) -> CyclicFrame:
+        factor = el.get("CycleTimeFactor")
+        try:
+            factor_value = parse_number(factor) if factor is not None else None
+        except ValueError:
+            raise self.error(el, f"<Frame CycleTimeFactor={factor!r}>: not a number") from None
+        return CyclicFrame(
+            commands=tuple(self.cyclic_cmd(c) for c in self.children(el, "Cmd")),
+            comment=self.text(el, "Comment").strip(),
+            cycle_time_factor=factor_value,
+        )
+
+    def cyclic_cmd(self, el: _El) -> CyclicCommand:
+        from lolacli.wire.commands import LOGICAL
+
+        cmd = self.need(el, "Cmd")
+        length = self.number(el, "DataLength")
+        if length is None:
+            length = len(self.hexdata(el, "Data") or b"")
+        addr = self.number(el, "Addr")
+        adp, ado = self.number(el, "Adp"), self.number(el, "Ado")
+        if cmd in LOGICAL and addr is None and (adp is not None or ado is not None):
+            addr = ((adp or 0) & 0xFFFF) | (((ado or 0) & 0xFFFF) << 16)
+        if cmd in LOGICAL:
+            adp = ado = None
+        elif addr is not None and adp is None and ado is None:
+            adp, ado, addr = addr & 0xFFFF, (addr >> 16) & 0xFFFF, None
+        return CyclicCommand(
+            cmd=cmd,
+            data_length_bytes=length,
+            expected_wkc=self.number(el, "Cnt"),
+            adp=None if adp is None else adp & 0xFFFF,
+            ado=None if ado is None else ado & 0xFFFF,
+            logical_address=None if addr is None else addr & 0xFFFFFFFF,
+            input_offset_bytes=self.number(el, "InputOffs"),
+            output_offset_bytes=self.number(el, "OutputOffs"),
+            states=self.texts(el, "State"),
+            comment=self.text(el, "Comment").strip(),
+        )
+
+    # -- process image --
+
+    def process_image(self, el: _El | None) -> ProcessImage:
+        if el is None:
+            return ProcessImage(0, 0)
+        variables: list[Variable] = []
+        sizes: dict[str, int] = {}
+        for tag, direction in (("Inputs", Direction.INPUT), ("Outputs", Direction.OUTPUT)):
+            section = self.child(el, tag)
+            sizes[tag] = self.number(section, "ByteSize", 0) or 0
+            if section is not None:
+                variables += [
+                    self.variable(v, direction) for v in self.children(section, "Variable")
+                ]
+        return ProcessImage(sizes["Inputs"], sizes["Outputs"], tuple(variables))
+
+    def variable(self, el: _El, direction: Direction) -> Variable:
+        return Variable(
+            name=self.text(el, "Name"),
+            direction=direction,
+            bit_offset=self.need(el, "BitOffs"),
+            bit_size=self.need(el, "BitSize"),
+            data_type=self.text(el, "DataType").strip(),
+            comment=self.text(el, "Comment").strip(),
+        )
+
+
+# --------------------------------------------------------------------------- register decoding
+
+
+def _register_writes(
+    init_cmds: Iterable[InitCmd], base: int, size: int, count: int
+) -> Iterator[tuple[int, bytes, InitCmd]]:
+    """(index, bytes) of each register block ``base + size·index`` an InitCmd writes."""
+    from lolacli.wire.commands import Command
+
+    writes = {Command.APWR, Command.FPWR, Command.BWR, Command.APRW, Command.FPRW, Command.BRW}
+    end = base + size * count
+    for ic in init_cmds:
+        if ic.cmd not in writes or ic.logical_address is not None:
+            continue
+        if not base <= ic.ado < end or (ic.ado - base) % size:
+            continue
+        first = (ic.ado - base) // size
+        for k in range(len(ic.data) // size):
+            if first + k < count:
+                yield first + k, ic.data[k * size : (k + 1) * size], ic
+
+
+def decode_fmmu(index: int, block: bytes) -> Fmmu:
+    """One FMMU register block (16 bytes, ETG.1000.4 Table 56)."""
+    start, length, start_bit, end_bit, phys, phys_bit, kind, activate = _FMMU.unpack(block)
+    return Fmmu(index, start, length, start_bit, end_bit, phys, phys_bit, kind, bool(activate & 1))
+
+
+def decode_sync_manager(index: int, block: bytes) -> SyncManager:
+    """One sync manager register block (8 bytes, ETG.1000.4 Table 58)."""
+    start, length, control, _status, activate, _pdi = _SM.unpack(block)
+    return SyncManager(index, start, length, control, bool(activate & 1))
+
+
+def fmmus_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[Fmmu, ...]:
+    """The FMMUs the InitCmds configure (the last non-zero write of each wins)."""
+    found: dict[int, Fmmu] = {}
+    for index, block, _ic in _register_writes(init_cmds, FMMU_REGISTER, FMMU_BYTES, FMMU_COUNT):
+        if any(block):
+            found[index] = decode_fmmu(index, block)
+    return tuple(found[i] for i in sorted(found))
+
+
+def sync_managers_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[SyncManager, ...]:
+    """The sync managers the InitCmds configure; bootstrap-only (``IB``) writes are skipped."""
+    found: dict[int, SyncManager] = {}
+    for index, block, ic in _register_writes(init_cmds, SM_REGISTER, SM_BYTES, SM_COUNT):
+        if any(block) and set(ic.transitions) != {"IB"}:
+            found[index] = decode_sync_manager(index, block)
+    return tuple(found[i] for i in sorted(found))
+
+
+def dc_activation_from_init_cmds(init_cmds: Iterable[InitCmd]) -> int | None:
+    """AssignActivate as written to register 0x0980 (the last non-zero write)."""
+    value = None
+    for ic in init_cmds:
+        if ic.ado == DC_ACTIVATION_REGISTER and len(ic.data) >= 2 and ic.logical_address is None:
+            (word,) = _U16.unpack_from(ic.data)
+            if word:
+                value = word
+    return value
+
+
+def _with_kind(sm: SyncManager, kind: str) -> SyncManager:
+    from dataclasses import replace
+
+    return replace(sm, kind=kind) if kind and not sm.kind else sm
+
+
+__all__ = [
+    "ENI_ROOTS",
+    "decode_fmmu",
+    "decode_sync_manager",
+    "fmmus_from_init_cmds",
+    "parse_eni",
+    "parse_number",
+    "sync_managers_from_init_cmds",
+]

@@ -1,0 +1,43 @@
+"""Thin file loaders: read bytes, hand them to a pure parser, map OS errors to exit-3 errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from lolacli.errors import EniError
+
+if TYPE_CHECKING:
+    from lolacli.eni.model import Eni
+
+#: Refuse absurdly large "ENI" files before reading them (the largest real exports are ~1 MB).
+MAX_ENI_BYTES = 64 * 1024 * 1024
+
+
+def read_eni_bytes(path: str | Path) -> bytes:
+    """The bytes of an ENI file; :class:`EniError` (exit 3) when it cannot be read."""
+    p = Path(path)
+    name = str(path)
+    try:
+        if p.is_dir():
+            raise EniError("is a directory, not an ENI file", path=name)
+        size = p.stat().st_size
+        if size > MAX_ENI_BYTES:
+            raise EniError(f"file too large for an ENI ({size} bytes)", path=name)
+        return p.read_bytes()
+    except FileNotFoundError:
+        raise EniError("no such file", path=name) from None
+    except PermissionError:
+        raise EniError("permission denied", path=name) from None
+    except OSError as exc:
+        raise EniError(f"cannot read: {exc.strerror or exc}", path=name) from None
+
+
+def load_eni(path: str | Path) -> Eni:
+    """Read and parse an ENI file. Every failure is an :class:`EniError` naming the file."""
+    from lolacli.eni.parser import parse_eni
+
+    return parse_eni(read_eni_bytes(path), source=str(path))
+
+
+__all__ = ["MAX_ENI_BYTES", "load_eni", "read_eni_bytes"]
