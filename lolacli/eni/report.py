@@ -1,0 +1,198 @@
+"""JSON-ready reports over an :class:`~lolacli.eni.model.Eni` (pure: model in, dicts out).
+
+Contracts (DESIGN.md "JSON contracts"): ``lolacli.eni/1`` (inspect), ``lolacli.eni-vars/1``.
+Wire numbers follow DESIGN.md "Definitions": frame bytes from
+:func:`lolacli.wire.frame.frame_bytes_on_wire`, wire time ``8 × bytes / rate``, and the time
+with overhead adds preamble+SFD (8 B) and the inter-frame gap (12 B).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from typing import Any
+
+from lolacli.eni.model import CyclicCommand, CyclicFrame, Eni, Slave, Variable
+from lolacli.wire.commands import mnemonic
+
+INSPECT_SCHEMA = "lolacli.eni/1"
+VARS_SCHEMA = "lolacli.eni-vars/1"
+
+LINK_BITS_PER_S = 100_000_000
+PREAMBLE_SFD_BYTES = 8
+INTER_FRAME_GAP_BYTES = 12
+
+
+def wire_time_ns(frame_bytes: int, link_bits_per_s: int = LINK_BITS_PER_S) -> int:
+    """8 × bytes / rate, in integer nanoseconds (rounded)."""
+    return (8 * frame_bytes * 1_000_000_000 + link_bits_per_s // 2) // link_bits_per_s
+
+
+def _us(ns: int | None) -> float | None:
+    return None if ns is None else round(ns / 1000, 2)
+
+
+def _hex(value: int | None, digits: int = 4) -> str | None:
+    return None if value is None else f"0x{value:0{digits}X}"
+
+
+def datagram_dict(c: CyclicCommand) -> dict[str, Any]:
+    return {
+        "cmd": mnemonic(c.cmd),
+        "adp": c.adp,
+        "ado": c.ado,
+        "logical_address": c.logical_address,
+        "length_bytes": c.data_length_bytes,
+        "expected_wkc": c.expected_wkc,
+        "input_offset_bytes": c.input_offset_bytes,
+        "output_offset_bytes": c.output_offset_bytes,
+        "states": list(c.states),
+    }
+
+
+def frame_dict(frame: CyclicFrame) -> dict[str, Any]:
+    n = frame.frame_bytes
+    overhead = n + PREAMBLE_SFD_BYTES + INTER_FRAME_GAP_BYTES
+    return {
+        "datagrams": [datagram_dict(c) for c in frame.commands],
+        "frame_bytes": n,
+        "wire_time_us": _us(wire_time_ns(n)),
+        "wire_time_with_overhead_us": _us(wire_time_ns(overhead)),
+    }
+
+
+def slave_dict(s: Slave) -> dict[str, Any]:
+    mailbox = s.mailbox
+    return {
+        "position": s.position,
+        "name": s.name,
+        "vendor_id": s.identity.vendor_id,
+        "product_code": s.identity.product_code,
+        "revision": s.identity.revision,
+        "serial": s.identity.serial,
+        "station_address": s.station_address,
+        "auto_inc_address": s.auto_inc_address,
+        "inputs_bits": s.inputs_bits,
+        "outputs_bits": s.outputs_bits,
+        "previous_port": s.previous_port,
+        "previous_station_address": s.previous_station_address,
+        "mailbox_protocols": list(mailbox.protocols) if mailbox else [],
+        "coe_init_cmds": len(mailbox.coe_init_cmds) if mailbox else 0,
+        "init_cmds": len(s.init_cmds),
+        "dc": _dc_dict(s),
+        "sync_managers": [
+            {
+                "index": m.index,
+                "start_address": m.start_address,
+                "length_bytes": m.length_bytes,
+                "control": m.control,
+                "enable": m.enable,
+                "kind": m.kind,
+            }
+            for m in s.sync_managers
+        ],
+        "fmmus": [
+            {
+                "index": f.index,
+                "logical_start": f.logical_start,
+                "length_bytes": f.length_bytes,
+                "logical_start_bit": f.logical_start_bit,
+                "logical_end_bit": f.logical_end_bit,
+                "physical_start": f.physical_start,
+                "type": f.type,
+                "enable": f.enable,
+            }
+            for f in s.fmmus
+        ],
+        "pdos_assigned": [
+            {"index": p.index, "name": p.name, "sync_manager": p.sync_manager, "bits": p.bit_size}
+            for p in s.pdos
+            if p.sync_manager is not None
+        ],
+    }
+
+
+def _dc_dict(s: Slave) -> dict[str, Any] | None:
+    if s.dc is None:
+        return None
+    return {
+        "reference_clock": s.dc.reference_clock,
+        "cycle_time0_ns": s.dc.cycle_time0_ns,
+        "cycle_time1_ns": s.dc.cycle_time1_ns,
+        "shift_time_ns": s.dc.shift_time_ns,
+        "assign_activate": s.dc.assign_activate,
+    }
+
+
+def variable_dict(v: Variable) -> dict[str, Any]:
+    return {
+        "name": v.name,
+        "direction": v.direction.value,
+        "bit_offset": v.bit_offset,
+        "bit_size": v.bit_size,
+        "data_type": v.data_type,
+    }
+
+
+def inspect_report(eni: Eni) -> dict[str, Any]:
+    """The ``lolacli.eni/1`` document of ``eni inspect``."""
+    frames = [frame_dict(f) for f in eni.cyclic_frames]
+    pi = eni.process_image
+    return {
+        "schema": INSPECT_SCHEMA,
+        "source": eni.source,
+        "root": eni.root,
+        "cycle_time_us": _us(eni.cycle_time_ns),
+        "master_cycle_time_us": _us(eni.master.cycle_time_ns),
+        "master": {
+            "name": eni.master.name,
+            "destination_mac": eni.master.destination_mac.hex(":"),
+            "source_mac": eni.master.source_mac.hex(":"),
+            "ethertype": eni.master.ethertype,
+            "init_cmds": len(eni.master.init_cmds),
+        },
+        "slave_count": len(eni.slaves),
+        "slaves": [slave_dict(s) for s in eni.slaves],
+        "cyclic_frames": frames,
+        "frames_bytes_total": sum(f["frame_bytes"] for f in frames),
+        "process_image": {
+            "inputs_bytes": pi.inputs_bytes,
+            "outputs_bytes": pi.outputs_bytes,
+            "variable_count": len(pi.variables),
+            "variables": [variable_dict(v) for v in pi.variables],
+        },
+    }
+
+
+def filter_variables(eni: Eni, pattern: str | None) -> tuple[Variable, ...]:
+    """Variables whose name matches the glob ``pattern`` (case-insensitive); all if None."""
+    variables = eni.process_image.variables
+    if not pattern:
+        return variables
+    glob = pattern.casefold()
+    return tuple(v for v in variables if fnmatch.fnmatchcase(v.name.casefold(), glob))
+
+
+def vars_report(eni: Eni, pattern: str | None = None) -> dict[str, Any]:
+    """The ``lolacli.eni-vars/1`` document of ``eni vars``."""
+    chosen = filter_variables(eni, pattern)
+    return {
+        "schema": VARS_SCHEMA,
+        "source": eni.source,
+        "filter": pattern,
+        "count": len(chosen),
+        "variables": [
+            {**variable_dict(v), "byte_offset": v.bit_offset // 8, "comment": v.comment}
+            for v in chosen
+        ],
+    }
+
+
+__all__ = [
+    "INSPECT_SCHEMA",
+    "VARS_SCHEMA",
+    "filter_variables",
+    "frame_dict",
+    "inspect_report",
+    "vars_report",
+    "wire_time_ns",
+]
