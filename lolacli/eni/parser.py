@@ -446,6 +446,14 @@ class _Reader:
             kinds.setdefault(0, "MBoxOut")
             kinds.setdefault(1, "MBoxIn")
         result = {sm.index: sm for sm in written}
+        if mailbox is not None:  # mailbox SMs the ENI describes but no InitCmd writes
+            mbx = (
+                (0, mailbox.out_start, mailbox.out_length_bytes, 0x26),
+                (1, mailbox.in_start, mailbox.in_length_bytes, 0x22),
+            )
+            for n, start, length, control in mbx:
+                if n not in result and n not in declared and length:
+                    result[n] = SyncManager(n, start, length, control, True)
         for n, el in declared.items():
             if n not in result:
                 result[n] = self.declared_sm(n, el)
