@@ -30,8 +30,20 @@ def logical(cmd: int) -> bool:
     return cmd in (10, 11, 12)  # LRD, LWR, LRW (ETG.1000.4 Table 13)
 
 
-MNEMONIC = {0: "NOP", 1: "APRD", 2: "APWR", 4: "FPRD", 5: "FPWR", 7: "BRD", 8: "BWR",
-            10: "LRD", 11: "LWR", 12: "LRW", 13: "ARMW", 14: "FRMW"}
+MNEMONIC = {
+    0: "NOP",
+    1: "APRD",
+    2: "APWR",
+    4: "FPRD",
+    5: "FPWR",
+    7: "BRD",
+    8: "BWR",
+    10: "LRD",
+    11: "LWR",
+    12: "LRW",
+    13: "ARMW",
+    14: "FRMW",
+}
 
 
 def oracle(path: Path) -> dict:
@@ -42,17 +54,19 @@ def oracle(path: Path) -> dict:
         pd = s.find("ProcessData")
         send = pd.findall("Send") if pd is not None else []
         recv = pd.findall("Recv") if pd is not None else []
-        slaves.append({
-            "position": i,
-            "name": s.findtext("Info/Name"),
-            "vendor_id": num(s.findtext("Info/VendorId")),
-            "product_code": num(s.findtext("Info/ProductCode")),
-            "revision": num(s.findtext("Info/RevisionNo")),
-            "station_address": num(s.findtext("Info/PhysAddr")),
-            "auto_inc_address": num(s.findtext("Info/AutoIncAddr")),
-            "inputs_bits": sum(num(r.findtext("BitLength")) for r in recv),
-            "outputs_bits": sum(num(r.findtext("BitLength")) for r in send),
-        })
+        slaves.append(
+            {
+                "position": i,
+                "name": s.findtext("Info/Name"),
+                "vendor_id": num(s.findtext("Info/VendorId")),
+                "product_code": num(s.findtext("Info/ProductCode")),
+                "revision": num(s.findtext("Info/RevisionNo")),
+                "station_address": num(s.findtext("Info/PhysAddr")),
+                "auto_inc_address": num(s.findtext("Info/AutoIncAddr")),
+                "inputs_bits": sum(num(r.findtext("BitLength")) for r in recv),
+                "outputs_bits": sum(num(r.findtext("BitLength")) for r in send),
+            }
+        )
     frames = []
     cycle = None
     for task in config.findall("Cyclic"):
@@ -62,27 +76,31 @@ def oracle(path: Path) -> dict:
             datagrams = []
             for c in frame.findall("Cmd"):
                 cmd = num(c.findtext("Cmd"))
-                datagrams.append({
-                    "cmd": MNEMONIC[cmd],
-                    "adp": None if logical(cmd) else num(c.findtext("Adp")),
-                    "ado": None if logical(cmd) else num(c.findtext("Ado")),
-                    "logical_address": num(c.findtext("Addr")) if logical(cmd) else None,
-                    "length_bytes": num(c.findtext("DataLength")),
-                    "expected_wkc": num(c.findtext("Cnt")),
-                })
+                datagrams.append(
+                    {
+                        "cmd": MNEMONIC[cmd],
+                        "adp": None if logical(cmd) else num(c.findtext("Adp")),
+                        "ado": None if logical(cmd) else num(c.findtext("Ado")),
+                        "logical_address": num(c.findtext("Addr")) if logical(cmd) else None,
+                        "length_bytes": num(c.findtext("DataLength")),
+                        "expected_wkc": num(c.findtext("Cnt")),
+                    }
+                )
             wire = 14 + 2 + sum(10 + d["length_bytes"] + 2 for d in datagrams) + 4
             frames.append({"datagrams": datagrams, "frame_bytes": max(64, wire)})
     pi = config.find("ProcessImage")
     variables = []
     for section, direction in (("Inputs", "input"), ("Outputs", "output")):
         for v in pi.findall(f"{section}/Variable"):
-            variables.append({
-                "name": v.findtext("Name"),
-                "direction": direction,
-                "bit_offset": num(v.findtext("BitOffs")),
-                "bit_size": num(v.findtext("BitSize")),
-                "data_type": v.findtext("DataType"),
-            })
+            variables.append(
+                {
+                    "name": v.findtext("Name"),
+                    "direction": direction,
+                    "bit_offset": num(v.findtext("BitOffs")),
+                    "bit_size": num(v.findtext("BitSize")),
+                    "data_type": v.findtext("DataType"),
+                }
+            )
     return {
         "cycle_time_us": cycle,
         "slaves": slaves,
