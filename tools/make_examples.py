@@ -171,9 +171,7 @@ DRIVE = DeviceClass(
     sm_in=SmSpec(3, 0x1180, 0x20),
     dc_sync=True,
     remap_pdos=True,
-    coe_extra=(
-        (0x6060, 0, bytes([8]), "modes of operation: cyclic synchronous position"),
-    ),
+    coe_extra=((0x6060, 0, bytes([8]), "modes of operation: cyclic synchronous position"),),
 )
 
 
@@ -319,12 +317,28 @@ AI_2 = DeviceClass(  # EL3102-like: 2 analog inputs, status + value per channel
 )
 
 LOLA_JOINTS = (
-    "L Hip Yaw", "L Hip Roll", "L Hip Pitch", "L Knee", "L Ankle A", "L Ankle B", "L Toe",
-    "R Hip Yaw", "R Hip Roll", "R Hip Pitch", "R Knee", "R Ankle A", "R Ankle B", "R Toe",
+    "L Hip Yaw",
+    "L Hip Roll",
+    "L Hip Pitch",
+    "L Knee",
+    "L Ankle A",
+    "L Ankle B",
+    "L Toe",
+    "R Hip Yaw",
+    "R Hip Roll",
+    "R Hip Pitch",
+    "R Knee",
+    "R Ankle A",
+    "R Ankle B",
+    "R Toe",
     "Pelvis Rotation",
-    "L Shoulder Pitch", "L Shoulder Roll", "L Elbow",
-    "R Shoulder Pitch", "R Shoulder Roll", "R Elbow",
-)  # fmt: skip
+    "L Shoulder Pitch",
+    "L Shoulder Roll",
+    "L Elbow",
+    "R Shoulder Pitch",
+    "R Shoulder Roll",
+    "R Elbow",
+)
 
 LOLA = ChainSpec(
     file_name="lola.xml",
@@ -400,7 +414,9 @@ def _logical_rank(d: DeviceClass) -> int:
 
 def place(chain: ChainSpec) -> list[Placed]:
     """Chain positions, station addresses 1001…, auto-increment addresses, logical offsets."""
-    order = sorted(range(len(chain.slaves)), key=lambda i: (_logical_rank(chain.slaves[i].device), i))
+    order = sorted(
+        range(len(chain.slaves)), key=lambda i: (_logical_rank(chain.slaves[i].device), i)
+    )
     offsets: dict[int, int] = {}
     cursor = 0
     for i in order:
@@ -515,11 +531,19 @@ def write_master(config: ET.Element, chain: ChainSpec) -> None:
     if any(s.device.dc_sync for s in chain.slaves):
         init_cmd(cmds, ip, "latch DC receive times", BWR, 0, 0x0900, bytes(4), before_slave=True)
         init_cmd(
-            cmds, ip, "clear DC system time, offset and delay", BWR, 0, 0x0910,
-            length=32, before_slave=True,
-        )  # fmt: skip
+            cmds,
+            ip,
+            "clear DC system time, offset and delay",
+            BWR,
+            0,
+            0x0910,
+            length=32,
+            before_slave=True,
+        )
         init_cmd(cmds, ip, "reset DC speed counter", BWR, 0, 0x0930, u16(0x1000), before_slave=True)
-        init_cmd(cmds, ip, "DC filter depths", BWR, 0, 0x0934, bytes([0x00, 0x0C]), before_slave=True)
+        init_cmd(
+            cmds, ip, "DC filter depths", BWR, 0, 0x0934, bytes([0x00, 0x0C]), before_slave=True
+        )
         init_cmd(cmds, ip, "clear DC activation", BWR, 0, 0x0981, bytes(1), before_slave=True)
 
 
@@ -578,12 +602,17 @@ def write_process_data(slave: ET.Element, p: Placed) -> None:
             sms.append((index, _sm_element(kind, length, start, control, ())))
     if d.sm_out is not None:
         pdos = tuple(x.index for x in d.rx_pdos)
-        sms.append((d.sm_out.index, _sm_element("Outputs", d.out_bytes, d.sm_out.start,
-                                                 d.sm_out.control, pdos)))  # fmt: skip
+        sms.append(
+            (
+                d.sm_out.index,
+                _sm_element("Outputs", d.out_bytes, d.sm_out.start, d.sm_out.control, pdos),
+            )
+        )
     if d.sm_in is not None:
         pdos = tuple(x.index for x in d.tx_pdos)
-        sms.append((d.sm_in.index, _sm_element("Inputs", d.in_bytes, d.sm_in.start,
-                                                d.sm_in.control, pdos)))  # fmt: skip
+        sms.append(
+            (d.sm_in.index, _sm_element("Inputs", d.in_bytes, d.sm_in.start, d.sm_in.control, pdos))
+        )
     for index, el in sorted(sms, key=lambda t: t[0]):
         el.tag = f"Sm{index}"
         pd.append(el)
@@ -604,7 +633,9 @@ def write_process_data(slave: ET.Element, p: Placed) -> None:
                 sub(en, "DataType", entry.data_type)
 
 
-def _sm_element(kind: str, size: int, start: int, control: int, pdos: tuple[int, ...]) -> ET.Element:
+def _sm_element(
+    kind: str, size: int, start: int, control: int, pdos: tuple[int, ...]
+) -> ET.Element:
     el = ET.Element("Sm")
     sub(el, "Type", kind)
     sub(el, "DefaultSize", size)
@@ -658,10 +689,22 @@ def coe_init_cmds(d: DeviceClass) -> list[tuple[int, int, bytes, str]]:
             cmds.append((pdo.index, 0, bytes(1), f"clear PDO 0x{pdo.index:04X} mapping"))
             for k, entry in enumerate(pdo.entries, start=1):
                 value = (entry.index << 16) | (entry.subindex << 8) | entry.bits
-                cmds.append((pdo.index, k, struct.pack("<I", value),
-                             f"map 0x{entry.index:04X}:{entry.subindex:02X} {entry.name}"))  # fmt: skip
-            cmds.append((pdo.index, 0, bytes([len(pdo.entries)]),
-                         f"PDO 0x{pdo.index:04X}: {len(pdo.entries)} entries"))  # fmt: skip
+                cmds.append(
+                    (
+                        pdo.index,
+                        k,
+                        struct.pack("<I", value),
+                        f"map 0x{entry.index:04X}:{entry.subindex:02X} {entry.name}",
+                    )
+                )
+            cmds.append(
+                (
+                    pdo.index,
+                    0,
+                    bytes([len(pdo.entries)]),
+                    f"PDO 0x{pdo.index:04X}: {len(pdo.entries)} entries",
+                )
+            )
     for sm_obj, pdos in assigns:
         for k, pdo in enumerate(pdos, start=1):
             cmds.append((sm_obj, k, u16(pdo.index), f"assign PDO 0x{pdo.index:04X}"))
@@ -679,58 +722,143 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
     a, s = p.auto_inc, p.station
     cmds = sub(slave, "InitCmds")
     al_mask = u16(0x001F)  # state bits + error indication
-    init_cmd(cmds, ("IP",), "request INIT (acknowledge errors)", APWR, a, 0x0120, u16(0x0011),
-             cnt=1, timeout_ms=3000)  # fmt: skip
-    init_cmd(cmds, ("IP",), "check INIT", APRD, a, 0x0130, bytes(2), cnt=1,
-             validate=(u16(0x0001), u16(0x000F), 3000))  # fmt: skip
+    init_cmd(
+        cmds,
+        ("IP",),
+        "request INIT (acknowledge errors)",
+        APWR,
+        a,
+        0x0120,
+        u16(0x0011),
+        cnt=1,
+        timeout_ms=3000,
+    )
+    init_cmd(
+        cmds,
+        ("IP",),
+        "check INIT",
+        APRD,
+        a,
+        0x0130,
+        bytes(2),
+        cnt=1,
+        validate=(u16(0x0001), u16(0x000F), 3000),
+    )
     init_cmd(cmds, ("IP",), "set station address", APWR, a, 0x0010, u16(s), cnt=1)
     init_cmd(cmds, ("IP",), "watchdog divider 100 us", FPWR, s, 0x0400, u16(2498), cnt=1)
     init_cmd(cmds, ("IP",), "SM watchdog 100 ms", FPWR, s, 0x0420, u16(1000), cnt=1)
     if d.mailbox is not None:
         out_start, out_len, in_start, in_len = d.mailbox
-        init_cmd(cmds, ("IP",), "SM0 mailbox out", FPWR, s, 0x0800,
-                 SM_REGISTER.pack(out_start, out_len, 0x26, 0, 1, 0), cnt=1)  # fmt: skip
-        init_cmd(cmds, ("IP",), "SM1 mailbox in", FPWR, s, 0x0808,
-                 SM_REGISTER.pack(in_start, in_len, 0x22, 0, 1, 0), cnt=1)  # fmt: skip
-    init_cmd(cmds, ("IP",), "request PREOP", FPWR, s, 0x0120, u16(0x0002), cnt=1,
-             timeout_ms=3000)  # fmt: skip
-    init_cmd(cmds, ("IP",), "check PREOP", FPRD, s, 0x0130, bytes(2), cnt=1,
-             validate=(u16(0x0002), al_mask, 3000))  # fmt: skip
+        init_cmd(
+            cmds,
+            ("IP",),
+            "SM0 mailbox out",
+            FPWR,
+            s,
+            0x0800,
+            SM_REGISTER.pack(out_start, out_len, 0x26, 0, 1, 0),
+            cnt=1,
+        )
+        init_cmd(
+            cmds,
+            ("IP",),
+            "SM1 mailbox in",
+            FPWR,
+            s,
+            0x0808,
+            SM_REGISTER.pack(in_start, in_len, 0x22, 0, 1, 0),
+            cnt=1,
+        )
+    init_cmd(cmds, ("IP",), "request PREOP", FPWR, s, 0x0120, u16(0x0002), cnt=1, timeout_ms=3000)
+    init_cmd(
+        cmds,
+        ("IP",),
+        "check PREOP",
+        FPRD,
+        s,
+        0x0130,
+        bytes(2),
+        cnt=1,
+        validate=(u16(0x0002), al_mask, 3000),
+    )
     for sm, size, label in ((d.sm_out, d.out_bytes, "outputs"), (d.sm_in, d.in_bytes, "inputs")):
         if sm is not None:
             data = SM_REGISTER.pack(sm.start, size, sm.control, 0, 1, 0)
-            init_cmd(cmds, ("PS",), f"SM{sm.index} {label}", FPWR, s, 0x0800 + 8 * sm.index,
-                     data, cnt=1)  # fmt: skip
+            init_cmd(
+                cmds, ("PS",), f"SM{sm.index} {label}", FPWR, s, 0x0800 + 8 * sm.index, data, cnt=1
+            )
     for n, (kind, sm, size) in enumerate(_fmmus(d)):
-        data = FMMU_REGISTER.pack(LOGICAL_BASE + p.logical_offset, size, 0, 7, sm.start, 0,
-                                  kind, 1)  # fmt: skip
+        data = FMMU_REGISTER.pack(LOGICAL_BASE + p.logical_offset, size, 0, 7, sm.start, 0, kind, 1)
         label = "outputs (write)" if kind == FMMU_WRITE else "inputs (read)"
         init_cmd(cmds, ("PS",), f"FMMU{n} {label}", FPWR, s, 0x0600 + 16 * n, data, cnt=1)
     if d.dc_sync:
         cycle_ns = chain.cycle_time_us * 1000
         init_cmd(cmds, ("PS",), "clear DC activation", FPWR, s, 0x0980, bytes(2), cnt=1)
-        init_cmd(cmds, ("PS",), "SYNC0/SYNC1 cycle time", FPWR, s, 0x09A0,
-                 struct.pack("<II", cycle_ns, 0), cnt=1)  # fmt: skip
-        init_cmd(cmds, ("PS",), "SYNC start time (the master adds its local time)", FPWR, s,
-                 0x0990, bytes(8), cnt=1)  # fmt: skip
-        init_cmd(cmds, ("PS",), "DC activation (AssignActivate 0x0300)", FPWR, s, 0x0980,
-                 u16(0x0300), cnt=1)  # fmt: skip
-    init_cmd(cmds, ("PS",), "request SAFEOP", FPWR, s, 0x0120, u16(0x0004), cnt=1,
-             timeout_ms=10000)  # fmt: skip
-    init_cmd(cmds, ("PS",), "check SAFEOP", FPRD, s, 0x0130, bytes(2), cnt=1,
-             validate=(u16(0x0004), al_mask, 10000))  # fmt: skip
+        init_cmd(
+            cmds,
+            ("PS",),
+            "SYNC0/SYNC1 cycle time",
+            FPWR,
+            s,
+            0x09A0,
+            struct.pack("<II", cycle_ns, 0),
+            cnt=1,
+        )
+        init_cmd(
+            cmds,
+            ("PS",),
+            "SYNC start time (the master adds its local time)",
+            FPWR,
+            s,
+            0x0990,
+            bytes(8),
+            cnt=1,
+        )
+        init_cmd(
+            cmds,
+            ("PS",),
+            "DC activation (AssignActivate 0x0300)",
+            FPWR,
+            s,
+            0x0980,
+            u16(0x0300),
+            cnt=1,
+        )
+    init_cmd(cmds, ("PS",), "request SAFEOP", FPWR, s, 0x0120, u16(0x0004), cnt=1, timeout_ms=10000)
+    init_cmd(
+        cmds,
+        ("PS",),
+        "check SAFEOP",
+        FPRD,
+        s,
+        0x0130,
+        bytes(2),
+        cnt=1,
+        validate=(u16(0x0004), al_mask, 10000),
+    )
     init_cmd(cmds, ("SO",), "request OP", FPWR, s, 0x0120, u16(0x0008), cnt=1, timeout_ms=10000)
-    init_cmd(cmds, ("SO",), "check OP", FPRD, s, 0x0130, bytes(2), cnt=1,
-             validate=(u16(0x0008), al_mask, 10000))  # fmt: skip
+    init_cmd(
+        cmds,
+        ("SO",),
+        "check OP",
+        FPRD,
+        s,
+        0x0130,
+        bytes(2),
+        cnt=1,
+        validate=(u16(0x0008), al_mask, 10000),
+    )
     init_cmd(cmds, ("OS",), "request SAFEOP", FPWR, s, 0x0120, u16(0x0004), timeout_ms=200)
     init_cmd(cmds, ("OP", "SP"), "request PREOP", FPWR, s, 0x0120, u16(0x0002), timeout_ms=200)
     for n, _ in enumerate(_fmmus(d)):
-        init_cmd(cmds, ("OP", "SP", "OI", "SI"), f"clear FMMU{n}", FPWR, s, 0x0600 + 16 * n,
-                 bytes(16))  # fmt: skip
+        init_cmd(
+            cmds, ("OP", "SP", "OI", "SI"), f"clear FMMU{n}", FPWR, s, 0x0600 + 16 * n, bytes(16)
+        )
     if d.dc_sync:
         init_cmd(cmds, ("OP", "SP", "OI", "SI"), "clear DC activation", FPWR, s, 0x0980, bytes(2))
-    init_cmd(cmds, ("OI", "SI", "PI"), "request INIT", FPWR, s, 0x0120, u16(0x0001),
-             timeout_ms=5000)  # fmt: skip
+    init_cmd(
+        cmds, ("OI", "SI", "PI"), "request INIT", FPWR, s, 0x0120, u16(0x0001), timeout_ms=5000
+    )
 
 
 def _fmmus(d: DeviceClass) -> list[tuple[int, SmSpec, int]]:
