@@ -131,6 +131,9 @@ class Frame:
     ``udp`` is ``None`` for EtherCAT directly over Ethernet, else the UDP/IP information
     (see :mod:`lolacli.wire.udp`). ``padding`` holds bytes after the last datagram up to
     the end of the captured Ethernet frame (zero padding, or an FCS).
+
+    ``declared_length`` is the EtherCAT header's length field where it differs from the
+    datagrams' total (some masters count padding in it); ``None`` when they agree.
     """
 
     ethernet: EthernetHeader = field(default_factory=EthernetHeader)
@@ -138,10 +141,16 @@ class Frame:
     ecat_type: int = ECAT_TYPE_COMMANDS
     ecat_reserved: int = 0
     padding: bytes = b""
+    declared_length: int | None = None
 
     @property
     def ecat_length(self) -> int:
         return sum(d.wire_bytes for d in self.datagrams)
+
+    @property
+    def header_length(self) -> int:
+        """The EtherCAT header's length field as sent."""
+        return self.ecat_length if self.declared_length is None else self.declared_length
 
 
 def frame_bytes_on_wire(datagram_data_lengths: list[int] | tuple[int, ...]) -> int:
@@ -242,6 +251,12 @@ def decode_ethernet_header(buf: bytes | memoryview) -> tuple[EthernetHeader, int
     return EthernetHeader(dst, src, tci), etype, pos
 
 
+def _declared(buf: bytes | memoryview, pos: int, datagrams: tuple[Datagram, ...]) -> int | None:
+    length = _U16.unpack_from(buf, pos)[0] & 0x7FF
+    total = sum(d.wire_bytes for d in datagrams)
+    return None if length == total else length
+
+
 def decode_frame(buf: bytes | memoryview) -> Frame:
     """Decode an Ethernet frame that carries EtherCAT (ethertype 0x88A4).
 
@@ -252,7 +267,8 @@ def decode_frame(buf: bytes | memoryview) -> Frame:
     if etype != ETHERTYPE_ECAT:
         raise WireError(f"not an EtherCAT frame (ethertype 0x{etype:04X})", offset=12)
     ecat_type, reserved, datagrams, end = decode_ecat_payload(buf, pos)
-    return Frame(header, datagrams, ecat_type, reserved, bytes(buf[end:]))
+    declared = _declared(buf, pos, datagrams)
+    return Frame(header, datagrams, ecat_type, reserved, bytes(buf[end:]), declared)
 
 
 def encode_datagram(d: Datagram) -> bytes:
@@ -272,7 +288,8 @@ def encode_ecat_payload(frame: Frame) -> bytes:
     body = b"".join(encode_datagram(d) for d in frame.datagrams)
     if len(body) > 0x7FF:
         raise WireError(f"EtherCAT payload of {len(body)} bytes exceeds 2047")
-    word = len(body) | ((frame.ecat_reserved & 1) << 11) | ((frame.ecat_type & 0xF) << 12)
+    length = len(body) if frame.declared_length is None else frame.declared_length
+    word = (length & 0x7FF) | ((frame.ecat_reserved & 1) << 11) | ((frame.ecat_type & 0xF) << 12)
     return _U16.pack(word) + body
 
 
