@@ -1,0 +1,118 @@
+"""`eni diff`: equal files exit 0, each kind of difference is reported and exits 1."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from lolacli.eni.diff import diff_eni
+from lolacli.eni.parser import parse_eni
+from tests.conftest import corpus_files
+
+FIXTURES = Path(__file__).resolve().parent.parent / "fixtures" / "eni"
+VALID_PATH = FIXTURES / "eni-small-valid.xml"
+VALID = VALID_PATH.read_text()
+
+
+def write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def diff_json(cli, a: Path, b: Path) -> tuple[int, dict]:
+    code, out, err = cli("eni", "diff", str(a), str(b), "--format", "json")
+    assert err == ""
+    report = json.loads(out)
+    assert report["schema"] == "lolacli.eni-diff/1"
+    return code, report
+
+
+def test_same_file_is_equal(cli):
+    code, report = diff_json(cli, VALID_PATH, VALID_PATH)
+    assert code == 0
+    assert report["equal"] is True and report["changes"] == []
+
+
+def test_formatting_only_changes_are_equal(cli, tmp_path):
+    """Whitespace, comments and #x vs decimal spelling do not make a difference."""
+    other = VALID.replace("<Addr>#x00010000</Addr>", "<Addr>65536</Addr>").replace("\n", "\n  ")
+    other = other.replace("<Cyclic>", "<Cyclic><!-- a comment -->")
+    code, report = diff_json(cli, VALID_PATH, write(tmp_path, "b.xml", other))
+    assert code == 0 and report["equal"]
+
+
+def test_changed_identity_and_address(cli, tmp_path):
+    b = VALID.replace("<RevisionNo>66592</RevisionNo>", "<RevisionNo>66593</RevisionNo>")
+    code, report = diff_json(cli, VALID_PATH, write(tmp_path, "b.xml", b))
+    assert code == 1
+    assert report["changes"] == [
+        {
+            "kind": "changed",
+            "area": "slave",
+            "key": "station 1002",
+            "before": {"revision": 66592},
+            "after": {"revision": 66593},
+        }
+    ]
+
+
+def test_cyclic_and_variable_changes(cli, tmp_path):
+    b = VALID.replace("<Cnt>4</Cnt>", "<Cnt>5</Cnt>").replace(
+        "<Name>EL1809.Channel 1-16.Input</Name>", "<Name>EL1809.Inputs</Name>"
+    )
+    code, report = diff_json(cli, VALID_PATH, write(tmp_path, "b.xml", b))
+    assert code == 1
+    summary = [(c["kind"], c["area"], c["key"]) for c in report["changes"]]
+    assert summary == [
+        ("changed", "cyclic", "frame 1 cmd 1"),
+        ("removed", "variable", "input:EL1809.Channel 1-16.Input"),
+        ("added", "variable", "input:EL1809.Inputs"),
+    ]
+    assert report["changes"][0]["before"] == {"expected_wkc": 4}
+    assert report["changes_by_area"]["variable"] == 2
+
+
+def test_removed_slave_and_cycle_time(cli, tmp_path):
+    start = VALID.index("    <Slave>\n      <Info>\n        <Name>EL1809")
+    end = VALID.index("    <Cyclic>")
+    b = (VALID[:start] + VALID[end:]).replace(
+        "<CycleTime>500</CycleTime>", "<CycleTime>1000</CycleTime>"
+    )
+    eni_a, eni_b = parse_eni(VALID.encode()), parse_eni(b.encode())
+    changes = diff_eni(eni_a, eni_b)
+    assert ("changed", "cycle_time") == (changes[0].kind, changes[0].area)
+    assert changes[0].before == {"cycle_time_ns": 500_000}
+    assert changes[0].after == {"cycle_time_ns": 1_000_000}
+    removed = [c for c in changes if c.kind == "removed" and c.area == "slave"]
+    assert [c.key for c in removed] == ["station 1003"]
+    code, out, _ = cli("eni", "diff", str(VALID_PATH), str(write(tmp_path, "b.xml", b)))
+    assert code == 1
+    assert "- slave station 1003" in out
+    assert "difference(s)" in out
+
+
+def test_corpus_pair(cli):
+    """rocos eni4 (4 drives) against eni7 (7 drives): three slaves added, LRW grown."""
+    files = {p.name: p for p in corpus_files("eni", "rocos-ethercat__eni[47].xml")}
+    if len(files) < 2:
+        import pytest
+
+        pytest.skip("corpus not found")
+    code, report = diff_json(
+        cli, files["rocos-ethercat__eni4.xml"], files["rocos-ethercat__eni7.xml"]
+    )
+    assert code == 1
+    added = [c["key"] for c in report["changes"] if c["kind"] == "added" and c["area"] == "slave"]
+    assert added == ["station 1005", "station 1006", "station 1007"]
+    lrw = next(
+        c for c in report["changes"] if c["area"] == "cyclic" and "length_bytes" in c["before"]
+    )
+    assert (lrw["before"]["length_bytes"], lrw["after"]["length_bytes"]) == (56, 154)
+    assert (lrw["before"]["expected_wkc"], lrw["after"]["expected_wkc"]) == (12, 21)
+
+
+def test_diff_help_states_exit_codes(cli):
+    code, out, _ = cli("eni", "diff", "--help")
+    assert code == 0
+    assert "Exit 0 when the two are equal, 1 when they differ" in " ".join(out.split())
