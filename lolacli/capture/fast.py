@@ -1,0 +1,67 @@
+"""Pick the scanner engine: numba-compiled (extra ``fast``) or plain Python.
+
+The functions of :mod:`lolacli.capture.scan` are compiled into a private namespace, so
+that the plain-Python originals stay importable beside the compiled ones (the tests
+compare both). numba is imported here only, and only when asked for.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from lolacli.capture import scan
+
+_COMPILED: SimpleNamespace | None = None
+
+
+def numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def choose_engine(engine: str = "auto") -> str:
+    """``"numba"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``."""
+    if engine == "auto":
+        engine = os.environ.get("LOLACLI_ENGINE", "auto")
+    if engine == "auto":
+        return "numba" if numba_available() else "python"
+    if engine not in ("numba", "python"):
+        raise ValueError(f"unknown engine {engine!r}")
+    return engine
+
+
+def kernels(engine: str) -> Any:
+    """An object with ``scan``, ``rehash`` and ``finish`` for the engine."""
+    if engine == "python":
+        return scan
+    global _COMPILED
+    if _COMPILED is None:
+        _COMPILED = _compile()
+    return _COMPILED
+
+
+def _compile() -> SimpleNamespace:
+    import numba
+
+    source_path = Path(scan.__file__)
+    namespace: dict[str, Any] = {"__name__": "lolacli.capture.scan"}
+    code = compile(source_path.read_text(encoding="utf-8"), str(source_path), "exec")
+    exec(code, namespace)  # noqa: S102  (our own module, compiled for numba)
+    for name in scan.KERNELS:
+        namespace[name] = numba.njit(cache=True, nogil=True)(namespace[name])
+    namespace["_byte"] = numba.njit(cache=True, nogil=True)(_byte_int64)
+    return SimpleNamespace(**{name: namespace[name] for name in scan.KERNELS})
+
+
+def _byte_int64(buf: Any, p: Any) -> Any:
+    """``scan._byte`` for compiled kernels: a uint8 widened to int64 (numba would keep
+    it unsigned, and unsigned mixed with signed integers promotes to float)."""
+    return np.int64(buf[p])

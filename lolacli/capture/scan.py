@@ -1,0 +1,542 @@
+"""The capture scanner: walks pcap/pcapng records in a byte buffer and analyses each
+EtherCAT frame in one pass (pure; no IO).
+
+This module is written in the small subset of Python that numba compiles: integers,
+indexing, loops, no objects. :mod:`lolacli.capture.fast` compiles it with ``numba.njit``;
+without numba the very same functions run as plain Python (slower, same results).
+
+Everything lives in flat integer arrays (lists in plain-Python mode):
+
+* ``st`` — counters and running state, indexed by the ``S_*`` constants below;
+* ``cmd_counts[256]`` — datagrams per command byte;
+* the pairing table ``pk/pn/pts/pmeta`` (open addressing, key = 63-bit hash of the
+  frame's (command, index, address key) sequence, a stack of ``DEPTH`` pending outgoing
+  timestamps per key: a return pops the most recent one, DESIGN.md "Pairing");
+* the stream table ``sk/sc`` (outgoing frames per (command, address key) signature), used
+  to pick the cyclic stream when there is no logical traffic;
+* the WKC table ``wk/wv`` (expected WKC per cyclic datagram key: the ENI's ``<Cnt>``, or
+  the first WKC seen);
+* output rows ``o_*`` that the driver drains whenever :data:`ST_FLUSH` is returned.
+
+Address key: auto-increment and broadcast commands have their ADP incremented by every
+slave, so only ADO identifies them; configured-address and logical commands keep the
+full 32-bit address.
+"""
+
+from __future__ import annotations
+
+# --- st indices -------------------------------------------------------------------------
+S_FRAMES = 0
+S_ECAT = 1
+S_NONECAT = 2
+S_MALFORMED = 3
+S_DGRAMS = 4
+S_OUT = 5
+S_RET = 6
+S_PAIRS = 7
+S_UNMATCHED_RET = 8
+S_CYC_N = 9
+S_CYC_MATCHED = 10
+S_LOST = 11
+S_CYC_LAST_TS = 12
+S_WKC_MISMATCH = 13
+S_WKC_CHECKED = 14
+S_DC_DGRAMS = 15
+S_DC_BURST = 16
+S_DC_LAST_TS = 17
+S_N_RT = 18
+S_N_PERIOD = 19
+S_N_BURST = 20
+S_N_DC = 21
+S_N_MBX = 22
+S_P_USED = 23
+S_S_USED = 24
+S_W_USED = 25
+S_LAST_TS = 26
+S_MODE = 27
+S_STREAM_SIG = 28
+S_WKC_FIXED = 29
+S_NON_ETH = 30
+S_ECAT_OTHER = 31
+S_FIRST_TS = 32
+S_END_TS = 33
+S_UDP = 34
+S_VLAN = 35
+S_CUT = 36
+S_LOGICAL_OUT = 37
+S_SKIPPED = 38
+S_N_WKCBAD = 39
+S_SIZE = 48
+
+# --- kernel return codes -----------------------------------------------------------------
+ST_NEED_MORE = 0
+ST_FLUSH = 1
+ST_BLOCK = 2
+ST_GROW = 3
+ST_CORRUPT = 4
+ST_DONE = 5
+
+MODE_LOGICAL = 0
+MODE_SIGNATURE = 1
+
+DEPTH = 16
+MAX_DGRAMS = 128
+MBX_COLS = 8
+WKC_COLS = 5
+MAX_RECORD = 16 * 1024 * 1024
+BURST_GAP_NS = 1_000_000
+MASK63 = 0x7FFFFFFFFFFFFFFF
+FNV = 0x100000001B3
+SEED_PAIR = 0x2545F4914F6CDD1D
+SEED_STREAM = 0x1B873593
+SEED_WKC = 0x5BD1E995
+
+REG_DC_SYSTIME = 0x0910
+REG_DC_SYSTIME_DIFF = 0x092C
+MBX_AREA = 0x1000
+
+
+def _byte(buf, p):  # type: ignore[no-untyped-def]
+    return buf[p]
+
+
+def _u16(buf, p, big):  # type: ignore[no-untyped-def]
+    if big:
+        return (_byte(buf, p) << 8) | _byte(buf, p + 1)
+    return _byte(buf, p) | (_byte(buf, p + 1) << 8)
+
+
+def _u32(buf, p, big):  # type: ignore[no-untyped-def]
+    if big:
+        return (_u16(buf, p, True) << 16) | _u16(buf, p + 2, True)
+    return _u16(buf, p, False) | (_u16(buf, p + 2, False) << 16)
+
+
+def _mix(h, v):  # type: ignore[no-untyped-def]
+    h = ((h ^ v) * FNV) & MASK63
+    return h ^ (h >> 29)
+
+
+def _key(h):  # type: ignore[no-untyped-def]
+    return h if h != 0 else 1
+
+
+def _slot(keys, key):  # type: ignore[no-untyped-def]
+    mask = len(keys) - 1
+    i = (key ^ (key >> 21)) & mask
+    while True:
+        k = keys[i]
+        if k == key or k == 0:
+            return i
+        i = (i + 1) & mask
+
+
+def _addr_key(cmd, addr):  # type: ignore[no-untyped-def]
+    # APRD APWR APRW ARMW BRD BWR BRW: ADP is incremented by every slave.
+    if cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9:
+        return addr & 0xFFFF0000
+    return addr
+
+
+def _ts_ns(units, mode, a, b, off):  # type: ignore[no-untyped-def]
+    if mode == 0:
+        return units * a // b + off
+    sec = units >> a
+    frac = units & ((1 << a) - 1)
+    if a > 30:
+        frac = frac >> (a - 30)
+        return sec * 1000000000 + ((frac * 1000000000) >> 30) + off
+    return sec * 1000000000 + ((frac * 1000000000) >> a) + off
+
+
+def _push(pk, pn, pts, pmeta, st, key, ts, meta):  # type: ignore[no-untyped-def]
+    i = _slot(pk, key)
+    if pk[i] == 0:
+        pk[i] = key
+        st[S_P_USED] += 1
+    n = pn[i]
+    base = i * DEPTH
+    if n == DEPTH:
+        for j in range(DEPTH - 1):
+            pts[base + j] = pts[base + j + 1]
+            pmeta[base + j] = pmeta[base + j + 1]
+        n = DEPTH - 1
+    pts[base + n] = ts
+    pmeta[base + n] = meta
+    pn[i] = n + 1
+
+
+def _count_stream(sk, sc, st, key):  # type: ignore[no-untyped-def]
+    i = _slot(sk, key)
+    if sk[i] == 0:
+        sk[i] = key
+        st[S_S_USED] += 1
+    sc[i] += 1
+
+
+def _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc):  # type: ignore[no-untyped-def]
+    key = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
+    i = _slot(wk, key)
+    if wk[i] == 0:
+        if st[S_WKC_FIXED] != 0:
+            return
+        wk[i] = key
+        wv[i] = wkc
+        st[S_W_USED] += 1
+    st[S_WKC_CHECKED] += 1
+    if wv[i] != wkc:
+        st[S_WKC_MISMATCH] += 1
+        r = st[S_N_WKCBAD]
+        o_wkc[r * WKC_COLS] = st[S_FRAMES]
+        o_wkc[r * WKC_COLS + 1] = cmd
+        o_wkc[r * WKC_COLS + 2] = _u32(buf, q + 2, False)
+        o_wkc[r * WKC_COLS + 3] = wv[i]
+        o_wkc[r * WKC_COLS + 4] = wkc
+        st[S_N_WKCBAD] = r + 1
+
+
+def _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx):  # type: ignore[no-untyped-def]
+    # Reads of the DC system-time difference (0x092C): sign-and-magnitude nanoseconds.
+    if (cmd == 1 or cmd == 4) and wkc >= 1 and ado <= REG_DC_SYSTIME_DIFF:
+        if ado + ln >= REG_DC_SYSTIME_DIFF + 4:
+            v = _u32(buf, q + 10 + REG_DC_SYSTIME_DIFF - ado, False)
+            mag = v & 0x7FFFFFFF
+            o_dc[st[S_N_DC]] = -mag if v & 0x80000000 else mag
+            st[S_N_DC] += 1
+    # Mailbox candidates: a physical read/write in the process-memory area whose data
+    # starts with a plausible mailbox header (ETG.1000.4 Table 29).
+    if (cmd == 1 or cmd == 2 or cmd == 4 or cmd == 5) and wkc >= 1 and ado >= MBX_AREA:
+        if ln >= 8:
+            mlen = _u16(buf, q + 10, False)
+            mtype = _byte(buf, q + 15) & 0x0F
+            if mlen >= 2 and mlen + 6 <= ln and (mtype <= 5 or mtype == 15):
+                r = st[S_N_MBX] * MBX_COLS
+                o_mbx[r] = st[S_FRAMES]
+                o_mbx[r + 1] = ts
+                o_mbx[r + 2] = q
+                o_mbx[r + 3] = cmd
+                o_mbx[r + 4] = _u32(buf, q + 2, False)
+                o_mbx[r + 5] = ln
+                o_mbx[r + 6] = wkc
+                o_mbx[r + 7] = _u16(buf, q + 8, False)
+                st[S_N_MBX] += 1
+
+
+def _drift(ts, st, o_burst):  # type: ignore[no-untyped-def]
+    st[S_DC_DGRAMS] += 1
+    if st[S_DC_BURST] > 0 and ts - st[S_DC_LAST_TS] > BURST_GAP_NS:
+        o_burst[st[S_N_BURST]] = st[S_DC_BURST]
+        st[S_N_BURST] += 1
+        st[S_DC_BURST] = 0
+    st[S_DC_BURST] += 1
+    st[S_DC_LAST_TS] = ts
+
+
+def _ecat(  # type: ignore[no-untyped-def]
+    buf, p, limit, ret, ts, st, cmd_counts, dg,
+    pk, pn, pts, pmeta, sk, sc, wk, wv,
+    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
+):
+    """One EtherCAT payload at ``p`` (captured bytes end at ``limit``).
+
+    Returns False when the datagrams do not fit (a malformed frame).
+    """
+    if p + 2 > limit:
+        return False
+    word = _u16(buf, p, False)
+    if (word >> 12) != 1:
+        st[S_ECAT] += 1
+        st[S_ECAT_OTHER] += 1
+        return True
+    q = p + 2
+    n = 0
+    while True:
+        if n == MAX_DGRAMS or q + 12 > limit:
+            return False
+        lw = _u16(buf, q + 6, False)
+        ln = lw & 0x7FF
+        if q + 12 + ln > limit:
+            return False
+        dg[n] = q
+        n += 1
+        q += 12 + ln
+        if (lw & 0x8000) == 0:
+            break
+    st[S_ECAT] += 1
+    st[S_DGRAMS] += n
+    hp = SEED_PAIR
+    hs = SEED_STREAM
+    logical = False
+    for j in range(n):
+        q = dg[j]
+        cmd = _byte(buf, q)
+        akey = _addr_key(cmd, _u32(buf, q + 2, False))
+        cmd_counts[cmd] += 1
+        hp = _mix(_mix(hp, (cmd << 8) | _byte(buf, q + 1)), akey)
+        hs = _mix(_mix(hs, cmd), akey)
+        if cmd == 10 or cmd == 11 or cmd == 12:
+            logical = True
+    hp = _key(hp)
+    hs = _key(hs)
+    if st[S_MODE] == MODE_LOGICAL:
+        cyc = logical
+    else:
+        cyc = hs == st[S_STREAM_SIG]
+    if ret == 0:
+        st[S_OUT] += 1
+        _count_stream(sk, sc, st, hs)
+        if logical:
+            st[S_LOGICAL_OUT] += 1
+        meta = 0
+        if cyc:
+            if st[S_CYC_N] > 0:
+                if st[S_CYC_MATCHED] == 0:
+                    st[S_LOST] += 1
+                o_period[st[S_N_PERIOD]] = ts - st[S_CYC_LAST_TS]
+                st[S_N_PERIOD] += 1
+            st[S_CYC_N] += 1
+            st[S_CYC_MATCHED] = 0
+            st[S_CYC_LAST_TS] = ts
+            meta = st[S_CYC_N]
+        _push(pk, pn, pts, pmeta, st, hp, ts, meta)
+        for j in range(n):
+            q = dg[j]
+            cmd = _byte(buf, q)
+            if (cmd == 13 or cmd == 14) and _u16(buf, q + 4, False) == REG_DC_SYSTIME:
+                _drift(ts, st, o_burst)
+        return True
+    st[S_RET] += 1
+    i = _slot(pk, hp)
+    if pk[i] != 0 and pn[i] > 0:
+        top = pn[i] - 1
+        pn[i] = top
+        meta = pmeta[i * DEPTH + top]
+        r = st[S_N_RT]
+        o_rt[r] = ts - pts[i * DEPTH + top]
+        o_rtts[r] = ts
+        o_rtcyc[r] = 1 if meta > 0 else 0
+        st[S_N_RT] = r + 1
+        st[S_PAIRS] += 1
+        if meta > 0 and meta == st[S_CYC_N]:
+            st[S_CYC_MATCHED] = 1
+    else:
+        st[S_UNMATCHED_RET] += 1
+    for j in range(n):
+        q = dg[j]
+        cmd = _byte(buf, q)
+        ado = _u16(buf, q + 4, False)
+        ln = _u16(buf, q + 6, False) & 0x7FF
+        wkc = _u16(buf, q + 10 + ln, False)
+        if cyc:
+            _check_wkc(buf, q, cmd, _addr_key(cmd, _u32(buf, q + 2, False)), ln, wkc, wk, wv,
+                       st, o_wkc)
+        _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx)
+    return True
+
+
+def _packet(  # type: ignore[no-untyped-def]
+    buf, d, cap, orig, ts, st, cmd_counts, dg,
+    pk, pn, pts, pmeta, sk, sc, wk, wv,
+    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
+):
+    """One Ethernet frame of ``cap`` captured bytes at ``d``."""
+    st[S_FRAMES] += 1
+    if st[S_FRAMES] == 1:
+        st[S_FIRST_TS] = ts
+    st[S_END_TS] = ts
+    st[S_LAST_TS] = ts
+    if cap < 14:
+        st[S_MALFORMED] += 1
+        return
+    limit = d + cap
+    etype = _u16(buf, d + 12, True)
+    p = d + 14
+    if etype == 0x8100:
+        if cap < 18:
+            st[S_MALFORMED] += 1
+            return
+        etype = _u16(buf, d + 16, True)
+        p = d + 18
+        st[S_VLAN] += 1
+    if etype == 0x0800:
+        # EtherCAT over UDP (ETG.1000.4 §5.3.2): IPv4, protocol 17, port 0x88A4.
+        if p + 20 > limit or (_byte(buf, p) >> 4) != 4 or _byte(buf, p + 9) != 17:
+            st[S_NONECAT] += 1
+            return
+        ihl = (_byte(buf, p) & 0x0F) * 4
+        if (_u16(buf, p + 6, True) & 0x1FFF) != 0 or p + ihl + 8 > limit:
+            st[S_NONECAT] += 1
+            return
+        if _u16(buf, p + ihl + 2, True) != 0x88A4:
+            st[S_NONECAT] += 1
+            return
+        p = p + ihl + 8
+        st[S_UDP] += 1
+    elif etype != 0x88A4:
+        st[S_NONECAT] += 1
+        return
+    ret = _byte(buf, d + 6) & 0x02
+    ok = _ecat(buf, p, limit, ret, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
+               o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+    if not ok:
+        st[S_MALFORMED] += 1
+    elif cap < orig:
+        st[S_CUT] += 1
+
+
+def _full(st, cap, pk, sk, wk):  # type: ignore[no-untyped-def]
+    """ST_FLUSH / ST_GROW / -1: whether the driver must act before the next record."""
+    lim = cap - MAX_DGRAMS - 2
+    if (st[S_N_RT] >= lim or st[S_N_PERIOD] >= lim or st[S_N_BURST] >= lim
+            or st[S_N_DC] >= lim or st[S_N_MBX] >= lim or st[S_N_WKCBAD] >= lim):
+        return ST_FLUSH
+    if st[S_P_USED] * 2 > len(pk) or st[S_S_USED] * 2 > len(sk) or st[S_W_USED] * 2 > len(wk):
+        return ST_GROW
+    return -1
+
+
+def scan(  # type: ignore[no-untyped-def]
+    buf, pos, end, eof, fmt, big, ns_res, ifs, n_if, st, cmd_counts, dg,
+    pk, pn, pts, pmeta, sk, sc, wk, wv,
+    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
+):
+    """Walk records from ``pos`` until the buffer ends or the driver must act.
+
+    ``fmt`` 0 = classic pcap (``ns_res`` 1 for nanosecond files), 1 = pcapng. ``ifs`` holds
+    5 integers per pcapng interface: ts mode, a, b, offset_ns, is_ethernet.
+    Returns ``(pos, status)``.
+    """
+    cap = len(o_rt)
+    while True:
+        act = _full(st, cap, pk, sk, wk)
+        if act >= 0:
+            return pos, act
+        if fmt == 0:
+            if pos + 16 > end:
+                break
+            incl = _u32(buf, pos + 8, big)
+            if incl > MAX_RECORD:
+                return pos, ST_CORRUPT
+            if pos + 16 + incl > end:
+                break
+            frac = _u32(buf, pos + 4, big)
+            ts = _u32(buf, pos, big) * 1000000000 + (frac if ns_res else frac * 1000)
+            _packet(buf, pos + 16, incl, _u32(buf, pos + 12, big), ts, st, cmd_counts, dg,
+                    pk, pn, pts, pmeta, sk, sc, wk, wv,
+                    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+            pos += 16 + incl
+            continue
+        if pos + 8 > end:
+            break
+        btype = _u32(buf, pos, big)
+        if btype == 0x0A0D0D0A:
+            return pos, ST_BLOCK
+        total = _u32(buf, pos + 4, big)
+        if total < 12 or total % 4 != 0 or total > MAX_RECORD:
+            return pos, ST_CORRUPT
+        if pos + total > end:
+            break
+        if btype == 1:
+            return pos, ST_BLOCK
+        if btype == 6 or btype == 2 or btype == 3:
+            _pcapng_packet(buf, pos, total, btype, big, ifs, n_if, st, cmd_counts, dg,
+                           pk, pn, pts, pmeta, sk, sc, wk, wv,
+                           o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+        else:
+            st[S_SKIPPED] += 1
+        pos += total
+    if eof:
+        if pos == end:
+            return pos, ST_DONE
+        return pos, ST_CORRUPT
+    return pos, ST_NEED_MORE
+
+
+def _pcapng_packet(  # type: ignore[no-untyped-def]
+    buf, pos, total, btype, big, ifs, n_if, st, cmd_counts, dg,
+    pk, pn, pts, pmeta, sk, sc, wk, wv,
+    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
+):
+    if btype == 3:
+        if total < 16:
+            st[S_FRAMES] += 1
+            st[S_MALFORMED] += 1
+            return
+        orig = _u32(buf, pos + 8, big)
+        incl = min(orig, total - 16)
+        iface = 0
+        ts = st[S_LAST_TS]
+        start = pos + 12
+    else:
+        if total < 32:
+            st[S_FRAMES] += 1
+            st[S_MALFORMED] += 1
+            return
+        if btype == 6:
+            iface = _u32(buf, pos + 8, big)
+        else:
+            iface = _u16(buf, pos + 8, big)
+        units = (_u32(buf, pos + 12, big) << 32) | _u32(buf, pos + 16, big)
+        incl = _u32(buf, pos + 20, big)
+        orig = _u32(buf, pos + 24, big)
+        start = pos + 28
+        if 28 + incl > total - 4 or iface >= n_if:
+            st[S_FRAMES] += 1
+            st[S_MALFORMED] += 1
+            return
+        b = iface * 5
+        ts = _ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3])
+    if iface >= n_if:
+        st[S_FRAMES] += 1
+        st[S_MALFORMED] += 1
+        return
+    if ifs[iface * 5 + 4] == 0:
+        st[S_FRAMES] += 1
+        st[S_NONECAT] += 1
+        st[S_NON_ETH] += 1
+        return
+    _packet(buf, start, incl, orig, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
+            o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+
+
+def rehash(ok, on, ots, ometa, nk, nn, nts, nmeta, keep_empty):  # type: ignore[no-untyped-def]
+    """Move the entries of one open-addressing table into a new (empty) one.
+
+    With ``on`` given (a pairing table), slots whose stack is empty are dropped unless
+    ``keep_empty``. Returns the number of keys moved. For the stream and WKC tables the
+    value array is passed as ``on`` and ``ots``/``ometa`` are empty.
+    """
+    used = 0
+    depth = len(ots) // len(ok) if len(ok) > 0 else 0
+    for i in range(len(ok)):
+        k = ok[i]
+        if k == 0:
+            continue
+        if depth > 0 and on[i] == 0 and not keep_empty:
+            continue
+        j = _slot(nk, k)
+        nk[j] = k
+        nn[j] = on[i]
+        for t in range(depth):
+            nts[j * depth + t] = ots[i * depth + t]
+            nmeta[j * depth + t] = ometa[i * depth + t]
+        used += 1
+    return used
+
+
+def finish(st, o_burst):  # type: ignore[no-untyped-def]
+    """End of file: the last cyclic frame without a return is lost; close the DC burst."""
+    if st[S_CYC_N] > 0 and st[S_CYC_MATCHED] == 0:
+        st[S_LOST] += 1
+        st[S_CYC_MATCHED] = 1
+    if st[S_DC_BURST] > 0:
+        o_burst[st[S_N_BURST]] = st[S_DC_BURST]
+        st[S_N_BURST] += 1
+        st[S_DC_BURST] = 0
+
+
+KERNELS = (
+    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_addr_key", "_ts_ns", "_push", "_count_stream",
+    "_check_wkc", "_returned_extras", "_drift", "_ecat", "_packet", "_full", "scan",
+    "_pcapng_packet", "rehash", "finish",
+)

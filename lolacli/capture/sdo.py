@@ -1,0 +1,230 @@
+"""SDO transactions rebuilt from the CoE mailbox traffic of a capture (pure).
+
+The scanner hands over every returned datagram that looks like a mailbox message: a
+physical write (FPWR/APWR, mailbox out: master → slave) or read (FPRD/APRD, mailbox in:
+slave → master) in the process-memory area (ADO ≥ 0x1000) with WKC ≥ 1 and a plausible
+mailbox header. Here each is decoded with :mod:`lolacli.wire.mailbox`,
+:mod:`lolacli.wire.coe` and :mod:`lolacli.wire.sdo` and fed to a per-slave state machine
+(slave = ADP of the configured-address datagram):
+
+* upload: initiate upload request → initiate upload response (expedited: done; normal:
+  upload segment request/response pairs until the segment with the "last" bit);
+* download: initiate download request (expedited, or normal followed by download
+  segments) → initiate/segment download responses until the last segment is acknowledged;
+* an abort (either side, CiA 301 abort code) ends the open transaction.
+
+A mailbox read that repeats the previous message of the same slave (same non-zero
+counter, same bytes) is a mailbox repeat and is counted once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lolacli.errors import WireError
+from lolacli.wire.coe import CoeService, decode_coe_header
+from lolacli.wire.mailbox import MailboxType, decode_mailbox
+from lolacli.wire.sdo import (
+    SdoAbort,
+    SdoDownloadRequest,
+    SdoDownloadResponse,
+    SdoDownloadSegmentRequest,
+    SdoDownloadSegmentResponse,
+    SdoUploadRequest,
+    SdoUploadResponse,
+    SdoUploadSegmentResponse,
+    abort_text,
+    decode_sdo,
+)
+
+WRITE_COMMANDS = (2, 5)  # APWR, FPWR
+
+
+@dataclass(slots=True)
+class SdoTransaction:
+    """One SDO upload or download as seen on the wire."""
+
+    slave: int
+    index: int
+    subindex: int
+    kind: str  # "upload" | "download"
+    start_frame: int
+    start_ns: int
+    transfer: str = "expedited"  # or "segmented"
+    size_bytes: int = 0
+    segments: int = 0
+    complete_access: bool = False
+    status: str = "open"  # "ok" | "abort" | "open"
+    abort_code: int | None = None
+    end_frame: int | None = None
+    end_ns: int | None = None
+    data: bytearray = field(default_factory=bytearray)
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "slave": self.slave,
+            "index": self.index,
+            "subindex": self.subindex,
+            "object": f"0x{self.index:04X}:{self.subindex:02X}",
+            "kind": self.kind,
+            "transfer": self.transfer,
+            "complete_access": self.complete_access,
+            "size_bytes": self.size_bytes,
+            "segments": self.segments,
+            "status": self.status,
+            "abort_code": None if self.abort_code is None else f"0x{self.abort_code:08X}",
+            "abort_text": None if self.abort_code is None else abort_text(self.abort_code),
+            "start_frame": self.start_frame,
+            "end_frame": self.end_frame,
+            "duration_us": None
+            if self.end_ns is None
+            else (self.end_ns - self.start_ns) / 1000.0,
+            "data_hex": bytes(self.data[:64]).hex(),
+        }
+
+
+@dataclass(slots=True)
+class MailboxStats:
+    messages: int = 0
+    repeats: int = 0
+    undecodable: int = 0
+    by_type: dict[str, int] = field(default_factory=dict)
+    coe_by_service: dict[str, int] = field(default_factory=dict)
+    sdo_info_messages: int = 0
+    emergencies: int = 0
+
+
+class SdoTracker:
+    """Feed mailbox datagrams in file order; read :attr:`transactions` at the end."""
+
+    def __init__(self) -> None:
+        self.transactions: list[SdoTransaction] = []
+        self.stats = MailboxStats()
+        self._open: dict[int, SdoTransaction] = {}
+        self._last_in: dict[int, tuple[int, bytes]] = {}
+
+    def feed(self, frame: int, ts_ns: int, cmd: int, address: int, data: bytes) -> None:
+        slave = address & 0xFFFF
+        try:
+            mailbox = decode_mailbox(data)
+        except WireError:
+            self.stats.undecodable += 1
+            return
+        header = mailbox.header
+        to_slave = cmd in WRITE_COMMANDS
+        if not to_slave and header.counter != 0:
+            wire = bytes(data[: 6 + header.length])
+            if self._last_in.get(slave) == (header.counter, wire):
+                self.stats.repeats += 1
+                return
+            self._last_in[slave] = (header.counter, wire)
+        self.stats.messages += 1
+        name = _type_name(header.mailbox_type)
+        self.stats.by_type[name] = self.stats.by_type.get(name, 0) + 1
+        if header.mailbox_type == MailboxType.CoE:
+            self._coe(frame, ts_ns, slave, mailbox.payload)
+
+    def _coe(self, frame: int, ts_ns: int, slave: int, payload: bytes) -> None:
+        try:
+            service = decode_coe_header(payload).service
+        except WireError:
+            self.stats.undecodable += 1
+            return
+        sname = service.name if isinstance(service, CoeService) else str(int(service))
+        counts = self.stats.coe_by_service
+        counts[sname] = counts.get(sname, 0) + 1
+        if service == CoeService.EMERGENCY:
+            self.stats.emergencies += 1
+            return
+        if service == CoeService.SDO_INFO:
+            self.stats.sdo_info_messages += 1
+            return
+        if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
+            return
+        try:
+            message = decode_sdo(payload)
+        except WireError:
+            self.stats.undecodable += 1
+            return
+        self._sdo(frame, ts_ns, slave, message)
+
+    def _sdo(self, frame: int, ts_ns: int, slave: int, message: object) -> None:
+        if isinstance(message, SdoUploadRequest | SdoDownloadRequest):
+            self._start(frame, ts_ns, slave, message)
+            return
+        txn = self._open.get(slave)
+        if isinstance(message, SdoAbort):
+            if txn is None or (txn.index, txn.subindex) != (message.index, message.subindex):
+                txn = SdoTransaction(
+                    slave, message.index, message.subindex, "unknown", frame, ts_ns
+                )
+                self.transactions.append(txn)
+            txn.abort_code = message.code
+            self._close(txn, frame, ts_ns, "abort")
+            return
+        if txn is None:
+            return
+        if isinstance(message, SdoUploadResponse):
+            self._upload_response(txn, frame, ts_ns, message)
+        elif isinstance(message, SdoUploadSegmentResponse):
+            txn.segments += 1
+            txn.data += message.data
+            if message.last:
+                self._close(txn, frame, ts_ns, "ok")
+        elif isinstance(message, SdoDownloadSegmentRequest):
+            txn.segments += 1
+            txn.data += message.data
+            txn.size_bytes = max(txn.size_bytes, len(txn.data))
+            txn.transfer = "segmented"
+            if message.last:
+                txn.status = "last-sent"
+        elif isinstance(message, SdoDownloadResponse):
+            if txn.transfer == "expedited":
+                self._close(txn, frame, ts_ns, "ok")
+        elif isinstance(message, SdoDownloadSegmentResponse):
+            if txn.status == "last-sent":
+                self._close(txn, frame, ts_ns, "ok")
+
+    def _start(self, frame: int, ts_ns: int, slave: int, message: object) -> None:
+        assert isinstance(message, SdoUploadRequest | SdoDownloadRequest)
+        kind = "upload" if isinstance(message, SdoUploadRequest) else "download"
+        txn = SdoTransaction(slave, message.index, message.subindex, kind, frame, ts_ns)
+        txn.complete_access = message.complete_access
+        if isinstance(message, SdoDownloadRequest):
+            txn.data += message.data
+            if message.expedited:
+                txn.size_bytes = len(message.data)
+            else:
+                txn.transfer = "segmented"
+                txn.size_bytes = message.complete_size
+        self.transactions.append(txn)
+        self._open[slave] = txn
+
+    def _upload_response(
+        self, txn: SdoTransaction, frame: int, ts_ns: int, message: SdoUploadResponse
+    ) -> None:
+        txn.data += message.data
+        if message.expedited:
+            txn.size_bytes = len(message.data)
+            self._close(txn, frame, ts_ns, "ok")
+            return
+        txn.transfer = "segmented"
+        txn.size_bytes = message.complete_size
+        if len(txn.data) >= message.complete_size:
+            self._close(txn, frame, ts_ns, "ok")
+
+    def _close(self, txn: SdoTransaction, frame: int, ts_ns: int, status: str) -> None:
+        txn.status = status
+        txn.end_frame = frame
+        txn.end_ns = ts_ns
+        if self._open.get(txn.slave) is txn:
+            del self._open[txn.slave]
+
+    def aborts(self) -> list[SdoTransaction]:
+        return [t for t in self.transactions if t.status == "abort"]
+
+
+def _type_name(mailbox_type: int) -> str:
+    if isinstance(mailbox_type, MailboxType):
+        return mailbox_type.name
+    return f"type{int(mailbox_type)}"
