@@ -1,0 +1,458 @@
+"""ESC registers: addresses, AL states and status codes, FMMU and sync-manager structs.
+
+Addresses follow ETG.1000.4 §6 (Tables 31–68, "ESC register map") and the ESC datasheets
+(Beckhoff ET1100/ET1200 Section II). Multi-byte registers are little endian.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+
+from lolacli.errors import WireError
+from lolacli.wire._codes import enum_or_int, need
+
+FMMU_BYTES = 16
+SYNC_MANAGER_BYTES = 8
+FMMU_COUNT_MAX = 16
+SYNC_MANAGER_COUNT_MAX = 16
+
+
+class Register(IntEnum):
+    """ESC register addresses (ETG.1000.4 §6; ET1100 datasheet Section II, Table 2)."""
+
+    TYPE = 0x0000
+    REVISION = 0x0001
+    BUILD = 0x0002
+    FMMU_COUNT = 0x0004
+    SM_COUNT = 0x0005
+    RAM_SIZE = 0x0006
+    PORT_DESCRIPTOR = 0x0007
+    ESC_FEATURES = 0x0008
+    STATION_ADDRESS = 0x0010
+    STATION_ALIAS = 0x0012
+    WRITE_ENABLE = 0x0020
+    WRITE_PROTECTION = 0x0021
+    ESC_WRITE_ENABLE = 0x0030
+    ESC_WRITE_PROTECTION = 0x0031
+    ESC_RESET_ECAT = 0x0040
+    ESC_RESET_PDI = 0x0041
+    DL_CONTROL = 0x0100
+    PHYSICAL_READ_WRITE_OFFSET = 0x0108
+    DL_STATUS = 0x0110
+    AL_CONTROL = 0x0120
+    AL_STATUS = 0x0130
+    AL_STATUS_CODE = 0x0134
+    RUN_LED_OVERRIDE = 0x0138
+    ERR_LED_OVERRIDE = 0x0139
+    PDI_CONTROL = 0x0140
+    ESC_CONFIGURATION = 0x0141
+    PDI_CONFIGURATION = 0x0150
+    SYNC_LATCH_CONFIGURATION = 0x0151
+    EXTENDED_PDI_CONFIGURATION = 0x0152
+    ECAT_EVENT_MASK = 0x0200
+    PDI_EVENT_MASK = 0x0204
+    ECAT_EVENT_REQUEST = 0x0210
+    AL_EVENT_REQUEST = 0x0220
+    RX_ERROR_COUNTER = 0x0300  # 4 ports × (invalid frame u8, RX error u8)
+    FORWARDED_RX_ERROR_COUNTER = 0x0308
+    PROCESSING_UNIT_ERROR_COUNTER = 0x030C
+    PDI_ERROR_COUNTER = 0x030D
+    LOST_LINK_COUNTER = 0x0310
+    WATCHDOG_DIVIDER = 0x0400
+    WD_TIME_PDI = 0x0410
+    WD_TIME_PD = 0x0420
+    WD_STATUS_PD = 0x0440
+    WD_COUNTER_PD = 0x0442
+    WD_COUNTER_PDI = 0x0443
+    SII_CONFIG = 0x0500
+    SII_PDI_ACCESS = 0x0501
+    SII_CONTROL_STATUS = 0x0502
+    SII_ADDRESS = 0x0504
+    SII_DATA = 0x0508
+    MII_CONTROL_STATUS = 0x0510
+    MII_PHY_ADDRESS = 0x0512
+    MII_PHY_REGISTER = 0x0513
+    MII_PHY_DATA = 0x0514
+    FMMU = 0x0600
+    SM = 0x0800
+    DC_RECEIVE_TIME_PORT0 = 0x0900
+    DC_RECEIVE_TIME_PORT1 = 0x0904
+    DC_RECEIVE_TIME_PORT2 = 0x0908
+    DC_RECEIVE_TIME_PORT3 = 0x090C
+    DC_SYSTEM_TIME = 0x0910
+    DC_RECEIVE_TIME_PU = 0x0918
+    DC_SYSTEM_TIME_OFFSET = 0x0920
+    DC_SYSTEM_TIME_DELAY = 0x0928
+    DC_SYSTEM_TIME_DIFFERENCE = 0x092C
+    DC_SPEED_COUNTER_START = 0x0930
+    DC_SPEED_COUNTER_DIFF = 0x0932
+    DC_FILTER_DEPTH_SYSTEM_TIME = 0x0934
+    DC_FILTER_DEPTH_SPEED_COUNTER = 0x0935
+    DC_CYCLIC_UNIT_CONTROL = 0x0980
+    DC_ACTIVATION = 0x0981
+    DC_SYNC_IMPULSE_LENGTH = 0x0982
+    DC_ACTIVATION_STATUS = 0x0984
+    DC_SYNC0_STATUS = 0x098E
+    DC_SYNC1_STATUS = 0x098F
+    DC_START_TIME_CYCLIC = 0x0990
+    DC_NEXT_SYNC1_PULSE = 0x0998
+    DC_SYNC0_CYCLE = 0x09A0
+    DC_SYNC1_CYCLE = 0x09A4
+    DC_LATCH0_CONTROL = 0x09A8
+    DC_LATCH1_CONTROL = 0x09A9
+    DC_LATCH0_STATUS = 0x09AE
+    DC_LATCH1_STATUS = 0x09AF
+    ESC_SPECIFIC = 0x0E00
+    DIGITAL_IO_OUTPUT = 0x0F00
+    GENERAL_PURPOSE_OUTPUT = 0x0F10
+    GENERAL_PURPOSE_INPUT = 0x0F18
+    USER_RAM = 0x0F80
+    PROCESS_RAM = 0x1000
+
+
+def fmmu_address(n: int) -> int:
+    """Address of FMMU ``n`` (0x0600 + 16 n)."""
+    return Register.FMMU + FMMU_BYTES * n
+
+
+def sync_manager_address(n: int) -> int:
+    """Address of sync manager ``n`` (0x0800 + 8 n)."""
+    return Register.SM + SYNC_MANAGER_BYTES * n
+
+
+class AlState(IntEnum):
+    """Application-layer state in AL control/status bits 0–3 (ETG.1000.6 Table 9)."""
+
+    INIT = 1
+    PREOP = 2
+    BOOT = 3
+    SAFEOP = 4
+    OP = 8
+
+
+#: AL status bit 4: the slave refused the requested change (error indicator);
+#: in AL control the same bit acknowledges the error.
+AL_ERROR_INDICATOR = 0x10
+AL_STATE_MASK = 0x0F
+
+
+def al_state(status: int) -> AlState | int:
+    """The state bits of an AL status/control word; unknown values stay ints."""
+    return enum_or_int(AlState, status & AL_STATE_MASK)
+
+
+def al_error(status: int) -> bool:
+    return bool(status & AL_ERROR_INDICATOR)
+
+
+def al_state_name(status: int) -> str:
+    """``OP``, ``SAFEOP+ERR``, ``0x7`` …"""
+    state = al_state(status)
+    name = state.name if isinstance(state, AlState) else f"0x{state:X}"
+    return name + ("+ERR" if al_error(status) else "")
+
+
+_AL_STATUS_TEXT: dict[int, str] = {
+    0x0000: "No error",
+    0x0001: "Unspecified error",
+    0x0002: "No memory",
+    0x0003: "Invalid device setup",
+    0x0006: "SII/EEPROM information does not match firmware",
+    0x0007: "Firmware update not successful",
+    0x000E: "License error",
+    0x0011: "Invalid requested state change",
+    0x0012: "Unknown requested state",
+    0x0013: "Bootstrap not supported",
+    0x0014: "No valid firmware",
+    0x0015: "Invalid mailbox configuration (BOOT)",
+    0x0016: "Invalid mailbox configuration (PREOP)",
+    0x0017: "Invalid sync manager configuration",
+    0x0018: "No valid inputs available",
+    0x0019: "No valid outputs",
+    0x001A: "Synchronization error",
+    0x001B: "Sync manager watchdog",
+    0x001C: "Invalid sync manager types",
+    0x001D: "Invalid output configuration",
+    0x001E: "Invalid input configuration",
+    0x001F: "Invalid watchdog configuration",
+    0x0020: "Slave needs cold start",
+    0x0021: "Slave needs INIT",
+    0x0022: "Slave needs PREOP",
+    0x0023: "Slave needs SAFEOP",
+    0x0024: "Invalid input mapping",
+    0x0025: "Invalid output mapping",
+    0x0026: "Inconsistent settings",
+    0x0027: "Free-run not supported",
+    0x0028: "Synchronization not supported",
+    0x0029: "Free-run needs 3-buffer mode",
+    0x002A: "Background watchdog",
+    0x002B: "No valid inputs and outputs",
+    0x002C: "Fatal sync error",
+    0x002D: "No sync error",
+    0x002E: "Cycle time too small",
+    0x0030: "Invalid DC SYNC configuration",
+    0x0031: "Invalid DC latch configuration",
+    0x0032: "PLL error",
+    0x0033: "DC sync IO error",
+    0x0034: "DC sync timeout error",
+    0x0035: "DC invalid sync cycle time",
+    0x0036: "DC SYNC0 cycle time",
+    0x0037: "DC SYNC1 cycle time",
+    0x0041: "Mailbox AoE error",
+    0x0042: "Mailbox EoE error",
+    0x0043: "Mailbox CoE error",
+    0x0044: "Mailbox FoE error",
+    0x0045: "Mailbox SoE error",
+    0x004F: "Mailbox VoE error",
+    0x0050: "EEPROM no access",
+    0x0051: "EEPROM error",
+    0x0052: "External hardware not ready",
+    0x0060: "Slave restarted locally",
+    0x0061: "Device identification value updated",
+    0x0070: "Detected module ident list does not match",
+    0x0080: "Supply voltage too low",
+    0x0081: "Supply voltage too high",
+    0x0082: "Temperature too low",
+    0x0083: "Temperature too high",
+    0x00F0: "Application controller available",
+}
+
+
+class AlStatusCode(IntEnum):
+    """Frequently used AL status codes (ETG.1000.6 Table 11); see :func:`al_status_text`."""
+
+    NO_ERROR = 0x0000
+    UNSPECIFIED_ERROR = 0x0001
+    INVALID_STATE_CHANGE = 0x0011
+    UNKNOWN_STATE = 0x0012
+    BOOTSTRAP_NOT_SUPPORTED = 0x0013
+    INVALID_MAILBOX_CONFIG_PREOP = 0x0016
+    INVALID_SM_CONFIG = 0x0017
+    SYNC_ERROR = 0x001A
+    SM_WATCHDOG = 0x001B
+    INVALID_SM_TYPES = 0x001C
+    INVALID_OUTPUT_CONFIG = 0x001D
+    INVALID_INPUT_CONFIG = 0x001E
+    INVALID_WATCHDOG_CONFIG = 0x001F
+    INVALID_INPUT_MAPPING = 0x0024
+    INVALID_OUTPUT_MAPPING = 0x0025
+    INVALID_DC_SYNC_CONFIG = 0x0030
+    DC_SYNC0_CYCLE_TIME = 0x0036
+
+
+def al_status_text(code: int) -> str:
+    """Text of an AL status code; vendor codes (0x8000+) and unknown ones say so."""
+    if code in _AL_STATUS_TEXT:
+        return _AL_STATUS_TEXT[code]
+    if code >= 0x8000:
+        return f"Vendor specific code 0x{code:04X}"
+    return f"Unknown AL status code 0x{code:04X}"
+
+
+# --- FMMU and sync manager ----------------------------------------------------------------
+
+_FMMU = struct.Struct("<IHBBHBBB3s")
+_SM = struct.Struct("<HHBBBB")
+
+
+class FmmuType(IntFlag):
+    """FMMU type register bits (ETG.1000.4 Table 57): read = inputs, write = outputs."""
+
+    READ = 0x01
+    WRITE = 0x02
+
+
+@dataclass(frozen=True, slots=True)
+class Fmmu:
+    """One FMMU (16 bytes at 0x0600 + 16 n; ETG.1000.4 Table 57)."""
+
+    logical_start: int
+    length_bytes: int
+    logical_start_bit: int = 0
+    logical_stop_bit: int = 7
+    physical_start: int = 0
+    physical_start_bit: int = 0
+    type: int = 0
+    activate: int = 0
+    reserved: bytes = bytes(3)
+
+    @property
+    def active(self) -> bool:
+        return bool(self.activate & 1)
+
+
+def decode_fmmu(buf: bytes | memoryview, offset: int = 0) -> Fmmu:
+    need(buf, offset, FMMU_BYTES, "FMMU")
+    return Fmmu(*_FMMU.unpack_from(buf, offset))
+
+
+def encode_fmmu(f: Fmmu) -> bytes:
+    if len(f.reserved) != 3:
+        raise WireError("FMMU reserved field must be 3 bytes")
+    return _FMMU.pack(
+        f.logical_start & 0xFFFFFFFF,
+        f.length_bytes & 0xFFFF,
+        f.logical_start_bit & 0xFF,
+        f.logical_stop_bit & 0xFF,
+        f.physical_start & 0xFFFF,
+        f.physical_start_bit & 0xFF,
+        f.type & 0xFF,
+        f.activate & 0xFF,
+        f.reserved,
+    )
+
+
+class SmControl(IntFlag):
+    """Sync-manager control byte (ETG.1000.4 Table 59)."""
+
+    BUFFERED = 0x00  # 3-buffer mode (operation mode bits 0-1 = 00)
+    MAILBOX = 0x02  # operation mode bits 0-1 = 10
+    WRITE = 0x04  # direction bits 2-3 = 01: ECAT writes, PDI reads
+    ECAT_EVENT = 0x08
+    PDI_EVENT = 0x10
+    WATCHDOG = 0x40
+
+
+@dataclass(frozen=True, slots=True)
+class SyncManager:
+    """One sync manager channel (8 bytes at 0x0800 + 8 n; ETG.1000.4 Table 59).
+
+    ``control``: mode bits 0–1 (0 buffered, 2 mailbox), direction bits 2–3 (0 read by
+    the master, 1 written by it). ``status`` is read-only on the ESC. ``activate`` bit 0
+    enables the channel; ``pdi_control`` bit 0 lets the PDI deactivate it.
+    """
+
+    physical_start: int
+    length_bytes: int
+    control: int = 0
+    status: int = 0
+    activate: int = 0
+    pdi_control: int = 0
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.activate & 1)
+
+    @property
+    def mailbox(self) -> bool:
+        return (self.control & 0x03) == 0x02
+
+    @property
+    def master_writes(self) -> bool:
+        return (self.control & 0x0C) == 0x04
+
+
+def decode_sync_manager(buf: bytes | memoryview, offset: int = 0) -> SyncManager:
+    need(buf, offset, SYNC_MANAGER_BYTES, "sync manager")
+    return SyncManager(*_SM.unpack_from(buf, offset))
+
+
+def encode_sync_manager(sm: SyncManager) -> bytes:
+    return _SM.pack(
+        sm.physical_start & 0xFFFF,
+        sm.length_bytes & 0xFFFF,
+        sm.control & 0xFF,
+        sm.status & 0xFF,
+        sm.activate & 0xFF,
+        sm.pdi_control & 0xFF,
+    )
+
+
+def decode_fmmus(buf: bytes | memoryview) -> tuple[Fmmu, ...]:
+    """All whole FMMUs in a block read from 0x0600."""
+    return tuple(decode_fmmu(buf, i) for i in range(0, len(buf) - FMMU_BYTES + 1, FMMU_BYTES))
+
+
+def decode_sync_managers(buf: bytes | memoryview) -> tuple[SyncManager, ...]:
+    """All whole sync managers in a block read from 0x0800."""
+    step = SYNC_MANAGER_BYTES
+    return tuple(decode_sync_manager(buf, i) for i in range(0, len(buf) - step + 1, step))
+
+
+# --- distributed clocks -------------------------------------------------------------------
+
+_U32 = struct.Struct("<I")
+
+
+def decode_system_time_difference(buf: bytes | memoryview, offset: int = 0) -> int:
+    """Register 0x092C as signed nanoseconds.
+
+    Sign and magnitude (ET1100 datasheet, "System Time Difference"): bits 0–30 are the
+    magnitude, bit 31 set means the local copy of the system time is smaller than the
+    received system time; the result is then negative (local − received).
+    """
+    need(buf, offset, 4, "system time difference")
+    raw: int = _U32.unpack_from(buf, offset)[0]
+    magnitude = raw & 0x7FFFFFFF
+    return -magnitude if raw & 0x80000000 else magnitude
+
+
+def encode_system_time_difference(difference_ns: int) -> bytes:
+    magnitude = abs(difference_ns)
+    if magnitude > 0x7FFFFFFF:
+        raise WireError(f"system time difference {difference_ns} ns out of range")
+    return _U32.pack(magnitude | (0x80000000 if difference_ns < 0 else 0))
+
+
+# --- SII EEPROM interface -----------------------------------------------------------------
+
+
+class SiiCommand(IntEnum):
+    """SII control/status bits 8–10: the command (ET1100 datasheet, register 0x0502)."""
+
+    IDLE = 0
+    READ = 1
+    WRITE = 2
+    RELOAD = 4
+
+
+@dataclass(frozen=True, slots=True)
+class SiiControlStatus:
+    """SII EEPROM control/status word at 0x0502 (ETG.1000.4 Table 47)."""
+
+    write_enable: bool = False
+    read_8_bytes: bool = False
+    two_address_bytes: bool = False
+    emulation: bool = False
+    command: int = SiiCommand.IDLE
+    checksum_error: bool = False
+    device_info_error: bool = False
+    command_error: bool = False
+    write_error: bool = False
+    busy: bool = False
+    reserved: int = 0
+
+    @property
+    def read_bytes(self) -> int:
+        """How many bytes one read returns at 0x0508 (4 or 8)."""
+        return 8 if self.read_8_bytes else 4
+
+
+_SII_FLAGS = (
+    ("write_enable", 0),
+    ("emulation", 5),
+    ("read_8_bytes", 6),
+    ("two_address_bytes", 7),
+    ("checksum_error", 11),
+    ("device_info_error", 12),
+    ("command_error", 13),
+    ("write_error", 14),
+    ("busy", 15),
+)
+_SII_RESERVED_MASK = 0x001E
+
+
+def decode_sii_control_status(word: int) -> SiiControlStatus:
+    flags = {name: bool(word >> bit & 1) for name, bit in _SII_FLAGS}
+    command = enum_or_int(SiiCommand, (word >> 8) & 0x7)
+    return SiiControlStatus(command=command, reserved=word & _SII_RESERVED_MASK, **flags)
+
+
+def encode_sii_control_status(s: SiiControlStatus) -> int:
+    word = ((s.command & 0x7) << 8) | (s.reserved & _SII_RESERVED_MASK)
+    for name, bit in _SII_FLAGS:
+        if getattr(s, name):
+            word |= 1 << bit
+    return word
