@@ -17,6 +17,7 @@ file on one line) and Elmo Application Studio (vendor elements before ``<Config>
 
 from __future__ import annotations
 
+import itertools
 import re
 import struct
 from collections.abc import Iterable, Iterator
@@ -58,6 +59,7 @@ SM_REGISTER = 0x0800
 SM_BYTES = 8
 SM_COUNT = 16
 DC_ACTIVATION_REGISTER = 0x0980
+DATAGRAM_HEADER_BYTES = 10
 
 _FMMU = struct.Struct("<IHBBHBBB3x")  # ETG.1000.4 Table 56
 _SM = struct.Struct("<HHBBBB")  # ETG.1000.4 Table 58: start, length, control, status, activate, pdi
@@ -243,10 +245,13 @@ class _Reader:
         if config is None:
             raise self.error(root, f"<{name}> has no <Config>")
         slaves = tuple(self.slave(el, i + 1) for i, el in enumerate(self.children(config, "Slave")))
+        cyclic = tuple(self.cyclic(el) for el in self.children(config, "Cyclic"))
+        frames = tuple(f for task in cyclic for f in task.frames)
+        slaves = tuple(_with_process_data_fmmus(s, frames) for s in slaves)
         return Eni(
             master=self.master(self.child(config, "Master")),
             slaves=slaves,
-            cyclic=tuple(self.cyclic(el) for el in self.children(config, "Cyclic")),
+            cyclic=cyclic,
             process_image=self.process_image(self.child(config, "ProcessImage")),
             root=name,
             source=self.source,
@@ -663,6 +668,84 @@ def dc_activation_from_init_cmds(init_cmds: Iterable[InitCmd]) -> int | None:
     return value
 
 
+def _frame_layout(frames: tuple[CyclicFrame, ...]) -> bool:
+    """True when image offsets follow the frame (TwinCAT): each command's offset points at
+    its datagram header, so the next one is 10 + data + 2 further on. acontis and Elmo
+    exports point at the data itself."""
+    for frame in frames:
+        offs = [c.input_offset_bytes for c in frame.commands]
+        for (a, b), c in zip(itertools.pairwise(offs), frame.commands, strict=False):
+            if a is not None and b is not None and b - a == c.data_length_bytes + 12:
+                return True
+    return False
+
+
+def fmmus_from_process_data(slave: Slave, frames: tuple[CyclicFrame, ...]) -> tuple[Fmmu, ...]:
+    """FMMUs implied by ``<ProcessData><Send|Recv>`` and the logical cyclic commands.
+
+    For ENIs without FMMU InitCmds: an area's image bits are placed at the logical address
+    of the command whose image window holds them; the physical side is the Outputs / Inputs
+    sync manager (SM2 / SM3 when the ENI names none).
+    """
+    header = DATAGRAM_HEADER_BYTES if _frame_layout(frames) else 0
+    found: list[Fmmu] = []
+    for areas, kind, default_sm, fmmu_type in (
+        (slave.outputs, "Outputs", 2, 2),
+        (slave.inputs, "Inputs", 3, 1),
+    ):
+        sm = next((m for m in slave.sync_managers if m.kind == kind), None)
+        sm = sm or next((m for m in slave.sync_managers if m.index == default_sm), None)
+        for area in areas:
+            logical_bit = _logical_bit(area, frames, fmmu_type, header)
+            if logical_bit is None or not area.bit_length or sm is None:
+                continue
+            start_bit = logical_bit % 8
+            length = (start_bit + area.bit_length + 7) // 8
+            end_bit = (start_bit + area.bit_length - 1) % 8
+            found.append(
+                Fmmu(
+                    len(found),
+                    logical_bit // 8,
+                    length,
+                    start_bit,
+                    end_bit,
+                    sm.start_address,
+                    0,
+                    fmmu_type,
+                    True,
+                )
+            )
+    return tuple(found)
+
+
+def _logical_bit(
+    area: ProcessDataArea, frames: tuple[CyclicFrame, ...], fmmu_type: int, header: int
+) -> int | None:
+    from lolacli.wire.commands import Command
+
+    wanted = {Command.LRW, Command.LWR if fmmu_type == 2 else Command.LRD}
+    for frame in frames:
+        for c in frame.commands:
+            offs = c.output_offset_bytes if fmmu_type == 2 else c.input_offset_bytes
+            if c.cmd not in wanted or c.logical_address is None or offs is None:
+                continue
+            start = (offs + header) * 8
+            if (
+                start <= area.bit_start
+                and area.bit_start + area.bit_length <= start + 8 * c.data_length_bytes
+            ):
+                return c.logical_address * 8 + area.bit_start - start
+    return None
+
+
+def _with_process_data_fmmus(slave: Slave, frames: tuple[CyclicFrame, ...]) -> Slave:
+    from dataclasses import replace
+
+    if slave.fmmus or not (slave.inputs or slave.outputs):
+        return slave
+    return replace(slave, fmmus=fmmus_from_process_data(slave, frames))
+
+
 def _with_kind(sm: SyncManager, kind: str) -> SyncManager:
     from dataclasses import replace
 
@@ -674,6 +757,7 @@ __all__ = [
     "decode_fmmu",
     "decode_sync_manager",
     "fmmus_from_init_cmds",
+    "fmmus_from_process_data",
     "parse_eni",
     "parse_number",
     "sync_managers_from_init_cmds",

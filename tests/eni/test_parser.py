@@ -191,3 +191,58 @@ def test_corrupted_fixture_raises_only_eni_error(at, junk):
         parse_eni(VALID[:at] + junk + VALID[at + len(junk) :], "c.xml")
     except EniError as exc:
         assert exc.path == "c.xml"
+
+
+def _without_fmmu_init_cmds(data: bytes) -> bytes:
+    """Drop every InitCmd writing FMMU registers 0x0600/0x0610/0x0620 (Ado 1536/1552/1568)."""
+    import re
+
+    pattern = (
+        rb"<InitCmd>(?:(?!</InitCmd>).)*?<Ado>15(?:36|52|68)</Ado>(?:(?!</InitCmd>).)*?</InitCmd>"
+    )
+    stripped, count = re.subn(pattern, b"", data, flags=re.S)
+    assert count > 0
+    return stripped
+
+
+def _process_fmmus(slave) -> list[tuple]:
+    return [
+        (
+            f.logical_start,
+            f.length_bytes,
+            f.logical_start_bit,
+            f.logical_end_bit,
+            f.physical_start,
+            f.type,
+        )
+        for f in slave.fmmus
+        if f.length_bytes and f.type in (1, 2) and f.physical_start != 0x080D  # not mailbox state
+    ]
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "kpierczy-ethercat-lib__test_eni.xml",  # TwinCAT: image offsets follow the frame
+        "rocos-ethercat__eni7.xml",  # acontis: offsets point at the data
+        "rocos-ethercat__eni1.xml",  # Elmo: separate LRD + LWR
+    ],
+)
+def test_fmmus_from_process_data_equal_the_init_cmd_ones(name):
+    """With the FMMU InitCmds removed, <ProcessData> + cyclic commands give the same FMMUs."""
+    path = CORPUS / "eni" / name
+    if not path.is_file():
+        pytest.skip("corpus not found")
+    data = path.read_bytes()
+    full, bare = parse_eni(data), parse_eni(_without_fmmu_init_cmds(data))
+    for a, b in zip(full.slaves, bare.slaves, strict=True):
+        assert _process_fmmus(b) == _process_fmmus(a) != [] or not (a.inputs or a.outputs)
+
+
+def test_fmmus_from_process_data_on_the_small_fixture():
+    bare = parse_eni(_without_fmmu_init_cmds(VALID))
+    assert _process_fmmus(bare.slaves[1]) == [
+        (0x10000, 6, 0, 7, 0x1100, 2),
+        (0x10000, 8, 0, 7, 0x1180, 1),
+    ]
+    assert _process_fmmus(bare.slaves[2]) == [(0x10008, 2, 0, 7, 0x1000, 1)]
