@@ -1,5 +1,70 @@
-"""`lolacli bus emulate`."""
+"""`lolacli bus emulate`: serve the emulated chain on a network interface."""
 
 from __future__ import annotations
 
-from lolacli.cli.bus import app  # noqa: F401  (commands register on the bus group)
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from lolacli.cli.bus import app
+from lolacli.cli.common import default_eni, stderr_console
+
+
+@app.command("emulate")
+def emulate_cmd(
+    iface: Annotated[str, typer.Option("--iface", "-i", help="Interface to serve on (veth, TAP, NIC).")],
+    eni: Annotated[
+        Path | None, typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain.")
+    ] = None,
+    drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
+    stuck_safeop: Annotated[
+        list[int] | None,
+        typer.Option("--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."),
+    ] = None,
+    drift_ppb: Annotated[int, typer.Option("--drift-ppb", help="Clock drift step along the line.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
+    duration_s: Annotated[
+        float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")
+    ] = 0.0,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
+) -> None:
+    """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
+    drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
+    import signal
+
+    from lolacli.emulator.run import EmulateOptions, make_chain, serve, state_summary
+    from lolacli.files import load_eni
+
+    model = load_eni(eni if eni is not None else default_eni())
+    options = EmulateOptions(drop_p, tuple(stuck_safeop or ()), drift_ppb, seed)
+    chain = make_chain(model, options)
+    stop = {"flag": False}
+
+    def _stop(_signum: int, _frame: object) -> None:
+        stop["flag"] = True
+
+    signal.signal(signal.SIGINT, _stop)
+    signal.signal(signal.SIGTERM, _stop)
+    deadline = time.monotonic() + duration_s if duration_s > 0 else None
+    console = stderr_console()
+    console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
+
+    def should_stop() -> bool:
+        return stop["flag"] or (deadline is not None and time.monotonic() >= deadline)
+
+    def status(stats: object) -> None:
+        if quiet:
+            return
+        s = chain.stats
+        elapsed = max(1e-9, (time.monotonic_ns() - getattr(stats, "started_ns", 0)) / 1e9)
+        console.print(
+            f"frames {s.frames} ({s.frames / elapsed:.0f}/s) cycles {s.logical_frames} "
+            f"lost {s.dropped} | {state_summary(chain)}",
+            highlight=False,
+        )
+
+    stats = serve(iface, chain, should_stop, status)
+    status(stats)
+    console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")

@@ -1,0 +1,130 @@
+"""The device behind an ESC: object dictionary, PDO mapping, one step per cycle.
+
+A device owns an :class:`ObjectDictionary` with the communication objects of CiA 301 /
+ETG.1000.6 (0x1000 device type, 0x1008 name, 0x1018 identity, 0x1C00 SM types,
+0x1C12/0x1C13 PDO assignment, 0x16xx/0x1Axx PDO mappings) built from the ENI slave's
+PDOs. Every cycle it unpacks the outputs through the RxPDO mapping into the dictionary,
+runs :meth:`Device.step`, and packs the inputs through the TxPDO mapping.
+"""
+
+from __future__ import annotations
+
+from lolacli.devices.od import DataType, ObjectCode, ObjectDictionary, data_type_for
+from lolacli.eni.model import Direction, Pdo, Slave
+
+MAPPING_RX = 0x1600
+MAPPING_TX = 0x1A00
+ASSIGN_RX = 0x1C12
+ASSIGN_TX = 0x1C13
+SM_TYPES = 0x1C00
+
+
+class Device:
+    """A generic device: its process data are plain object-dictionary entries."""
+
+    device_type = 0x00000000
+
+    def __init__(self, slave: Slave) -> None:
+        self.slave = slave
+        self.od = ObjectDictionary()
+        self.state = 1
+        self.t_ns = 0
+        self._communication_objects()
+        self._pdo_objects(slave.pdos)
+        self.define()
+
+    # ---------------------------------------------------------- definition
+    def define(self) -> None:
+        """Subclasses add their objects here."""
+
+    def _communication_objects(self) -> None:
+        od, ident = self.od, self.slave.identity
+        od.add_var(0x1000, "Device type", DataType.UNSIGNED32, self.device_type, access="ro")
+        od.add_var(0x1008, "Manufacturer device name", DataType.VISIBLE_STRING,
+                   self.slave.name, access="const")
+        od.add_var(0x1009, "Manufacturer hardware version", DataType.VISIBLE_STRING, "1.0",
+                   access="const")
+        od.add_var(0x100A, "Manufacturer software version", DataType.VISIBLE_STRING,
+                   "lolacli emulator", access="const")
+        od.add_record(0x1018, "Identity", [
+            ("Vendor ID", DataType.UNSIGNED32, ident.vendor_id, "ro"),
+            ("Product code", DataType.UNSIGNED32, ident.product_code, "ro"),
+            ("Revision", DataType.UNSIGNED32, ident.revision, "ro"),
+            ("Serial number", DataType.UNSIGNED32, ident.serial, "ro"),
+        ])
+        od.add_record(SM_TYPES, "Sync manager communication type", [
+            ("SM0", DataType.UNSIGNED8, 1, "ro"), ("SM1", DataType.UNSIGNED8, 2, "ro"),
+            ("SM2", DataType.UNSIGNED8, 3, "ro"), ("SM3", DataType.UNSIGNED8, 4, "ro"),
+        ], code=ObjectCode.ARRAY)
+
+    def _pdo_objects(self, pdos: tuple[Pdo, ...]) -> None:
+        rx = [p for p in pdos if p.direction == Direction.OUTPUT]
+        tx = [p for p in pdos if p.direction == Direction.INPUT]
+        for pdo in pdos:
+            subs = []
+            for e in pdo.entries:
+                value = (e.index << 16) | (e.subindex << 8) | e.bit_size
+                subs.append((e.name or "Mapped object", DataType.UNSIGNED32, value, "rw"))
+                if e.index:
+                    self.od.ensure_entry(e.index, e.subindex, e.name,
+                                         data_type_for(e.data_type, e.bit_size))
+            self.od.add_record(pdo.index, pdo.name or f"PDO 0x{pdo.index:04X}", subs,
+                               writable_count=True)
+        for index, assigned in ((ASSIGN_RX, rx), (ASSIGN_TX, tx)):
+            subs = [("PDO", DataType.UNSIGNED16, p.index, "rw") for p in assigned]
+            self.od.add_record(index, "PDO assignment", subs, code=ObjectCode.ARRAY,
+                               writable_count=True)
+
+    # ------------------------------------------------------------- mapping
+    def mapping(self, direction: Direction) -> list[tuple[int, int, int]]:
+        """(index, subindex, bits) in process-image order, from 0x1C12/0x1C13."""
+        assign = ASSIGN_RX if direction == Direction.OUTPUT else ASSIGN_TX
+        out: list[tuple[int, int, int]] = []
+        for n in range(1, self.od.get_int(assign, 0) + 1):
+            pdo = self.od.get_int(assign, n)
+            if pdo not in self.od.objects:
+                continue
+            for k in range(1, self.od.get_int(pdo, 0) + 1):
+                word = self.od.get_int(pdo, k)
+                out.append((word >> 16, (word >> 8) & 0xFF, word & 0xFF))
+        return out
+
+    def process_data_bytes(self) -> tuple[int, int]:
+        outputs = sum(b for *_, b in self.mapping(Direction.OUTPUT))
+        inputs = sum(b for *_, b in self.mapping(Direction.INPUT))
+        return (outputs + 7) // 8, (inputs + 7) // 8
+
+    def unpack_outputs(self, outputs: bytes) -> None:
+        image = int.from_bytes(outputs, "little")
+        bit = 0
+        for index, sub, bits in self.mapping(Direction.OUTPUT):
+            if index and (index, sub) in self.od:
+                value = (image >> bit) & ((1 << bits) - 1)
+                entry = self.od.entry(index, sub)
+                entry.value = value.to_bytes(max(1, (bits + 7) // 8), "little")
+            bit += bits
+
+    def pack_inputs(self) -> bytes:
+        image = 0
+        bit = 0
+        for index, sub, bits in self.mapping(Direction.INPUT):
+            if index and (index, sub) in self.od:
+                raw = self.od.entry(index, sub).value
+                image |= (int.from_bytes(raw, "little") & ((1 << bits) - 1)) << bit
+            bit += bits
+        return image.to_bytes((bit + 7) // 8, "little")
+
+    # ---------------------------------------------------------------- cycle
+    def state_changed(self, state: int) -> None:
+        self.state = state
+
+    def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        """Outputs in (empty in SAFEOP), one step, inputs out."""
+        if outputs:
+            self.unpack_outputs(outputs)
+        self.step(t_ns)
+        self.t_ns = t_ns
+        return self.pack_inputs()
+
+    def step(self, t_ns: int) -> None:
+        """One application cycle at time ``t_ns``; subclasses move their values here."""

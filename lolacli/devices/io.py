@@ -1,0 +1,71 @@
+"""IO terminals and the CAN gateway: devices whose inputs are signals of time.
+
+* :class:`DigitalIo` — digital outputs are stored; digital inputs echo the outputs of the
+  same width where there are any, else a walking bit pattern changing every 10 ms.
+* :class:`AnalogInput` — every input entry carries a sine (period 1 s) scaled to its type.
+* :class:`CanGateway` — a placeholder for the CAN gateway of the LOLA chain: its inputs
+  (IMU rates and accelerations, foot force/torque sensors) are deterministic sines of time
+  with distinct phases, so a master sees plausible, changing values.
+"""
+
+from __future__ import annotations
+
+import math
+
+from lolacli.devices.base import Device
+from lolacli.devices.od import DataType, decode_value, encode_value
+from lolacli.eni.model import Direction
+
+
+def _inputs(device: Device) -> list[tuple[int, int, int]]:
+    return [m for m in device.mapping(Direction.INPUT) if m[0]]
+
+
+class DigitalIo(Device):
+    device_type = 0x00000000
+
+    def step(self, t_ns: int) -> None:
+        outputs = [m for m in self.mapping(Direction.OUTPUT) if m[0]]
+        pattern = 1 << ((t_ns // 10_000_000) % 8)
+        for i, (index, sub, bits) in enumerate(_inputs(self)):
+            if i < len(outputs):
+                o_index, o_sub, _ = outputs[i]
+                value = int.from_bytes(self.od.entry(o_index, o_sub).value, "little")
+            else:
+                value = (pattern >> (i % 8)) & 1 if bits == 1 else pattern
+            raw = (value & ((1 << bits) - 1)).to_bytes(max(1, (bits + 7) // 8), "little")
+            self.od.entry(index, sub).value = raw
+
+
+def _sine_value(data_type: int, bits: int, phase: float, t_ns: int, scale: float) -> bytes:
+    s = math.sin(2 * math.pi * (t_ns / 1e9) + phase)
+    if data_type in (DataType.REAL32, DataType.REAL64):
+        return encode_value(data_type, s * scale)
+    full = (1 << (bits - 1)) - 1 if bits > 1 else 1
+    value = int(round(s * full * 0.5))
+    if data_type in (DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32):
+        value += full
+    return (value & ((1 << bits) - 1)).to_bytes(max(1, (bits + 7) // 8), "little")
+
+
+class AnalogInput(Device):
+    device_type = 0x00000000
+    scale = 10.0
+
+    def step(self, t_ns: int) -> None:
+        for i, (index, sub, bits) in enumerate(_inputs(self)):
+            entry = self.od.entry(index, sub)
+            entry.value = _sine_value(entry.data_type, bits, 0.7 * i, t_ns, self.scale)
+
+
+class CanGateway(AnalogInput):
+    """IMU and force/torque sensor values behind a CAN gateway (placeholder)."""
+
+    scale = 100.0
+
+    def values(self) -> dict[str, float | int | str | bytes]:
+        return {
+            e.name: decode_value(e.data_type, e.value)
+            for index, sub, _ in _inputs(self)
+            for e in [self.od.entry(index, sub)]
+        }

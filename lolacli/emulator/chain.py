@@ -1,0 +1,188 @@
+"""A line of emulated slaves: a frame passes every ESC on the way out and comes back.
+
+``Chain.process(frame_bytes, t_ns) -> (reply_bytes | None, delay_ns)`` is the in-process
+transport: the master's frame in, the frame as it returns to the master out, with the
+time it spent on the wire and in the slaves. Each ESC processes every datagram of the
+frame in the order the frame reaches it (slave-major, as on the wire), and the first ESC
+sets the locally administered bit of the source MAC (DESIGN.md "Direction").
+"""
+
+from __future__ import annotations
+
+import random
+import struct
+from dataclasses import dataclass, field
+
+from lolacli.emulator.esc import Esc, PortTimes
+from lolacli.emulator.registers import AlStatusCode
+from lolacli.errors import WireError
+from lolacli.wire.commands import LOGICAL
+from lolacli.wire.frame import (
+    DATAGRAM_HEADER_BYTES,
+    ECAT_HEADER_BYTES,
+    ECAT_TYPE_COMMANDS,
+    WKC_BYTES,
+    decode_ethernet_header,
+    decode_frame,
+)
+
+_U16 = struct.Struct("<H")
+_HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
+SOURCE_MAC_LOCAL_BIT = 0x02
+PREAMBLE_SFD_BYTES = 8
+INTER_FRAME_GAP_BYTES = 12
+FCS_BYTES = 4
+MIN_FRAME_BYTES = 64
+
+
+@dataclass(frozen=True, slots=True)
+class ChainTiming:
+    """Delay model of a line: link rate, per-slave delays, cable.
+
+    ``processing_ns`` is the delay through an ESC's processing unit on the way out,
+    ``forward_ns`` the delay of passing an ESC on the way back, ``cable_ns`` one cable
+    (about 5 ns per metre).
+    """
+
+    link_bit_s: int = 100_000_000
+    processing_ns: int = 600
+    forward_ns: int = 400
+    cable_ns: int = 10
+
+    def wire_time_ns(self, frame_bytes: int) -> int:
+        on_wire = max(frame_bytes + FCS_BYTES, MIN_FRAME_BYTES)
+        return (on_wire * 8 * 1_000_000_000) // self.link_bit_s
+
+    def port_times(self, t_ns: int, slaves: int) -> list[PortTimes]:
+        """When the frame's head reaches each slave's port 0 (out) and port 1 (back)."""
+        out = [t_ns + (i + 1) * self.cable_ns + i * self.processing_ns for i in range(slaves)]
+        back: list[int | None] = [None] * slaves
+        if slaves:
+            t = out[-1] + self.processing_ns
+            for i in range(slaves - 2, -1, -1):
+                t += self.cable_ns
+                back[i] = t
+                t += self.forward_ns
+        return [PortTimes(o, b) for o, b in zip(out, back, strict=True)]
+
+    def round_trip_ns(self, frame_bytes: int, slaves: int) -> int:
+        per_slave = self.processing_ns + self.forward_ns
+        return self.wire_time_ns(frame_bytes) + slaves * per_slave + 2 * slaves * self.cable_ns
+
+
+@dataclass(slots=True)
+class Faults:
+    """Faults injected at the chain: lost frames, slaves that refuse OP."""
+
+    drop_probability: float = 0.0
+    seed: int = 0
+    rng: random.Random = field(default_factory=random.Random)
+
+    def __post_init__(self) -> None:
+        self.rng.seed(self.seed)
+
+    def drop(self) -> bool:
+        return self.drop_probability > 0 and self.rng.random() < self.drop_probability
+
+
+@dataclass(slots=True)
+class ChainStats:
+    frames: int = 0
+    replies: int = 0
+    dropped: int = 0
+    malformed: int = 0
+    logical_frames: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class _Slot:
+    header: int  # offset of the datagram header in the frame
+    cmd: int
+    length: int
+
+    @property
+    def data(self) -> int:
+        return self.header + DATAGRAM_HEADER_BYTES
+
+    @property
+    def wkc(self) -> int:
+        return self.data + self.length
+
+
+class Chain:
+    """Slaves in line order; ``process`` runs a frame through all of them."""
+
+    def __init__(
+        self,
+        slaves: list[Esc],
+        *,
+        timing: ChainTiming | None = None,
+        faults: Faults | None = None,
+    ) -> None:
+        self.slaves = slaves
+        self.timing = timing or ChainTiming()
+        self.faults = faults or Faults()
+        self.stats = ChainStats()
+        for i, esc in enumerate(slaves):
+            esc.set_topology(last=i == len(slaves) - 1)
+
+    def stuck_in_safeop(self, position: int, code: int = AlStatusCode.NO_VALID_OUTPUTS) -> None:
+        """Fault: the slave at 1-based ``position`` refuses SAFEOP -> OP with ``code``."""
+        self.slaves[position - 1].refuse_op_code = code
+
+    def process(self, frame: bytes, t_ns: int) -> tuple[bytes | None, int]:
+        """The frame as it returns to the master, and its delay; ``None`` when lost."""
+        self.stats.frames += 1
+        slots = self._parse(frame)
+        if slots is None:
+            return None, 0
+        if self.faults.drop():
+            self.stats.dropped += 1
+            return None, 0
+        buf = bytearray(frame)
+        view = memoryview(buf)
+        times = self.timing.port_times(t_ns, len(self.slaves))
+        logical = any(s.cmd in LOGICAL for s in slots)
+        for esc, when in zip(self.slaves, times, strict=True):
+            esc.port_times = when
+            for slot in slots:
+                self._pass(esc, slot, buf, view, when.port0_ns)
+            if logical:
+                esc.cycle(when.port0_ns)
+        view.release()
+        if logical:
+            self.stats.logical_frames += 1
+        if self.slaves:
+            buf[6] |= SOURCE_MAC_LOCAL_BIT
+        self.stats.replies += 1
+        return bytes(buf), self.timing.round_trip_ns(len(frame), len(self.slaves))
+
+    @staticmethod
+    def _pass(esc: Esc, slot: _Slot, buf: bytearray, view: memoryview, t_ns: int) -> None:
+        _cmd, _idx, adp, ado, _len = _HEAD.unpack_from(buf, slot.header)
+        data = view[slot.data : slot.data + slot.length]
+        new_adp, increment = esc.process(slot.cmd, adp, ado, data, t_ns)
+        if new_adp != adp:
+            _U16.pack_into(buf, slot.header + 2, new_adp)
+        if increment:
+            (wkc,) = _U16.unpack_from(buf, slot.wkc)
+            _U16.pack_into(buf, slot.wkc, (wkc + increment) & 0xFFFF)
+
+    def _parse(self, frame: bytes) -> list[_Slot] | None:
+        """Datagram positions in the frame; a malformed frame counts as an RX error."""
+        try:
+            decoded = decode_frame(frame)
+            _header, _etype, pos = decode_ethernet_header(frame)
+        except WireError:
+            self.stats.malformed += 1
+            if self.slaves:
+                self.slaves[0].count_invalid_frame(0)
+            return None
+        if decoded.ecat_type != ECAT_TYPE_COMMANDS:
+            return []
+        slots = []
+        pos += ECAT_HEADER_BYTES
+        for d in decoded.datagrams:
+            slots.append(_Slot(pos, d.cmd, len(d.data)))
+            pos += DATAGRAM_HEADER_BYTES + len(d.data) + WKC_BYTES
+        return slots

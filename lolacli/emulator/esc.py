@@ -1,0 +1,752 @@
+"""One EtherCAT slave controller (ESC): register and process memory, datagram processing.
+
+Pure: datagram bytes in, datagram bytes out; time comes in as integer nanoseconds.
+The model follows ETG.1000.4 (data link layer: addressing, FMMU, sync managers, DC,
+SII interface, error counters) and ETG.1000.6 (AL state machine, AL status codes). The
+application behind the ESC (a device with its object dictionary and mailbox server) is
+an :class:`EscApplication`; the ESC calls it on mailbox requests, state changes and
+process-data cycles.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from lolacli.emulator import registers as r
+from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.sii import SiiLayout, sii_layout
+from lolacli.wire.commands import Command
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+_I64 = struct.Struct("<q")
+_FMMU = struct.Struct("<IHBBHBBB3x")
+_SM = struct.Struct("<HHBBBB")
+
+_KNOWN_STATES = frozenset(int(s) for s in AlState)
+# requested state -> states it may be reached from (ETG.1000.6 Figure 10)
+_ALLOWED_FROM: dict[int, frozenset[int]] = {
+    AlState.INIT: frozenset(_KNOWN_STATES),
+    AlState.PREOP: frozenset({AlState.INIT, AlState.PREOP, AlState.SAFEOP, AlState.OP}),
+    AlState.SAFEOP: frozenset({AlState.PREOP, AlState.SAFEOP, AlState.OP}),
+    AlState.OP: frozenset({AlState.SAFEOP, AlState.OP}),
+    AlState.BOOT: frozenset({AlState.INIT, AlState.BOOT}),
+}
+
+
+class EscApplication(Protocol):
+    """What sits behind the PDI: a device with mailbox server and process data."""
+
+    def mailbox_request(self, request: bytes) -> list[bytes]:
+        """A complete mailbox written by the master -> mailbox messages to send back."""
+        ...
+
+    def process_data_bytes(self) -> tuple[int, int]:
+        """(outputs, inputs) sizes the current PDO mapping needs, in bytes."""
+        ...
+
+    def state_changed(self, state: AlState) -> None: ...
+
+    def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        """Outputs from the master -> inputs for the master (one process-data cycle)."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class EscConfig:
+    """Identity of the ESC silicon (registers 0x0000–0x000F)."""
+
+    esc_type: int = 0x11  # ET1100-like
+    revision: int = 0x02
+    build: int = 0x0003
+    fmmus: int = 8
+    sync_managers: int = 8
+    ram_kib: int = 8
+    port_descriptor: int = 0x0F  # ports 0 and 1: MII; 2 and 3 not implemented
+    features: int = int(r.EscFeature.DISTRIBUTED_CLOCKS | r.EscFeature.DC_64_BIT)
+    eeprom_8_byte_reads: bool = True
+    pdi_control: int = 0x0005  # SPI
+    watchdog_divider: int = 0x09C2  # 100 µs at 25 MHz
+    watchdog_time_process_data: int = 1000  # 100 ms
+
+
+@dataclass(frozen=True, slots=True)
+class FmmuEntry:
+    """An FMMU as programmed (ETG.1000.4 Table 56)."""
+
+    logical_start: int
+    length_bytes: int
+    logical_start_bit: int
+    logical_stop_bit: int
+    physical_start: int
+    physical_start_bit: int
+    type: int
+    enabled: bool
+
+
+@dataclass(slots=True)
+class DcClock:
+    """The slave's local clock: ``local = t × (1 + drift_ppm·1e-6) + start_ns + correction``."""
+
+    start_ns: int = 0
+    drift_ppb: int = 0
+    correction_ns: int = 0
+
+    def local_ns(self, t_ns: int) -> int:
+        return t_ns + (t_ns * self.drift_ppb) // 1_000_000_000 + self.start_ns + self.correction_ns
+
+
+@dataclass(slots=True)
+class EscCounters:
+    """What happened, for status lines and tests."""
+
+    datagrams: int = 0
+    mailbox_requests: int = 0
+    cycles: int = 0
+    refused_transitions: int = 0
+
+
+@dataclass(slots=True)
+class PortTimes:
+    """When the frame reached this slave: port 0 on the way out, port 1 on the way back."""
+
+    port0_ns: int
+    port1_ns: int | None
+
+
+class Esc:
+    """The ESC of one slave: 64 KiB of registers and process RAM plus behaviour."""
+
+    def __init__(
+        self,
+        sii: bytes,
+        *,
+        config: EscConfig | None = None,
+        app: EscApplication | None = None,
+        clock: DcClock | None = None,
+    ) -> None:
+        self.config = config or EscConfig()
+        self.sii = bytearray(sii)
+        self.layout: SiiLayout = sii_layout(bytes(sii))
+        self.app = app
+        self.clock = clock or DcClock()
+        self.mem = bytearray(r.MEMORY_BYTES)
+        self.counters = EscCounters()
+        self.outputs_valid = False
+        self.pending_op = False
+        self.refuse_op_code: int | None = None  # fault: stay in SAFEOP with this code
+        self._mailbox_queue: list[bytes] = []
+        self.last_port = True
+        self.port_times: PortTimes | None = None
+        self._readonly = _readonly_mask()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Power-on: registers to defaults, AL INIT, SII alias loaded."""
+        cfg = self.config
+        self.mem[:] = bytes(r.MEMORY_BYTES)
+        m = self.mem
+        m[r.TYPE], m[r.REVISION] = cfg.esc_type, cfg.revision
+        _U16.pack_into(m, r.BUILD, cfg.build)
+        m[r.FMMUS_SUPPORTED], m[r.SYNC_MANAGERS_SUPPORTED] = cfg.fmmus, cfg.sync_managers
+        m[r.RAM_SIZE_KIB], m[r.PORT_DESCRIPTOR] = cfg.ram_kib, cfg.port_descriptor
+        _U16.pack_into(m, r.FEATURES, cfg.features)
+        _U16.pack_into(m, r.STATION_ALIAS, self.layout.station_alias)
+        _U32.pack_into(m, r.DL_CONTROL, 0x00000001)
+        _U16.pack_into(m, r.PDI_CONTROL, cfg.pdi_control)
+        _U16.pack_into(m, r.WATCHDOG_DIVIDER, cfg.watchdog_divider)
+        _U16.pack_into(m, r.WATCHDOG_TIME_PROCESS_DATA, cfg.watchdog_time_process_data)
+        status = r.EEPROM_STATUS_READ_8_BYTES if cfg.eeprom_8_byte_reads else 0
+        _U16.pack_into(m, r.EEPROM_CONTROL, status)
+        self._mailbox_queue.clear()
+        self.outputs_valid = False
+        self.pending_op = False
+        self._set_al(AlState.INIT, AlStatusCode.NO_ERROR, error=False)
+        self.set_topology(last=self.last_port)
+
+    def set_topology(self, *, last: bool) -> None:
+        """DL status 0x0110: port 0 link+communication, port 1 too unless last in line."""
+        self.last_port = last
+        status = 0x0001 | 0x0010 | 0x0200  # PDI operational, link port 0, comm port 0
+        status |= 0x0400 if last else (0x0020 | 0x0800)  # port 1 closed loop, or open+comm
+        status |= 0x1000 | 0x4000  # ports 2 and 3: loop closed
+        _U16.pack_into(self.mem, r.DL_STATUS, status)
+
+    @property
+    def station_address(self) -> int:
+        return int(_U16.unpack_from(self.mem, r.STATION_ADDRESS)[0])
+
+    @property
+    def station_alias(self) -> int:
+        return int(_U16.unpack_from(self.mem, r.STATION_ALIAS)[0])
+
+    @property
+    def al_state(self) -> int:
+        return self.mem[r.AL_STATUS] & r.AL_STATE_MASK
+
+    @property
+    def al_error(self) -> bool:
+        return bool(self.mem[r.AL_STATUS] & r.AL_ERROR_INDICATOR)
+
+    @property
+    def al_status_code(self) -> int:
+        return int(_U16.unpack_from(self.mem, r.AL_STATUS_CODE)[0])
+
+    def u16(self, address: int) -> int:
+        return int(_U16.unpack_from(self.mem, address)[0])
+
+    def u32(self, address: int) -> int:
+        return int(_U32.unpack_from(self.mem, address)[0])
+
+    # ------------------------------------------------------------- addressing
+    def addressed_configured(self, adp: int) -> bool:
+        if adp == self.station_address:
+            return True
+        alias_on = self.mem[r.DL_CONTROL_ALIAS_ENABLE_BYTE] & 0x01
+        return bool(alias_on) and adp == self.station_alias
+
+    def process(
+        self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
+    ) -> tuple[int, int]:
+        """Process one datagram passing through: returns (new ADP field, WKC increment).
+
+        ``data`` is the datagram's data in the frame buffer, changed in place. ``adp``/
+        ``ado`` are the two halves of the address field (for logical commands the
+        32-bit address is ``adp | ado << 16``).
+        """
+        self.counters.datagrams += 1
+        if cmd in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW):
+            hit = adp == 0
+            new_adp = (adp + 1) & 0xFFFF
+            if not hit and cmd != Command.ARMW:
+                return new_adp, 0
+            return new_adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
+        if cmd in (Command.FPRD, Command.FPWR, Command.FPRW, Command.FRMW):
+            hit = self.addressed_configured(adp)
+            if not hit and cmd != Command.FRMW:
+                return adp, 0
+            return adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
+        if cmd in (Command.BRD, Command.BWR, Command.BRW):
+            return (adp + 1) & 0xFFFF, self._physical(cmd, ado, data, t_ns, addressed=True)
+        if cmd in (Command.LRD, Command.LWR, Command.LRW):
+            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
+        return adp, 0
+
+    # --------------------------------------------------------- physical access
+    def _physical(
+        self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool
+    ) -> int:
+        n = len(data)
+        if ado + n > r.MEMORY_BYTES:
+            return 0
+        if cmd in (Command.ARMW, Command.FRMW):
+            if addressed:
+                return 1 if self._read(ado, data, t_ns, merge=False) else 0
+            return 1 if self._write(ado, bytes(data), t_ns) else 0
+        if cmd in (Command.APRD, Command.FPRD):
+            return 1 if self._read(ado, data, t_ns, merge=False) else 0
+        if cmd == Command.BRD:
+            return 1 if self._read(ado, data, t_ns, merge=True) else 0
+        if cmd in (Command.APWR, Command.FPWR, Command.BWR):
+            return 1 if self._write(ado, bytes(data), t_ns) else 0
+        incoming = bytes(data)  # APRW, FPRW, BRW
+        wkc = 1 if self._read(ado, data, t_ns, merge=cmd == Command.BRW) else 0
+        return wkc + (2 if self._write(ado, incoming, t_ns) else 0)
+
+    def _read(self, address: int, data: memoryview, t_ns: int, *, merge: bool) -> bool:
+        end = address + len(data)
+        for sm in self._mailbox_sms(address, end, write=False):
+            if not self._sm_full(sm):
+                return False
+        if _overlaps(address, end, r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8):
+            _U64.pack_into(self.mem, r.DC_SYSTEM_TIME, self.system_time_ns(t_ns) & (2**64 - 1))
+        if merge:
+            for i, b in enumerate(self.mem[address:end]):
+                data[i] |= b
+        else:
+            data[:] = self.mem[address:end]
+        self._after_read(address, end)
+        return True
+
+    def _write(self, address: int, payload: bytes, t_ns: int) -> bool:
+        end = address + len(payload)
+        for sm in self._mailbox_sms(address, end, write=True):
+            if self._sm_full(sm):
+                return False
+        if address >= r.PROCESS_RAM:
+            self.mem[address:end] = payload
+        else:
+            self._write_registers(address, payload)
+        self._after_write(address, end, payload, t_ns)
+        return True
+
+    def _write_registers(self, address: int, payload: bytes) -> None:
+        mem, ro = self.mem, self._readonly
+        for i, b in enumerate(payload):
+            a = address + i
+            if a >= r.PROCESS_RAM or not ro[a]:
+                mem[a] = b
+
+    def _after_write(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
+        if start < r.PROCESS_RAM:
+            self._register_side_effects(start, end, payload, t_ns)
+        if end > r.PROCESS_RAM:
+            self._sm_written(start, end)
+
+    def _register_side_effects(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
+        if _overlaps(start, end, r.RX_ERROR_COUNTER, r.ERROR_COUNTERS_END):
+            self.mem[r.RX_ERROR_COUNTER : r.ERROR_COUNTERS_END] = bytes(
+                r.ERROR_COUNTERS_END - r.RX_ERROR_COUNTER
+            )
+        if _overlaps(start, end, r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2):
+            self._eeprom_command()
+        if _overlaps(start, end, r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4):
+            self._latch_receive_times()
+        if _overlaps(start, end, r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8):
+            self._system_time_written(start, end, payload, t_ns)
+        if _overlaps(start, end, r.SYNC_MANAGER_BASE, r.SYNC_MANAGER_BASE + 16 * 8):
+            self._sm_registers_written(start, end)
+        if _overlaps(start, end, r.AL_CONTROL, r.AL_CONTROL + 1):
+            self._al_control_written(t_ns)
+
+    # ------------------------------------------------------------ AL states
+    def _set_al(self, state: int, code: int, *, error: bool) -> None:
+        self.mem[r.AL_STATUS] = (state & r.AL_STATE_MASK) | (r.AL_ERROR_INDICATOR if error else 0)
+        _U16.pack_into(self.mem, r.AL_STATUS_CODE, code)
+
+    def _refuse(self, code: int) -> None:
+        self.counters.refused_transitions += 1
+        self._set_al(self.al_state, code, error=True)
+
+    def _al_control_written(self, t_ns: int) -> None:
+        control = self.mem[r.AL_CONTROL]
+        requested = control & r.AL_STATE_MASK
+        if self.al_error:
+            if not control & r.AL_ERROR_INDICATOR:
+                return  # an error must be acknowledged before any other request
+            self._set_al(self.al_state, AlStatusCode.NO_ERROR, error=False)
+        if requested == 0:
+            return
+        self.request_state(requested)
+
+    def request_state(self, requested: int) -> None:
+        """Apply an AL control request (after an acknowledged error, if any)."""
+        current = self.al_state
+        if requested not in _KNOWN_STATES:
+            self._refuse(AlStatusCode.UNKNOWN_REQUESTED_STATE)
+            return
+        if current not in _ALLOWED_FROM[requested]:
+            self._refuse(AlStatusCode.INVALID_REQUESTED_STATE_CHANGE)
+            return
+        if requested == current:
+            return
+        code = self._transition_check(current, requested)
+        if code is not None:
+            self._refuse(code)
+            return
+        if requested == AlState.OP and not self._outputs_ready():
+            self.pending_op = True  # entered with the first valid outputs
+            return
+        self._enter(requested)
+
+    def _transition_check(self, current: int, requested: int) -> int | None:
+        if requested == AlState.BOOT:
+            return AlStatusCode.BOOTSTRAP_NOT_SUPPORTED
+        if current == AlState.INIT and requested == AlState.PREOP:
+            return self._check_mailbox_sms()
+        if current == AlState.PREOP and requested == AlState.SAFEOP:
+            return self._check_process_sms()
+        if requested == AlState.OP and self.refuse_op_code is not None:
+            return self.refuse_op_code
+        return None
+
+    def _outputs_ready(self) -> bool:
+        outputs, _ = self._process_sizes()
+        return outputs == 0 or self.outputs_valid
+
+    def _enter(self, state: int) -> None:
+        self.pending_op = False
+        if state in (AlState.INIT, AlState.PREOP):
+            self.outputs_valid = False
+        if state == AlState.INIT:
+            self._mailbox_queue.clear()
+            for sm in range(self.config.sync_managers):
+                self.mem[self._sm_address(sm) + 5] &= ~r.SM_STATUS_MAILBOX_FULL
+        self._set_al(state, AlStatusCode.NO_ERROR, error=False)
+        self._update_pdi_activation(state)
+        if self.app is not None:
+            self.app.state_changed(AlState(state))
+
+    def _update_pdi_activation(self, state: int) -> None:
+        layout = self.layout
+        for sm in range(self.config.sync_managers):
+            mailbox = sm in (layout.mailbox_out_sm, layout.mailbox_in_sm)
+            on = state != AlState.INIT if mailbox else state in (AlState.SAFEOP, AlState.OP)
+            base = self._sm_address(sm)
+            self.mem[base + 7] = 0 if on else r.SM_PDI_DEACTIVATE
+
+    def _check_mailbox_sms(self) -> int | None:
+        layout = self.layout
+        if layout.mailbox_out_bytes == 0:
+            return None
+        out = self.sync_manager(layout.mailbox_out_sm)
+        inn = self.sync_manager(layout.mailbox_in_sm)
+        ok = (
+            out.enabled
+            and inn.enabled
+            and out.start == layout.mailbox_out_start
+            and inn.start == layout.mailbox_in_start
+            and out.mode == r.SM_MODE_MAILBOX
+            and inn.mode == r.SM_MODE_MAILBOX
+            and out.direction == r.SM_DIRECTION_WRITE
+            and inn.direction == r.SM_DIRECTION_READ
+            and out.length > 0
+            and inn.length > 0
+        )
+        return None if ok else AlStatusCode.INVALID_MAILBOX_CONFIGURATION_PREOP
+
+    def _process_sizes(self) -> tuple[int, int]:
+        if self.app is not None:
+            return self.app.process_data_bytes()
+        return self.layout.outputs_bytes, self.layout.inputs_bytes
+
+    def _check_process_sms(self) -> int | None:
+        outputs, inputs = self._process_sizes()
+        layout = self.layout
+        if outputs:
+            sm = self.sync_manager(layout.outputs_sm)
+            if not (sm.enabled and sm.length == outputs and sm.direction == r.SM_DIRECTION_WRITE):
+                return AlStatusCode.INVALID_OUTPUT_CONFIGURATION
+        if inputs:
+            sm = self.sync_manager(layout.inputs_sm)
+            if not (sm.enabled and sm.length == inputs and sm.direction == r.SM_DIRECTION_READ):
+                return AlStatusCode.INVALID_INPUT_CONFIGURATION
+        return None
+
+    # ------------------------------------------------------- sync managers
+    @staticmethod
+    def _sm_address(index: int) -> int:
+        return r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * index
+
+    def sync_manager(self, index: int) -> SmView:
+        start, length, control, status, activate, pdi = _SM.unpack_from(
+            self.mem, self._sm_address(index)
+        )
+        return SmView(index, start, length, control, status, activate, pdi)
+
+    def _active_sms(self) -> list[SmView]:
+        out = []
+        for i in range(self.config.sync_managers):
+            sm = self.sync_manager(i)
+            if sm.enabled and sm.length and not sm.pdi_deactivated:
+                out.append(sm)
+        return out
+
+    def _mailbox_sms(self, start: int, end: int, *, write: bool) -> list[int]:
+        if end <= r.PROCESS_RAM:
+            return []
+        want = r.SM_DIRECTION_WRITE if write else r.SM_DIRECTION_READ
+        return [
+            sm.index
+            for sm in self._active_sms()
+            if sm.mode == r.SM_MODE_MAILBOX
+            and sm.direction == want
+            and _overlaps(start, end, sm.start, sm.start + sm.length)
+        ]
+
+    def _sm_full(self, index: int) -> bool:
+        return bool(self.mem[self._sm_address(index) + 5] & r.SM_STATUS_MAILBOX_FULL)
+
+    def _set_sm_full(self, index: int, full: bool) -> None:
+        addr = self._sm_address(index) + 5
+        if full:
+            self.mem[addr] |= r.SM_STATUS_MAILBOX_FULL
+        else:
+            self.mem[addr] &= ~r.SM_STATUS_MAILBOX_FULL
+
+    def _sm_registers_written(self, start: int, end: int) -> None:
+        for i in range(self.config.sync_managers):
+            base = self._sm_address(i)
+            if _overlaps(start, end, base, base + 8) and not self.mem[base + 6] & 1:
+                self._set_sm_full(i, False)
+
+    def _sm_written(self, start: int, end: int) -> None:
+        for sm in self._active_sms():
+            last = sm.start + sm.length - 1
+            if not start <= last < end or sm.direction != r.SM_DIRECTION_WRITE:
+                continue
+            if sm.mode == r.SM_MODE_MAILBOX:
+                self._mailbox_written(sm)
+            else:
+                self._outputs_written()
+
+    def _after_read(self, start: int, end: int) -> None:
+        if end <= r.PROCESS_RAM:
+            return
+        for sm in self._active_sms():
+            last = sm.start + sm.length - 1
+            if sm.mode == r.SM_MODE_MAILBOX and sm.direction == r.SM_DIRECTION_READ:
+                if start <= last < end:
+                    self._set_sm_full(sm.index, False)
+                    self._post_next_mailbox()
+
+    def _outputs_written(self) -> None:
+        self.outputs_valid = True
+        if self.pending_op and self.al_state == AlState.SAFEOP:
+            self._enter(AlState.OP)
+
+    # ------------------------------------------------------------- mailbox
+    def _mailbox_written(self, sm: SmView) -> None:
+        request = bytes(self.mem[sm.start : sm.start + sm.length])
+        self.counters.mailbox_requests += 1
+        if self.app is not None:
+            self._mailbox_queue.extend(self.app.mailbox_request(request))
+        self._set_sm_full(sm.index, False)  # the PDI has read it
+        self._post_next_mailbox()
+
+    def _post_next_mailbox(self) -> None:
+        index = self.layout.mailbox_in_sm
+        sm = self.sync_manager(index)
+        if not self._mailbox_queue or self._sm_full(index) or not sm.enabled:
+            return
+        message = self._mailbox_queue.pop(0)[: sm.length]
+        self.mem[sm.start : sm.start + sm.length] = message + bytes(sm.length - len(message))
+        self._set_sm_full(index, True)
+
+    def post_mailbox(self, message: bytes) -> None:
+        """Queue an unsolicited mailbox message (e.g. an emergency) for the master."""
+        self._mailbox_queue.append(message)
+        self._post_next_mailbox()
+
+    # -------------------------------------------------------------- logical
+    def fmmu(self, index: int) -> FmmuEntry:
+        ls, length, lsb, lstop, ps, psb, typ, act = _FMMU.unpack_from(
+            self.mem, r.FMMU_BASE + r.FMMU_BYTES * index
+        )
+        return FmmuEntry(ls, length, lsb, lstop, ps, psb, typ, bool(act & 1))
+
+    def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
+        n = len(data)
+        fmmus = [f for f in (self.fmmu(i) for i in range(self.config.fmmus)) if f.enabled]
+        hits = [f for f in fmmus if f.length_bytes and _overlaps(
+            address, address + n, f.logical_start, f.logical_start + f.length_bytes)]
+        if not hits:
+            return 0
+        wkc = 0
+        incoming = bytes(data)
+        if cmd in (Command.LWR, Command.LRW):
+            wrote = [f for f in hits if f.type & r.FMMU_TYPE_WRITE and self._sm_open(f)]
+            for f in wrote:
+                self._fmmu_write(f, address, incoming)
+            if wrote:
+                wkc += 2 if cmd == Command.LRW else 1
+        if cmd in (Command.LRD, Command.LRW):
+            read = [f for f in hits if f.type & r.FMMU_TYPE_READ and self._sm_open(f)]
+            for f in read:
+                self._fmmu_read(f, address, data)
+            if read:
+                wkc += 1
+        return wkc
+
+    def _sm_open(self, f: FmmuEntry) -> bool:
+        """FMMU access to a sync manager's buffer needs that SM enabled and PDI-active."""
+        end = f.physical_start + f.length_bytes
+        for i in range(self.config.sync_managers):
+            sm = self.sync_manager(i)
+            if sm.length and _overlaps(f.physical_start, end, sm.start, sm.start + sm.length):
+                return sm.enabled and not sm.pdi_deactivated
+        return True
+
+    def _fmmu_write(self, f: FmmuEntry, address: int, incoming: bytes) -> None:
+        if _byte_aligned(f):
+            lo = max(address, f.logical_start)
+            hi = min(address + len(incoming), f.logical_start + f.length_bytes)
+            p = f.physical_start + (lo - f.logical_start)
+            self.mem[p : p + hi - lo] = incoming[lo - address : hi - address]
+            self._sm_written(p, p + hi - lo)
+            return
+        for lbit, pbit in _bit_pairs(f, address, len(incoming)):
+            value = (incoming[lbit >> 3] >> (lbit & 7)) & 1
+            byte = pbit >> 3
+            self.mem[byte] = (self.mem[byte] & ~(1 << (pbit & 7))) | (value << (pbit & 7))
+        self._sm_written(f.physical_start, f.physical_start + f.length_bytes)
+
+    def _fmmu_read(self, f: FmmuEntry, address: int, data: memoryview) -> None:
+        if _byte_aligned(f):
+            lo = max(address, f.logical_start)
+            hi = min(address + len(data), f.logical_start + f.length_bytes)
+            p = f.physical_start + (lo - f.logical_start)
+            data[lo - address : hi - address] = self.mem[p : p + hi - lo]
+            self._after_read(p, p + hi - lo)
+            return
+        for lbit, pbit in _bit_pairs(f, address, len(data)):
+            value = (self.mem[pbit >> 3] >> (pbit & 7)) & 1
+            i = lbit >> 3
+            data[i] = (data[i] & ~(1 << (lbit & 7))) | (value << (lbit & 7))
+
+    # ----------------------------------------------------- process data
+    def cycle(self, t_ns: int) -> None:
+        """One application cycle: outputs from the output SM to the device, inputs back."""
+        if self.app is None or self.al_state not in (AlState.SAFEOP, AlState.OP):
+            return
+        self.counters.cycles += 1
+        layout = self.layout
+        outputs_bytes, inputs_bytes = self._process_sizes()
+        out_sm = self.sync_manager(layout.outputs_sm)
+        outputs = b""
+        if outputs_bytes and self.al_state == AlState.OP:
+            outputs = bytes(self.mem[out_sm.start : out_sm.start + outputs_bytes])
+        inputs = self.app.cycle(outputs, t_ns)
+        if inputs_bytes:
+            in_sm = self.sync_manager(layout.inputs_sm)
+            self.mem[in_sm.start : in_sm.start + len(inputs)] = inputs
+
+    # --------------------------------------------------------------- SII
+    def _eeprom_command(self) -> None:
+        control = self.u16(r.EEPROM_CONTROL)
+        command = control & r.EEPROM_COMMAND_MASK
+        word = self.u32(r.EEPROM_ADDRESS)
+        status = control & ~(r.EEPROM_COMMAND_MASK | r.EEPROM_STATUS_BUSY | r.EEPROM_ERROR_COMMAND)
+        if self.config.eeprom_8_byte_reads:
+            status |= r.EEPROM_STATUS_READ_8_BYTES
+        if command == r.EEPROM_COMMAND_READ:
+            chunk = 8 if self.config.eeprom_8_byte_reads else 4
+            raw = bytes(self.sii[2 * word : 2 * word + chunk])
+            self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 8] = (raw + b"\xff" * 8)[:8]
+        elif command == r.EEPROM_COMMAND_WRITE:
+            if 2 * word + 2 <= len(self.sii):
+                self.sii[2 * word : 2 * word + 2] = self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 2]
+            else:
+                status |= r.EEPROM_ERROR_COMMAND
+        elif command == r.EEPROM_COMMAND_RELOAD:
+            self.layout = sii_layout(bytes(self.sii))
+            _U16.pack_into(self.mem, r.STATION_ALIAS, self.layout.station_alias)
+        elif command:
+            status |= r.EEPROM_ERROR_COMMAND
+        _U16.pack_into(self.mem, r.EEPROM_CONTROL, status & 0xFFFF)
+
+    # ---------------------------------------------------------------- DC
+    def system_time_ns(self, t_ns: int) -> int:
+        offset = int(_I64.unpack_from(self.mem, r.DC_SYSTEM_TIME_OFFSET)[0])
+        return self.clock.local_ns(t_ns) + offset
+
+    def _latch_receive_times(self) -> None:
+        times = self.port_times
+        if times is None:
+            return
+        local0 = self.clock.local_ns(times.port0_ns)
+        _U32.pack_into(self.mem, r.DC_RECEIVE_TIME_PORT0, local0 & 0xFFFFFFFF)
+        if times.port1_ns is not None:
+            local1 = self.clock.local_ns(times.port1_ns)
+            _U32.pack_into(self.mem, r.DC_RECEIVE_TIME_PORT0 + 4, local1 & 0xFFFFFFFF)
+        _U64.pack_into(self.mem, r.DC_RECEIVE_TIME_PROCESSING_UNIT, local0 & (2**64 - 1))
+
+    def _system_time_written(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
+        """A write to 0x0910 feeds the time control loop (ETG.1000.4 §6.8, ET1100 §9.2)."""
+        lo = max(start, r.DC_SYSTEM_TIME)
+        hi = min(end, r.DC_SYSTEM_TIME + 8)
+        raw = bytearray(8)
+        raw[lo - r.DC_SYSTEM_TIME : hi - r.DC_SYSTEM_TIME] = payload[lo - start : hi - start]
+        width_bits = 8 * (hi - r.DC_SYSTEM_TIME)
+        received = int.from_bytes(raw, "little") + self.u32(r.DC_SYSTEM_TIME_DELAY)
+        own = self.system_time_ns(t_ns)
+        mask = (1 << width_bits) - 1
+        diff = ((own - received + (1 << (width_bits - 1))) & mask) - (1 << (width_bits - 1))
+        magnitude = min(abs(diff), 0x7FFFFFFF)
+        sign = 0x80000000 if diff < 0 else 0
+        _U32.pack_into(self.mem, r.DC_SYSTEM_TIME_DIFFERENCE, magnitude | sign)
+        self.clock.correction_ns -= diff // 2  # a first-order loop: halves the error per write
+
+    @property
+    def system_time_difference_ns(self) -> int:
+        raw = self.u32(r.DC_SYSTEM_TIME_DIFFERENCE)
+        magnitude = raw & 0x7FFFFFFF
+        return -magnitude if raw & 0x80000000 else magnitude
+
+    # ------------------------------------------------------- error counters
+    def count_invalid_frame(self, port: int = 0) -> None:
+        address = r.RX_ERROR_COUNTER + 2 * port
+        self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+    def count_processing_error(self) -> None:
+        address = r.PROCESSING_UNIT_ERROR
+        self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+
+@dataclass(frozen=True, slots=True)
+class SmView:
+    """A sync manager's registers (ETG.1000.4 Table 58)."""
+
+    index: int
+    start: int
+    length: int
+    control: int
+    status: int
+    activate: int
+    pdi_control: int
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.activate & r.SM_ACTIVATE_ENABLE)
+
+    @property
+    def pdi_deactivated(self) -> bool:
+        return bool(self.pdi_control & r.SM_PDI_DEACTIVATE)
+
+    @property
+    def mode(self) -> int:
+        return self.control & r.SM_CONTROL_MODE_MASK
+
+    @property
+    def direction(self) -> int:
+        return self.control & r.SM_CONTROL_DIRECTION_MASK
+
+
+def _overlaps(a0: int, a1: int, b0: int, b1: int) -> bool:
+    return a0 < b1 and b0 < a1
+
+
+def _byte_aligned(f: FmmuEntry) -> bool:
+    return f.logical_start_bit == 0 and f.logical_stop_bit == 7 and f.physical_start_bit == 0
+
+
+def _bit_pairs(f: FmmuEntry, address: int, n: int) -> list[tuple[int, int]]:
+    """(datagram bit, memory bit) for every bit the FMMU maps inside the datagram."""
+    first = f.logical_start * 8 + f.logical_start_bit
+    last = (f.logical_start + f.length_bytes - 1) * 8 + f.logical_stop_bit
+    lo = max(first, address * 8)
+    hi = min(last, (address + n) * 8 - 1)
+    base = f.physical_start * 8 + f.physical_start_bit - first
+    return [(b - address * 8, b + base) for b in range(lo, hi + 1)]
+
+
+def _readonly_mask() -> bytearray:
+    """1 where the master cannot write a register byte (ETG.1000.4 register tables)."""
+    mask = bytearray(r.PROCESS_RAM)
+    ranges = [
+        (0x0000, 0x0010),
+        (r.STATION_ALIAS, r.STATION_ALIAS + 2),
+        (r.DL_STATUS, r.DL_STATUS + 2),
+        (r.AL_STATUS, r.AL_STATUS + 6),
+        (r.PDI_CONTROL, r.PDI_CONTROL + 2),
+        (r.EEPROM_PDI_ACCESS, r.EEPROM_PDI_ACCESS + 1),
+        (r.WATCHDOG_STATUS_PROCESS_DATA, r.WATCHDOG_STATUS_PROCESS_DATA + 2),
+        (r.DC_RECEIVE_TIME_PORT0, r.DC_SYSTEM_TIME),
+        (r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
+        (r.DC_RECEIVE_TIME_PROCESSING_UNIT, r.DC_SYSTEM_TIME_OFFSET),
+        (r.DC_SYSTEM_TIME_DIFFERENCE, r.DC_SYSTEM_TIME_DIFFERENCE + 4),
+    ]
+    for lo, hi in ranges:
+        mask[lo:hi] = b"\x01" * (hi - lo)
+    for sm in range(16):
+        base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * sm
+        mask[base + 5] = 1  # status
+        mask[base + 7] = 1  # PDI control
+    return mask
+
+
+__all__ = ["DcClock", "Esc", "EscApplication", "EscConfig", "FmmuEntry", "SmView", "field"]

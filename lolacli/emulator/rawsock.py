@@ -1,0 +1,116 @@
+"""Real-time transport: serve a :class:`Chain` on a network interface (Linux AF_PACKET).
+
+The server receives EtherCAT frames (ethertype 0x88A4) on the interface, runs each through
+the chain, and sends the returned frame back on the same interface at once (the modelled
+bus delay is not waited for: the host is the bottleneck). Frames the socket itself sent
+are skipped (``PACKET_OUTGOING``), so on a veth pair only the master's frames are served.
+"""
+
+from __future__ import annotations
+
+import errno
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from lolacli.emulator.chain import Chain
+from lolacli.errors import TransportError
+
+ETH_P_ECAT = 0x88A4
+PACKET_OUTGOING = 4
+MAX_FRAME_BYTES = 1600
+
+
+@dataclass(slots=True)
+class ServerStats:
+    received: int = 0
+    answered: int = 0
+    lost: int = 0
+    started_ns: int = 0
+    max_service_ns: int = 0
+
+
+def open_socket(iface: str) -> socket.socket:
+    """A raw packet socket bound to ``iface`` for ethertype 0x88A4; TransportError if not."""
+    try:
+        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ECAT))
+    except PermissionError as exc:
+        raise TransportError(f"no permission for a raw socket ({exc.strerror}); run as root "
+                             "or give python CAP_NET_RAW") from None
+    except OSError as exc:
+        raise TransportError(f"cannot open a raw socket: {exc.strerror or exc}") from None
+    try:
+        sock.bind((iface, ETH_P_ECAT))
+    except OSError as exc:
+        sock.close()
+        if exc.errno in (errno.ENODEV, errno.ENXIO) or "No such device" in str(exc):
+            raise TransportError(f"no such interface: {iface}") from None
+        raise TransportError(f"cannot bind to {iface}: {exc.strerror or exc}") from None
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    return sock
+
+
+class RawSocketServer:
+    """Answers a real master on ``iface`` with the emulated chain."""
+
+    def __init__(self, iface: str, chain: Chain) -> None:
+        self.iface = iface
+        self.chain = chain
+        self.stats = ServerStats()
+        self._sock: socket.socket | None = None
+
+    def __enter__(self) -> RawSocketServer:
+        self._sock = open_socket(self.iface)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def serve(
+        self,
+        should_stop: Callable[[], bool],
+        *,
+        on_status: Callable[[ServerStats], None] | None = None,
+        status_interval_s: float = 1.0,
+        poll_s: float = 0.1,
+    ) -> ServerStats:
+        """Serve until ``should_stop()``; ``on_status`` every ``status_interval_s``."""
+        sock = self._sock
+        if sock is None:
+            raise TransportError("server not opened (use it as a context manager)")
+        sock.settimeout(poll_s)
+        self.stats.started_ns = time.monotonic_ns()
+        next_status = time.monotonic() + status_interval_s
+        while not should_stop():
+            self._serve_one(sock)
+            if on_status is not None and time.monotonic() >= next_status:
+                on_status(self.stats)
+                next_status = time.monotonic() + status_interval_s
+        return self.stats
+
+    def _serve_one(self, sock: socket.socket) -> None:
+        try:
+            frame, address = sock.recvfrom(MAX_FRAME_BYTES)
+        except TimeoutError:
+            return
+        except InterruptedError:
+            return
+        except OSError as exc:
+            raise TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}") from None
+        if len(address) > 2 and address[2] == PACKET_OUTGOING:
+            return
+        t_ns = time.monotonic_ns()
+        self.stats.received += 1
+        reply, _delay_ns = self.chain.process(frame, t_ns)
+        if reply is None:
+            self.stats.lost += 1
+            return
+        try:
+            sock.send(reply)
+        except OSError as exc:
+            raise TransportError(f"{self.iface}: send failed: {exc.strerror or exc}") from None
+        self.stats.answered += 1
+        self.stats.max_service_ns = max(self.stats.max_service_ns, time.monotonic_ns() - t_ns)

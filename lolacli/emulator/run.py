@@ -1,0 +1,59 @@
+"""Run an emulated chain on an interface: the library side of ``lolacli bus emulate``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from lolacli.emulator.chain import Chain, Faults
+from lolacli.emulator.rawsock import RawSocketServer, ServerStats
+from lolacli.emulator.registers import AlState
+from lolacli.emulator.slave import build_chain
+from lolacli.eni.model import Eni
+from lolacli.errors import UsageError
+
+
+@dataclass(frozen=True, slots=True)
+class EmulateOptions:
+    drop_probability: float = 0.0
+    stuck_safeop: tuple[int, ...] = ()  # 1-based positions that refuse SAFEOP -> OP
+    drift_ppb: int = 0
+    seed: int = 0
+
+
+def make_chain(eni: Eni, options: EmulateOptions) -> Chain:
+    """The chain of ``eni`` with the faults of ``options``; UsageError for bad positions."""
+    if not 0.0 <= options.drop_probability <= 1.0:
+        raise UsageError(f"drop probability {options.drop_probability} is not in [0, 1]")
+    faults = Faults(drop_probability=options.drop_probability, seed=options.seed)
+    chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
+    for position in options.stuck_safeop:
+        if not 1 <= position <= len(chain.slaves):
+            raise UsageError(f"--stuck-safeop {position}: the chain has slaves 1..{len(chain.slaves)}")
+        chain.stuck_in_safeop(position)
+    return chain
+
+
+def state_summary(chain: Chain) -> str:
+    """Slave states as a compact run-length string, e.g. ``OP×24 SAFEOP!×1``."""
+    names = {int(s): s.name for s in AlState}
+    parts: list[tuple[str, int]] = []
+    for esc in chain.slaves:
+        label = names.get(esc.al_state, f"0x{esc.al_state:X}") + ("!" if esc.al_error else "")
+        if parts and parts[-1][0] == label:
+            parts[-1] = (label, parts[-1][1] + 1)
+        else:
+            parts.append((label, 1))
+    return " ".join(f"{label}×{n}" for label, n in parts)
+
+
+def serve(
+    iface: str,
+    chain: Chain,
+    should_stop: Callable[[], bool],
+    on_status: Callable[[ServerStats], None] | None = None,
+    status_interval_s: float = 1.0,
+) -> ServerStats:
+    """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble."""
+    with RawSocketServer(iface, chain) as server:
+        return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)

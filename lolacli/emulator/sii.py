@@ -1,0 +1,435 @@
+"""SII EEPROM images (ETG.1000.6 §5.4, ETG.2010): build one from an ENI slave, read it back.
+
+Layout (word addresses)::
+
+    0x00 PDI control   0x01 PDI configuration   0x02 SYNC impulse length  0x03 PDI config 2
+    0x04 configured station alias                0x07 checksum (CRC-8 of words 0..6, low byte)
+    0x08 vendor id (2 words)  0x0A product code  0x0C revision  0x0E serial number
+    0x14/0x15 bootstrap receive mailbox offset/size   0x16/0x17 bootstrap send mailbox
+    0x18/0x19 standard receive mailbox (master -> slave)  0x1A/0x1B standard send mailbox
+    0x1C mailbox protocols   0x3E EEPROM size (KiBit - 1)   0x3F version
+    0x40… categories: type (word), length in words (word), data; 0xFFFF ends the list.
+
+Categories written: STRINGS (10), GENERAL (30), FMMU (40), SYNCM (41), TXPDO (50),
+RXPDO (51), DC (60). Pure: values in, bytes out.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+
+from lolacli.eni.model import Direction, Pdo, Slave, SyncManager
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_SM_ENTRY = struct.Struct("<HHBBBB")
+_PDO_HEAD = struct.Struct("<HBBBBH")
+_PDO_ENTRY = struct.Struct("<HBBBBH")
+
+HEADER_WORDS = 0x40
+CATEGORY_END = 0xFFFF
+
+
+class SiiCategory(IntEnum):
+    """Category types (ETG.1000.6 Table 19)."""
+
+    STRINGS = 10
+    DATA_TYPES = 20
+    GENERAL = 30
+    FMMU = 40
+    SYNCM = 41
+    TXPDO = 50
+    RXPDO = 51
+    DC = 60
+
+
+class MailboxProtocol(IntFlag):
+    """Mailbox protocols word 0x1C (ETG.1000.6 Table 18)."""
+
+    AOE = 0x01
+    EOE = 0x02
+    COE = 0x04
+    FOE = 0x08
+    SOE = 0x10
+    VOE = 0x20
+
+
+class SmType(IntEnum):
+    """SYNCM category "type" byte (ETG.2010 Table 12)."""
+
+    UNUSED = 0
+    MAILBOX_OUT = 1
+    MAILBOX_IN = 2
+    OUTPUTS = 3
+    INPUTS = 4
+
+
+class CoeDetails(IntFlag):
+    """GENERAL category CoE details (ETG.2010 Table 8)."""
+
+    SDO = 0x01
+    SDO_INFO = 0x02
+    PDO_ASSIGN = 0x04
+    PDO_CONFIG = 0x08
+    UPLOAD_AT_STARTUP = 0x10
+    SDO_COMPLETE_ACCESS = 0x20
+
+
+#: CoE data type codes of ENI/ESI type names (ETG.1000.6 Table 64).
+DATA_TYPE_CODES = {
+    "BOOL": 0x01, "BIT": 0x01, "SINT": 0x02, "INT": 0x03, "DINT": 0x04, "USINT": 0x05,
+    "UINT": 0x06, "UDINT": 0x07, "REAL": 0x08, "STRING": 0x09, "LREAL": 0x11,
+    "LINT": 0x15, "ULINT": 0x1B, "BYTE": 0x05, "WORD": 0x06, "DWORD": 0x07,
+    "BIT2": 0x31, "BIT3": 0x32, "BIT4": 0x33, "BIT5": 0x34, "BIT6": 0x35, "BIT7": 0x36,
+    "BIT8": 0x37,
+}
+
+_PROTOCOL_NAMES = {"AoE": 0x01, "EoE": 0x02, "CoE": 0x04, "FoE": 0x08, "SoE": 0x10, "VoE": 0x20}
+
+SM_CONTROL = {
+    SmType.MAILBOX_OUT: 0x26,
+    SmType.MAILBOX_IN: 0x22,
+    SmType.OUTPUTS: 0x64,
+    SmType.INPUTS: 0x20,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class SiiSyncManager:
+    start: int
+    length_bytes: int
+    control: int
+    enable: int
+    type: int
+
+
+@dataclass(frozen=True, slots=True)
+class SiiLayout:
+    """What the ESC and a master learn from an SII image."""
+
+    vendor_id: int = 0
+    product_code: int = 0
+    revision: int = 0
+    serial: int = 0
+    station_alias: int = 0
+    mailbox_out_start: int = 0
+    mailbox_out_bytes: int = 0
+    mailbox_in_start: int = 0
+    mailbox_in_bytes: int = 0
+    protocols: int = 0
+    name: str = ""
+    sync_managers: tuple[SiiSyncManager, ...] = ()
+    outputs_bytes: int = 0
+    inputs_bytes: int = 0
+
+    def _sm_of(self, kind: SmType, default: int) -> int:
+        for i, sm in enumerate(self.sync_managers):
+            if sm.type == kind:
+                return i
+        return default
+
+    @property
+    def mailbox_out_sm(self) -> int:
+        return self._sm_of(SmType.MAILBOX_OUT, 0)
+
+    @property
+    def mailbox_in_sm(self) -> int:
+        return self._sm_of(SmType.MAILBOX_IN, 1)
+
+    @property
+    def outputs_sm(self) -> int:
+        return self._sm_of(SmType.OUTPUTS, 2)
+
+    @property
+    def inputs_sm(self) -> int:
+        return self._sm_of(SmType.INPUTS, 3)
+
+
+def crc8_sii(data: bytes) -> int:
+    """CRC-8 of the first 14 header bytes: polynomial x^8+x^2+x+1, initial 0xFF."""
+    crc = 0xFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc
+
+
+# ------------------------------------------------------------------ building
+@dataclass(frozen=True, slots=True)
+class SiiSpec:
+    """Everything an SII image states; :func:`sii_spec_from_slave` fills it from an ENI."""
+
+    name: str
+    vendor_id: int
+    product_code: int
+    revision: int
+    serial: int = 0
+    station_alias: int = 0
+    mailbox: tuple[int, int, int, int] | None = None  # out start, out len, in start, in len
+    protocols: int = 0
+    coe_details: int = 0
+    ds402_channels: int = 0
+    sync_managers: tuple[SiiSyncManager, ...] = ()
+    fmmus: tuple[int, ...] = (1, 2)
+    pdos: tuple[Pdo, ...] = ()
+    pdo_sync_manager: dict[int, int] | None = None  # PDO index -> SM, where the ENI omits it
+    dc: bool = True
+    group: str = "lolacli emulated"
+    eeprom_kibit: int = 32
+
+
+def _category(kind: int, data: bytes) -> bytes:
+    if len(data) % 2:
+        data += b"\x00"
+    return _U16.pack(kind) + _U16.pack(len(data) // 2) + data
+
+
+def _strings(strings: list[str]) -> bytes:
+    out = bytearray([len(strings)])
+    for s in strings:
+        raw = s.encode("latin-1", "replace")[:255]
+        out += bytes([len(raw)]) + raw
+    return bytes(out)
+
+
+def _general(spec: SiiSpec) -> bytes:
+    out = bytearray(32)
+    out[0], out[2], out[3] = 2, 3, 1  # group, order, name string indices
+    out[5] = spec.coe_details
+    out[9] = spec.ds402_channels
+    _U16.pack_into(out, 16, 0x0011)  # physical ports 0 and 1: MII
+    return bytes(out)
+
+
+def _pdo_category(pdos: list[Pdo], sm_of: dict[int, int]) -> bytes:
+    out = bytearray()
+    for pdo in pdos:
+        sm = pdo.sync_manager if pdo.sync_manager is not None else sm_of.get(pdo.index, 0xFF)
+        flags = (0x0001 if pdo.mandatory else 0) | (0x0010 if pdo.fixed else 0)
+        out += _PDO_HEAD.pack(pdo.index, len(pdo.entries), sm, 0, 0, flags)
+        for e in pdo.entries:
+            code = DATA_TYPE_CODES.get(e.data_type.upper(), 0)
+            out += _PDO_ENTRY.pack(e.index, e.subindex, 0, code, e.bit_size, 0)
+    return bytes(out)
+
+
+def build_sii(spec: SiiSpec) -> bytes:
+    """The EEPROM image of ``spec``: 64-word header and categories up to 0xFFFF."""
+    head = bytearray(2 * HEADER_WORDS)
+    _U16.pack_into(head, 0, 0x0C05)  # PDI control: SPI, enhanced link detection
+    _U16.pack_into(head, 8, spec.station_alias)
+    _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
+    for word, value in ((0x08, spec.vendor_id), (0x0A, spec.product_code),
+                        (0x0C, spec.revision), (0x0E, spec.serial)):
+        _U32.pack_into(head, 2 * word, value & 0xFFFFFFFF)
+    if spec.mailbox is not None:
+        out_start, out_len, in_start, in_len = spec.mailbox
+        for word, value in ((0x14, out_start), (0x15, out_len), (0x16, in_start),
+                            (0x17, in_len), (0x18, out_start), (0x19, out_len),
+                            (0x1A, in_start), (0x1B, in_len), (0x1C, spec.protocols)):
+            _U16.pack_into(head, 2 * word, value)
+    _U16.pack_into(head, 2 * 0x3E, spec.eeprom_kibit - 1)
+    _U16.pack_into(head, 2 * 0x3F, 1)
+    _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
+
+    body = bytearray()
+    body += _category(SiiCategory.STRINGS, _strings([spec.name, spec.group, spec.name]))
+    body += _category(SiiCategory.GENERAL, _general(spec))
+    fmmus = bytes(spec.fmmus) + (b"\xff" if len(spec.fmmus) % 2 else b"")
+    body += _category(SiiCategory.FMMU, fmmus)
+    sms = b"".join(
+        _SM_ENTRY.pack(s.start, s.length_bytes, s.control, 0, s.enable, s.type)
+        for s in spec.sync_managers
+    )
+    body += _category(SiiCategory.SYNCM, sms)
+    sm_of = spec.pdo_sync_manager or {}
+    tx = [p for p in spec.pdos if p.direction == Direction.INPUT]
+    rx = [p for p in spec.pdos if p.direction == Direction.OUTPUT]
+    if tx:
+        body += _category(SiiCategory.TXPDO, _pdo_category(tx, sm_of))
+    if rx:
+        body += _category(SiiCategory.RXPDO, _pdo_category(rx, sm_of))
+    if spec.dc:
+        body += _category(SiiCategory.DC, _dc_category())
+    body += _U16.pack(CATEGORY_END)
+    image = bytes(head) + bytes(body)
+    size = max(len(image), spec.eeprom_kibit * 128)
+    return image + b"\xff" * (size - len(image))
+
+
+def _dc_category() -> bytes:
+    """One DC operation mode "DC-Synchron" (ETG.2010 Table 16): assign-activate 0x0300."""
+    out = bytearray(24)
+    _U32.pack_into(out, 0, 0)  # cycle time 0: set by the master
+    _U16.pack_into(out, 20, 0x0300)
+    return bytes(out)
+
+
+# ------------------------------------------------------------ from an ENI
+DEFAULT_MAILBOX = (0x1000, 128, 0x1080, 128)
+DEFAULT_OUTPUTS_START = 0x1100
+DEFAULT_INPUTS_START = 0x1400
+
+
+def _pdo_bytes(pdos: tuple[Pdo, ...], direction: Direction) -> int:
+    bits = sum(p.bit_size for p in pdos if p.direction == direction)
+    return (bits + 7) // 8
+
+
+def _eni_sm_type(sm: SyncManager) -> SmType | None:
+    kind = sm.kind.lower()
+    return {
+        "mboxout": SmType.MAILBOX_OUT,
+        "mboxin": SmType.MAILBOX_IN,
+        "outputs": SmType.OUTPUTS,
+        "inputs": SmType.INPUTS,
+    }.get(kind)
+
+
+def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
+    """The slave's SM layout: from its ENI sync managers where they are typed, else defaults."""
+    typed = [(sm, _eni_sm_type(sm)) for sm in sorted(slave.sync_managers, key=lambda s: s.index)]
+    if typed and all(t is not None for _, t in typed):
+        by_index = {sm.index: (sm, t) for sm, t in typed if t is not None}
+        out: list[SiiSyncManager] = []
+        for i in range(max(by_index) + 1):
+            if i not in by_index:
+                out.append(SiiSyncManager(0, 0, 0, 0, SmType.UNUSED))
+                continue
+            sm, kind = by_index[i]
+            control = sm.control or SM_CONTROL[kind]
+            out.append(SiiSyncManager(sm.start_address, sm.length_bytes, control,
+                                      1 if sm.enable else 0, kind))
+        return tuple(out)
+    if slave.mailbox is None and not slave.pdos and not slave.outputs and not slave.inputs:
+        return ()
+    out_bytes = _pdo_bytes(slave.pdos, Direction.OUTPUT) or (slave.outputs_bits + 7) // 8
+    in_bytes = _pdo_bytes(slave.pdos, Direction.INPUT) or (slave.inputs_bits + 7) // 8
+    sms: list[SiiSyncManager] = []
+    if slave.mailbox is not None:
+        mb = slave.mailbox
+        sms.append(SiiSyncManager(mb.out_start, mb.out_length_bytes, 0x26, 1, SmType.MAILBOX_OUT))
+        sms.append(SiiSyncManager(mb.in_start, mb.in_length_bytes, 0x22, 1, SmType.MAILBOX_IN))
+    out_enable = 1 if out_bytes else 0
+    in_enable = 1 if in_bytes else 0
+    sms.append(SiiSyncManager(DEFAULT_OUTPUTS_START, out_bytes, 0x64, out_enable, SmType.OUTPUTS))
+    sms.append(SiiSyncManager(DEFAULT_INPUTS_START, in_bytes, 0x20, in_enable, SmType.INPUTS))
+    return tuple(sms)
+
+
+def sii_spec_from_slave(slave: Slave, *, complete_access: bool = False) -> SiiSpec:
+    """An SII description of an ENI slave: identity, name, mailbox, SMs, PDOs."""
+    ident = slave.identity
+    mailbox = None
+    protocols = 0
+    coe = 0
+    if slave.mailbox is not None:
+        mb = slave.mailbox
+        mailbox = (mb.out_start, mb.out_length_bytes, mb.in_start, mb.in_length_bytes)
+        protocols = sum(_PROTOCOL_NAMES.get(p, 0) for p in set(mb.protocols)) or MailboxProtocol.COE
+        if protocols & MailboxProtocol.COE:
+            coe = CoeDetails.SDO | CoeDetails.SDO_INFO | CoeDetails.PDO_ASSIGN
+            coe |= CoeDetails.SDO_COMPLETE_ACCESS if complete_access else 0
+    sms = sync_managers_for(slave)
+    sm_of = _pdo_sm_defaults(sms)
+    return SiiSpec(
+        name=slave.name,
+        vendor_id=ident.vendor_id,
+        product_code=ident.product_code,
+        revision=ident.revision,
+        serial=ident.serial,
+        mailbox=mailbox,
+        protocols=int(protocols),
+        coe_details=int(coe),
+        ds402_channels=1 if any(e.index == 0x6040 for p in slave.pdos for e in p.entries) else 0,
+        sync_managers=sms,
+        fmmus=(1, 2, 3) if mailbox else (1, 2),
+        pdos=slave.pdos,
+        pdo_sync_manager={
+            p.index: sm_of[p.direction] for p in slave.pdos if p.direction in sm_of
+        },
+        dc=slave.dc is not None or mailbox is not None,
+    )
+
+
+def _pdo_sm_defaults(sms: tuple[SiiSyncManager, ...]) -> dict[Direction, int]:
+    out: dict[Direction, int] = {}
+    for i, sm in enumerate(sms):
+        if sm.type == SmType.OUTPUTS:
+            out.setdefault(Direction.OUTPUT, i)
+        elif sm.type == SmType.INPUTS:
+            out.setdefault(Direction.INPUT, i)
+    return out
+
+
+def sii_from_slave(slave: Slave, *, complete_access: bool = False) -> bytes:
+    return build_sii(sii_spec_from_slave(slave, complete_access=complete_access))
+
+
+# ------------------------------------------------------------------ reading
+def categories(image: bytes) -> dict[int, bytes]:
+    """Category type -> data (first occurrence), walking from word 0x40 to 0xFFFF."""
+    out: dict[int, bytes] = {}
+    pos = 2 * HEADER_WORDS
+    while pos + 4 <= len(image):
+        kind, words = struct.unpack_from("<HH", image, pos)
+        if kind == CATEGORY_END:
+            break
+        out.setdefault(kind, image[pos + 4 : pos + 4 + 2 * words])
+        pos += 4 + 2 * words
+    return out
+
+
+def _first_string(data: bytes) -> str:
+    if len(data) < 2:
+        return ""
+    n = data[1]
+    return data[2 : 2 + n].decode("latin-1")
+
+
+def _sm_entries(data: bytes) -> tuple[SiiSyncManager, ...]:
+    out = []
+    for pos in range(0, len(data) - 7, 8):
+        start, length, control, _status, enable, kind = _SM_ENTRY.unpack_from(data, pos)
+        out.append(SiiSyncManager(start, length, control, enable, kind))
+    return tuple(out)
+
+
+def _pdo_bits(data: bytes) -> int:
+    bits, pos = 0, 0
+    while pos + 8 <= len(data):
+        _index, n, sm, *_rest = _PDO_HEAD.unpack_from(data, pos)
+        pos += 8
+        for _ in range(n):
+            if pos + 8 > len(data):
+                break
+            bits += data[pos + 5] if sm != 0xFF else 0
+            pos += 8
+    return bits
+
+
+def sii_layout(image: bytes) -> SiiLayout:
+    """Read identity, mailbox, SMs and process-data sizes back from an image."""
+    if len(image) < 2 * HEADER_WORDS:
+        return SiiLayout()
+    w = struct.unpack_from("<64H", image, 0)
+    cats = categories(image)
+    return SiiLayout(
+        vendor_id=w[8] | w[9] << 16,
+        product_code=w[10] | w[11] << 16,
+        revision=w[12] | w[13] << 16,
+        serial=w[14] | w[15] << 16,
+        station_alias=w[4],
+        mailbox_out_start=w[0x18],
+        mailbox_out_bytes=w[0x19],
+        mailbox_in_start=w[0x1A],
+        mailbox_in_bytes=w[0x1B],
+        protocols=w[0x1C],
+        name=_first_string(cats.get(SiiCategory.STRINGS, b"")),
+        sync_managers=_sm_entries(cats.get(SiiCategory.SYNCM, b"")),
+        outputs_bytes=(_pdo_bits(cats.get(SiiCategory.RXPDO, b"")) + 7) // 8,
+        inputs_bytes=(_pdo_bits(cats.get(SiiCategory.TXPDO, b"")) + 7) // 8,
+    )
