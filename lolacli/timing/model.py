@@ -1,0 +1,286 @@
+"""Frame-time model of one EtherCAT line: wire time, slave delays, cable, round trip (pure).
+
+Definitions (DESIGN.md "Definitions"):
+
+* **frame bytes** = 14 + 2 + Σ(10 + data + 2) + 4, padded to 64;
+* **wire time** = 8 × frame bytes / link rate (846 B at 100 Mbit/s → 67.68 µs, the LOLA
+  seed's equation (3));
+* **wire time with overhead** adds preamble + SFD (8 B) and the inter-frame gap (12 B)
+  (IEEE 802.3 clause 4/24): 866 B → 69.28 µs.
+
+Round trip (the seed's "minimum bus cycle time (total delay)") is modelled as
+
+    predicted_total = wire time + slaves × per-slave delay + cable delay
+
+The frame is forwarded cut-through, so its serialisation time counts once; every slave adds
+its delay (processing on the way out, forwarding on the way back, PHYs on both), and the
+cable is crossed twice (out and back; ~5 ns/m for twisted pair, velocity factor ≈ 0.65).
+
+**Per-slave delay, assumed default: 1000 ns** (our assumption, to be replaced by a
+calibration). Reasoning: a 100BASE-TX slave passes the frame through its ESC and two PHYs
+(receive and transmit) on the way out and through the forwarding path and two PHYs on the
+way back; Beckhoff's ESC documentation (Section I, "Frame Processing") describes this
+cut-through path with a fixed delay per port. For E-bus slaves (no PHY) the corpus capture
+``ethercrab__replay-dc.pcapng`` (frames 506 and 510: DC receive times, register 0x0900)
+shows 600 ns between port 0 and port 1 of the EK1100 with two terminals behind it and
+310 ns for one, i.e. about 300 ns per E-bus terminal out and back; PHY slaves are slower.
+The LOLA measurement (124.1 µs for 25 slaves and 846 B) calibrates to about 2.25 µs per
+slave, which also holds the switch and capture latency the seed calls "conservative". Use
+:func:`calibrate_per_slave_delay_ns` with a measured total to replace the assumption.
+
+**Maximum update rate** = 1 / total round trip (measured when given, else predicted): the
+highest cycle rate at which each cycle's frame is back before the next one leaves, with
+no master computing time and no acyclic traffic. It is an upper bound, not a recommended
+cycle; LOLA runs at 2 kHz while 124.1 µs allows ~8 kHz (the seed: "> 4 kHz possible").
+
+Integer nanoseconds inside; microseconds only in :meth:`TimingEstimate.to_dict`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
+from enum import StrEnum
+
+from lolacli.errors import UsageError
+from lolacli.wire.frame import MIN_FRAME_BYTES, frame_bytes_on_wire
+
+TIMING_SCHEMA = "lolacli.timing/1"
+
+LINK_100_MBIT_S = 100_000_000
+PREAMBLE_SFD_BYTES = 8
+INTER_FRAME_GAP_BYTES = 12
+DEFAULT_PER_SLAVE_DELAY_NS = 1000
+CABLE_NS_PER_M = 5.0
+DEFAULT_CABLE_M = 1.0  # per segment (master→slave 1, slave 1→slave 2, …)
+NS_PER_S = 1_000_000_000
+
+
+class DelaySource(StrEnum):
+    """Where the per-slave delay of an estimate comes from."""
+
+    ASSUMED = "assumed"  # DEFAULT_PER_SLAVE_DELAY_NS
+    GIVEN = "given"  # set by the caller
+    CALIBRATED = "calibrated"  # from a measured total
+
+
+def frame_bytes(datagram_data_lengths: Sequence[int]) -> int:
+    """Frame bytes on the wire for datagrams of these data lengths (DESIGN.md)."""
+    return frame_bytes_on_wire(tuple(datagram_data_lengths))
+
+
+def _div_round(numerator: int, denominator: int) -> int:
+    """numerator / denominator rounded half up, integers only."""
+    return (2 * numerator + denominator) // (2 * denominator)
+
+
+def wire_time_ns(n_bytes: int, link_bit_s: int = LINK_100_MBIT_S) -> int:
+    """8 × bytes / rate, in ns (846 B at 100 Mbit/s → 67 680 ns)."""
+    return _div_round(8 * n_bytes * NS_PER_S, link_bit_s)
+
+
+def wire_time_with_overhead_ns(n_bytes: int, link_bit_s: int = LINK_100_MBIT_S) -> int:
+    """Wire time of the frame plus preamble/SFD (8 B) and inter-frame gap (12 B)."""
+    return wire_time_ns(n_bytes + PREAMBLE_SFD_BYTES + INTER_FRAME_GAP_BYTES, link_bit_s)
+
+
+def cable_delay_ns(segment_lengths_m: Sequence[float], ns_per_m: float = CABLE_NS_PER_M) -> int:
+    """Round-trip propagation over the cable segments (each crossed out and back)."""
+    return round(2 * sum(segment_lengths_m) * ns_per_m)
+
+
+def predict_total_ns(wire_ns: int, slaves: int, per_slave_delay_ns: int, cable_ns: int) -> int:
+    """Predicted round trip: wire time + slaves × per-slave delay + cable."""
+    return wire_ns + slaves * per_slave_delay_ns + cable_ns
+
+
+def calibrate_per_slave_delay_ns(
+    measured_total_ns: int, wire_ns: int, cable_ns: int, slaves: int
+) -> int:
+    """(measured − wire − cable) / slaves, rounded to whole ns.
+
+    Raises :class:`UsageError` when there are no slaves to share the delay, or when the
+    measurement is shorter than the frame's own wire time plus cable (it cannot be a round
+    trip of this frame).
+    """
+    if slaves <= 0:
+        raise UsageError("cannot calibrate a per-slave delay without slaves")
+    rest = measured_total_ns - wire_ns - cable_ns
+    if rest < 0:
+        raise UsageError(
+            f"measured total {measured_total_ns / 1000:g} us is shorter than the wire time "
+            f"plus cable ({(wire_ns + cable_ns) / 1000:g} us): not a round trip of this frame"
+        )
+    return _div_round(rest, slaves)
+
+
+def max_rate_hz(total_ns: int) -> float:
+    """1 / total round trip in Hz (see the module docstring for what it means)."""
+    if total_ns <= 0:
+        raise UsageError("a round trip must be longer than 0 ns")
+    return NS_PER_S / total_ns
+
+
+@dataclass(frozen=True, slots=True)
+class TimingEstimate:
+    """Timing of one cyclic frame through a line of slaves."""
+
+    frame_bytes: int
+    slaves: int
+    link_bit_s: int
+    wire_time_ns: int
+    wire_time_with_overhead_ns: int
+    cable_m_per_segment: float
+    cable_delay_ns: int
+    per_slave_delay_ns: int
+    per_slave_delay_source: DelaySource
+    predicted_total_ns: int
+    measured_total_ns: int | None = None
+    calibrated_per_slave_delay_ns: int | None = None
+    budget_ns: int | None = None
+
+    @property
+    def total_ns(self) -> int:
+        """The measured total when there is one, else the predicted one."""
+        return (
+            self.measured_total_ns
+            if self.measured_total_ns is not None
+            else self.predicted_total_ns
+        )
+
+    @property
+    def max_rate_hz(self) -> float:
+        return max_rate_hz(self.total_ns)
+
+    @property
+    def within_budget(self) -> bool | None:
+        """None without a budget; else whether the total round trip fits in it."""
+        return None if self.budget_ns is None else self.total_ns <= self.budget_ns
+
+    def to_dict(self) -> dict[str, object]:
+        """The ``lolacli.timing/1`` document."""
+        us = _us
+        return {
+            "schema": TIMING_SCHEMA,
+            "frame_bytes": self.frame_bytes,
+            "wire_time_us": us(self.wire_time_ns),
+            "wire_time_with_overhead_us": us(self.wire_time_with_overhead_ns),
+            "slaves": self.slaves,
+            "link_mbit_s": self.link_bit_s / 1_000_000,
+            "cable_m_per_segment": self.cable_m_per_segment,
+            "cable_delay_ns": self.cable_delay_ns,
+            "per_slave_delay_ns": self.per_slave_delay_ns,
+            "per_slave_delay_source": self.per_slave_delay_source.value,
+            "calibrated_per_slave_delay_ns": self.calibrated_per_slave_delay_ns,
+            "predicted_total_us": us(self.predicted_total_ns),
+            "measured_total_us": None
+            if self.measured_total_ns is None
+            else us(self.measured_total_ns),
+            "total_source": "predicted" if self.measured_total_ns is None else "measured",
+            "max_rate_hz": round(self.max_rate_hz, 3),
+            "budget_us": None if self.budget_ns is None else us(self.budget_ns),
+            "within_budget": self.within_budget,
+        }
+
+
+def _us(ns: int) -> float:
+    return round(ns / 1000, 3)
+
+
+def estimate(
+    frame_bytes: int,
+    slaves: int,
+    *,
+    link_bit_s: int = LINK_100_MBIT_S,
+    cable_m_per_segment: float = DEFAULT_CABLE_M,
+    per_slave_delay_ns: int | None = None,
+    measured_total_ns: int | None = None,
+    budget_ns: int | None = None,
+) -> TimingEstimate:
+    """Predict (and, with a measured total, calibrate) the round trip of one frame.
+
+    The per-slave delay is the caller's when given, else calibrated from the measured total
+    when there is one, else :data:`DEFAULT_PER_SLAVE_DELAY_NS`. One cable segment per slave.
+    Frames shorter than the Ethernet minimum are padded to 64 bytes, as on the wire.
+    """
+    if frame_bytes <= 0 or slaves < 0 or link_bit_s <= 0 or cable_m_per_segment < 0:
+        raise UsageError("frame bytes and link rate must be positive, slaves and cable >= 0")
+    frame_bytes = max(frame_bytes, MIN_FRAME_BYTES)
+    wire = wire_time_ns(frame_bytes, link_bit_s)
+    cable = cable_delay_ns([cable_m_per_segment] * slaves)
+    calibrated = None
+    if measured_total_ns is not None:
+        calibrated = calibrate_per_slave_delay_ns(measured_total_ns, wire, cable, slaves)
+    if per_slave_delay_ns is not None:
+        delay, source = per_slave_delay_ns, DelaySource.GIVEN
+    elif calibrated is not None:
+        delay, source = calibrated, DelaySource.CALIBRATED
+    else:
+        delay, source = DEFAULT_PER_SLAVE_DELAY_NS, DelaySource.ASSUMED
+    return TimingEstimate(
+        frame_bytes=frame_bytes,
+        slaves=slaves,
+        link_bit_s=link_bit_s,
+        wire_time_ns=wire,
+        wire_time_with_overhead_ns=wire_time_with_overhead_ns(frame_bytes, link_bit_s),
+        cable_m_per_segment=cable_m_per_segment,
+        cable_delay_ns=cable,
+        per_slave_delay_ns=delay,
+        per_slave_delay_source=source,
+        predicted_total_ns=predict_total_ns(wire, slaves, delay, cable),
+        measured_total_ns=measured_total_ns,
+        calibrated_per_slave_delay_ns=calibrated,
+        budget_ns=budget_ns,
+    )
+
+
+_UNITS_NS = {
+    "ns": Decimal(1),
+    "us": Decimal(1000),
+    "µs": Decimal(1000),
+    "μs": Decimal(1000),  # Greek mu as well as the micro sign
+    "ms": Decimal(1_000_000),
+    "s": Decimal(1_000_000_000),
+}
+
+
+def parse_duration_ns(text: str, default_unit: str = "us") -> int:
+    """ "124.1us", "124.1µs", "0.1241ms", "124100ns", "124.1" (bare: µs) → 124100.
+
+    Raises :class:`UsageError` for anything else (negative, empty, unknown unit).
+    """
+    s = text.strip().replace(" ", "")
+    unit = next((u for u in sorted(_UNITS_NS, key=len, reverse=True) if s.endswith(u)), "")
+    number = s[: len(s) - len(unit)] if unit else s
+    try:
+        value = Decimal(number) * _UNITS_NS[unit or default_unit]
+    except (InvalidOperation, KeyError):
+        raise UsageError(
+            f"not a duration: {text!r} (use e.g. 124.1us, 0.1241ms, 124100ns)"
+        ) from None
+    if not value.is_finite() or value < 0:
+        raise UsageError(f"not a duration: {text!r} (must be a finite time >= 0)")
+    return int(value.to_integral_value())
+
+
+__all__ = [
+    "CABLE_NS_PER_M",
+    "DEFAULT_CABLE_M",
+    "DEFAULT_PER_SLAVE_DELAY_NS",
+    "INTER_FRAME_GAP_BYTES",
+    "LINK_100_MBIT_S",
+    "PREAMBLE_SFD_BYTES",
+    "TIMING_SCHEMA",
+    "DelaySource",
+    "TimingEstimate",
+    "cable_delay_ns",
+    "calibrate_per_slave_delay_ns",
+    "estimate",
+    "frame_bytes",
+    "max_rate_hz",
+    "parse_duration_ns",
+    "predict_total_ns",
+    "wire_time_ns",
+    "wire_time_with_overhead_ns",
+]
