@@ -18,9 +18,13 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from lolacli.errors import WireError
 from lolacli.wire.commands import LOGICAL, mnemonic
+
+if TYPE_CHECKING:
+    from lolacli.wire.udp import UdpInfo
 
 ETHERTYPE_ECAT = 0x88A4
 ETHERTYPE_VLAN = 0x8100
@@ -142,6 +146,7 @@ class Frame:
     ecat_reserved: int = 0
     padding: bytes = b""
     declared_length: int | None = None
+    udp: UdpInfo | None = None
 
     @property
     def ecat_length(self) -> int:
@@ -251,7 +256,10 @@ def decode_ethernet_header(buf: bytes | memoryview) -> tuple[EthernetHeader, int
     return EthernetHeader(dst, src, tci), etype, pos
 
 
-def _declared(buf: bytes | memoryview, pos: int, datagrams: tuple[Datagram, ...]) -> int | None:
+def declared_length_if_odd(
+    buf: bytes | memoryview, pos: int, datagrams: tuple[Datagram, ...]
+) -> int | None:
+    """The EtherCAT header length at ``pos`` when it differs from the datagrams' total."""
     length = _U16.unpack_from(buf, pos)[0] & 0x7FF
     total = sum(d.wire_bytes for d in datagrams)
     return None if length == total else length
@@ -267,8 +275,20 @@ def decode_frame(buf: bytes | memoryview) -> Frame:
     if etype != ETHERTYPE_ECAT:
         raise WireError(f"not an EtherCAT frame (ethertype 0x{etype:04X})", offset=12)
     ecat_type, reserved, datagrams, end = decode_ecat_payload(buf, pos)
-    declared = _declared(buf, pos, datagrams)
+    declared = declared_length_if_odd(buf, pos, datagrams)
     return Frame(header, datagrams, ecat_type, reserved, bytes(buf[end:]), declared)
+
+
+def decode_any(buf: bytes | memoryview) -> Frame:
+    """Decode EtherCAT in any of its Ethernet forms: ethertype 0x88A4 (also behind one
+    802.1Q tag) or IPv4/UDP to port 0x88A4 (``Frame.udp`` set). Raises
+    :class:`WireError` for any other frame or malformed content."""
+    _, etype, _ = decode_ethernet_header(buf)
+    if etype == ETHERTYPE_IPV4:
+        from lolacli.wire.udp import decode_udp_frame
+
+        return decode_udp_frame(buf)
+    return decode_frame(buf)
 
 
 def encode_datagram(d: Datagram) -> bytes:
@@ -295,7 +315,15 @@ def encode_ecat_payload(frame: Frame) -> bytes:
 
 def encode_frame(frame: Frame, *, pad: bool = False) -> bytes:
     """Ethernet frame bytes (no FCS). ``pad`` pads to the 60-byte minimum without FCS;
-    otherwise ``frame.padding`` is appended as it is."""
+    otherwise ``frame.padding`` is appended as it is. A frame with ``udp`` set is encoded
+    as EtherCAT over UDP."""
+    if frame.udp is not None:
+        from lolacli.wire.udp import encode_udp_frame
+
+        out = encode_udp_frame(frame)
+        if pad:
+            return out + bytes(max(0, MIN_FRAME_BYTES - FCS_BYTES - len(out)))
+        return out
     eth = frame.ethernet
     head = eth.dst + eth.src
     if eth.vlan_tci is not None:
