@@ -161,6 +161,56 @@ def check_fmmu_overlaps(eni: Eni) -> Iterator[Finding]:
             )
 
 
+MAILBOX_STATUS_REGISTER = 0x080D  # SM1 status byte, mapped by mailbox-state FMMUs
+
+
+def check_fmmu_mapping(eni: Eni) -> Iterator[Finding]:
+    """Each FMMU must be carried by a cyclic command of its direction and point at an SM."""
+    ranges = [
+        (c.cmd, r)
+        for f in eni.cyclic_frames
+        for c in f.commands
+        if (r := _logical_range(c)) is not None
+    ]
+    for s in eni.slaves:
+        for f in active_fmmus(s):
+            bits = fmmu_bits(f)
+            wanted = _carriers(f.type)
+            if ranges and not any(
+                cmd in wanted and r[0] <= bits[0] and bits[1] <= r[1] for cmd, r in ranges
+            ):
+                yield _warning(
+                    "fmmu-not-in-cyclic",
+                    f"slave {s.position}: {_fmmu_label(f)} is not carried by any "
+                    "cyclic logical command",
+                    s.position,
+                )
+            if s.sync_managers and not _in_sync_manager(s, f):
+                yield _warning(
+                    "fmmu-sm-mismatch",
+                    f"slave {s.position}: {_fmmu_label(f)} maps physical "
+                    f"0x{f.physical_start:04X}, inside no sync manager",
+                    s.position,
+                )
+
+
+def _carriers(fmmu_type: int) -> set[int]:
+    if fmmu_type == FMMU_READ:
+        return {Command.LRD, Command.LRW}
+    if fmmu_type == FMMU_WRITE:
+        return {Command.LWR, Command.LRW}
+    return {Command.LRW}
+
+
+def _in_sync_manager(s: Slave, f: Fmmu) -> bool:
+    if f.physical_start == MAILBOX_STATUS_REGISTER:
+        return True
+    return any(
+        m.start_address <= f.physical_start < m.start_address + max(m.length_bytes, 1)
+        for m in s.sync_managers
+    )
+
+
 def _logical_range(c: CyclicCommand) -> tuple[int, int] | None:
     if c.logical_address is None or c.data_length_bytes <= 0:
         return None
@@ -313,6 +363,7 @@ CHECKS: tuple[Callable[[Eni], Iterator[Finding]], ...] = (
     check_chain,
     check_fmmu_types,
     check_fmmu_overlaps,
+    check_fmmu_mapping,
     check_cyclic_overlaps,
     check_wkc,
     check_pdo_sizes,

@@ -126,3 +126,15 @@ def test_human_output_names_code_and_slave(cli, tmp_path):
     assert code == 1
     assert "duplicate-station-address [slave 2]" in out
     assert "2 error(s)" in out
+
+
+def test_fmmu_outside_any_cyclic_command():
+    moved = planted(EL1809_FMMU_READ, "00000200020000070010000101000000")  # 0x00020000
+    found = codes(moved)
+    assert "fmmu-not-in-cyclic" in found
+    assert "wkc-mismatch" in found  # the LRW no longer reaches the terminal: 3, not 4
+
+
+def test_fmmu_pointing_outside_the_sync_managers():
+    moved = planted(EL1809_FMMU_READ, "08000100020000070014000101000000")  # physical 0x1400
+    assert codes(moved) == ["fmmu-sm-mismatch"]
