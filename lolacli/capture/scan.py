@@ -245,7 +245,9 @@ def _ecat(  # type: ignore[no-untyped-def]
         return False
     word = _u16(buf, p, False)
     if (word >> 12) != 1:
-        st[S_ECAT] += 1
+        # An EtherCAT header of another type (network variables, mailbox gateway…):
+        # no datagrams, counted with the non-EtherCAT-command traffic.
+        st[S_NONECAT] += 1
         st[S_ECAT_OTHER] += 1
         return True
     q = p + 2

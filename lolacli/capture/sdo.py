@@ -7,8 +7,9 @@ mailbox header. Here each is decoded with :mod:`lolacli.wire.mailbox`,
 :mod:`lolacli.wire.coe` and :mod:`lolacli.wire.sdo` and fed to a per-slave state machine
 (slave = ADP of the configured-address datagram):
 
-* upload: initiate upload request → initiate upload response (expedited: done; normal:
-  upload segment request/response pairs until the segment with the "last" bit);
+* upload: initiate upload request → initiate upload response (expedited: ≤ 4 bytes in
+  the response; normal: complete size and data in the response, done when all data is
+  there; else upload segment request/response pairs until the "last" bit: segmented);
 * download: initiate download request (expedited, or normal followed by download
   segments) → initiate/segment download responses until the last segment is acknowledged;
 * an abort (either side, CiA 301 abort code) ends the open transaction.
@@ -50,7 +51,7 @@ class SdoTransaction:
     kind: str  # "upload" | "download"
     start_frame: int
     start_ns: int
-    transfer: str = "expedited"  # or "segmented"
+    transfer: str = "expedited"  # "normal" (size + data in the initiate), "segmented"
     size_bytes: int = 0
     segments: int = 0
     complete_access: bool = False
@@ -168,6 +169,7 @@ class SdoTracker:
             self._upload_response(txn, frame, ts_ns, message)
         elif isinstance(message, SdoUploadSegmentResponse):
             txn.segments += 1
+            txn.transfer = "segmented"
             txn.data += message.data
             if message.last:
                 self._close(txn, frame, ts_ns, "ok")
@@ -179,7 +181,7 @@ class SdoTracker:
             if message.last:
                 txn.status = "last-sent"
         elif isinstance(message, SdoDownloadResponse):
-            if txn.transfer == "expedited":
+            if txn.transfer != "segmented":
                 self._close(txn, frame, ts_ns, "ok")
         elif isinstance(message, SdoDownloadSegmentResponse):
             if txn.status == "last-sent":
@@ -195,7 +197,7 @@ class SdoTracker:
             if message.expedited:
                 txn.size_bytes = len(message.data)
             else:
-                txn.transfer = "segmented"
+                txn.transfer = "normal"
                 txn.size_bytes = message.complete_size
         self.transactions.append(txn)
         self._open[slave] = txn
@@ -208,7 +210,7 @@ class SdoTracker:
             txn.size_bytes = len(message.data)
             self._close(txn, frame, ts_ns, "ok")
             return
-        txn.transfer = "segmented"
+        txn.transfer = "normal"
         txn.size_bytes = message.complete_size
         if len(txn.data) >= message.complete_size:
             self._close(txn, frame, ts_ns, "ok")
