@@ -1,0 +1,254 @@
+"""``capture list``: one entry per EtherCAT frame and datagram, mailbox/CoE/SDO decoded.
+
+Per-frame Python decoding (:func:`lolacli.wire.frame.decode_frame`) over the streaming
+reader: meant for reading a capture, not for throughput (use ``capture analyze``).
+
+Filter syntax (``--filter``): terms separated by spaces or commas, all of which must hold
+for a datagram to be listed (frames with no listed datagram are left out):
+
+* a command mnemonic, or several joined by ``|``: ``LRW``, ``fprd|fpwr``;
+* ``adp=N``, ``ado=N``, ``lad=N`` (logical address), ``idx=N``, ``wkc=N``, ``wkc!=N``
+  (decimal or 0x hex);
+* ``mailbox`` (any mailbox message), ``coe``, ``sdo`` (SDO and SDO Information);
+* ``out`` / ``ret``: frame direction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from lolacli.capture.reader import CaptureReader
+from lolacli.errors import UsageError, WireError
+from lolacli.wire.coe import CoeService, decode_coe_header
+from lolacli.wire.commands import LOGICAL, Command, mnemonic
+from lolacli.wire.frame import (
+    ETHERTYPE_ECAT,
+    Datagram,
+    decode_ecat_payload,
+    decode_ethernet_header,
+)
+from lolacli.wire.mailbox import MailboxType, decode_mailbox
+from lolacli.wire.sdo import (
+    SdoAbort,
+    SdoDownloadRequest,
+    SdoDownloadResponse,
+    SdoDownloadSegmentRequest,
+    SdoDownloadSegmentResponse,
+    SdoInitiate,
+    SdoSegment,
+    SdoUploadRequest,
+    SdoUploadResponse,
+    SdoUploadSegmentRequest,
+    SdoUploadSegmentResponse,
+    abort_text,
+    decode_sdo,
+)
+
+_MAILBOX_CMDS = (Command.APRD, Command.APWR, Command.FPRD, Command.FPWR)
+
+_SDO_NAMES: dict[type, str] = {
+    SdoUploadRequest: "upload req",
+    SdoUploadResponse: "upload resp",
+    SdoDownloadRequest: "download req",
+    SdoDownloadResponse: "download resp",
+    SdoUploadSegmentRequest: "upload segment req",
+    SdoUploadSegmentResponse: "upload segment resp",
+    SdoDownloadSegmentRequest: "download segment req",
+    SdoDownloadSegmentResponse: "download segment resp",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ListedDatagram:
+    cmd: str
+    index: int
+    adp: int | None
+    ado: int | None
+    logical_address: int | None
+    length_bytes: int
+    wkc: int
+    info: str  # mailbox/CoE/SDO summary, "" when none
+    kind: str  # "", "mailbox", "coe", "sdo"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cmd": self.cmd, "idx": self.index, "adp": self.adp, "ado": self.ado,
+            "logical_address": self.logical_address, "length_bytes": self.length_bytes,
+            "wkc": self.wkc, "info": self.info or None,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class ListedFrame:
+    number: int
+    time_s: float  # since the first frame of the file
+    direction: str  # "out" | "ret"
+    datagrams: tuple[ListedDatagram, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "number": self.number, "time_s": self.time_s, "direction": self.direction,
+            "datagrams": [d.to_dict() for d in self.datagrams],
+        }
+
+
+def describe_mailbox(data: bytes) -> tuple[str, str]:
+    """``(summary, kind)`` of a mailbox message, or ``("", "")`` when it is none."""
+    try:
+        mailbox = decode_mailbox(data)
+    except WireError:
+        return "", ""
+    mtype = mailbox.header.mailbox_type
+    name = mtype.name if isinstance(mtype, MailboxType) else f"type {int(mtype)}"
+    if mtype != MailboxType.CoE:
+        return f"Mbx {name} {mailbox.header.length} B", "mailbox"
+    try:
+        service = decode_coe_header(mailbox.payload).service
+    except WireError:
+        return "CoE (truncated)", "coe"
+    if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE, CoeService.SDO_INFO):
+        sname = service.name if isinstance(service, CoeService) else str(int(service))
+        return f"CoE {sname}", "coe"
+    try:
+        message = decode_sdo(mailbox.payload)
+    except WireError as e:
+        return f"CoE SDO ({e.message})", "sdo"
+    return "CoE " + _describe_sdo(message), "sdo"
+
+
+def _describe_sdo(message: object) -> str:
+    if isinstance(message, SdoAbort):
+        return (f"SDO abort 0x{message.index:04X}:{message.subindex:02X} "
+                f"code 0x{message.code:08X} ({abort_text(message.code)})")
+    name = _SDO_NAMES.get(type(message))
+    if name is None:
+        return f"SDO Info {type(message).__name__}"
+    text = f"SDO {name}"
+    if hasattr(message, "index"):
+        text += f" 0x{message.index:04X}:{message.subindex:02X}"
+    if isinstance(message, SdoInitiate):
+        if message.expedited:
+            text += f" expedited {len(message.data)} B 0x{message.data.hex() or '0'}"
+        elif isinstance(message, SdoUploadResponse | SdoDownloadRequest):
+            text += f" size {message.complete_size} B"
+    if isinstance(message, SdoSegment):
+        text += f" {len(message.data)} B" + (" last" if message.last else "")
+    return text
+
+
+def _listed(d: Datagram, returned: bool) -> ListedDatagram:
+    logical = d.cmd in LOGICAL
+    info, kind = "", ""
+    mailbox_like = d.cmd in _MAILBOX_CMDS and d.ado >= 0x1000 and len(d.data) >= 8
+    readable = not (d.cmd in (Command.APRD, Command.FPRD) and (not returned or d.wkc == 0))
+    if mailbox_like and readable:
+        info, kind = describe_mailbox(d.data)
+    return ListedDatagram(
+        cmd=d.mnemonic, index=d.index, adp=None if logical else d.adp,
+        ado=None if logical else d.ado, logical_address=d.address if logical else None,
+        length_bytes=len(d.data), wkc=d.wkc, info=info, kind=kind,
+    )
+
+
+class DatagramFilter:
+    """A parsed ``--filter`` expression (see the module docstring)."""
+
+    def __init__(self, expr: str | None) -> None:
+        self.cmds: set[str] | None = None
+        self.fields: list[tuple[str, str, int]] = []
+        self.kinds: set[str] = set()
+        self.direction: str | None = None
+        for term in (expr or "").replace(",", " ").split():
+            self._term(term)
+
+    def _term(self, term: str) -> None:
+        low = term.lower()
+        if low in ("out", "ret"):
+            self.direction = low
+        elif low in ("mailbox", "coe", "sdo"):
+            self.kinds.add(low)
+        elif "!=" in low or "=" in low:
+            op = "!=" if "!=" in low else "="
+            name, _, value = low.partition(op)
+            if name not in ("adp", "ado", "lad", "idx", "wkc"):
+                raise UsageError(f"unknown filter field {name!r} (adp, ado, lad, idx, wkc)")
+            try:
+                self.fields.append((name, op, int(value, 0)))
+            except ValueError as e:
+                raise UsageError(f"bad number in filter term {term!r}") from e
+        else:
+            names = {n.upper() for n in low.split("|")}
+            known = {c.name for c in Command}
+            if not names <= known:
+                raise UsageError(f"unknown filter term {term!r}: not a command mnemonic, "
+                                 "field test or mailbox/coe/sdo/out/ret")
+            self.cmds = (self.cmds or set()) | names
+
+    def frame_ok(self, direction: str) -> bool:
+        return self.direction is None or self.direction == direction
+
+    def datagram_ok(self, d: ListedDatagram) -> bool:
+        if self.cmds is not None and d.cmd not in self.cmds:
+            return False
+        if "mailbox" in self.kinds and not d.kind:
+            return False
+        if "coe" in self.kinds and d.kind not in ("coe", "sdo"):
+            return False
+        if "sdo" in self.kinds and d.kind != "sdo":
+            return False
+        values = {"adp": d.adp, "ado": d.ado, "lad": d.logical_address, "idx": d.index,
+                  "wkc": d.wkc}
+        for name, op, value in self.fields:
+            if (values[name] == value) != (op == "="):
+                return False
+        return True
+
+
+def list_frames(
+    path: str | Path, *, count: int | None = None, expr: str | None = None
+) -> Iterator[ListedFrame]:
+    """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``."""
+    flt = DatagramFilter(expr)
+    shown = 0
+    first_ns: int | None = None
+    for frame in CaptureReader(path):
+        if first_ns is None:
+            first_ns = frame.timestamp_ns
+        if count is not None and shown >= count:
+            return
+        try:
+            eth, etype, pos = decode_ethernet_header(frame.data)
+            if etype != ETHERTYPE_ECAT:
+                continue
+            _, _, datagrams, _ = decode_ecat_payload(frame.data, pos)
+        except WireError:
+            continue
+        direction = "ret" if eth.returned else "out"
+        if not datagrams or not flt.frame_ok(direction):
+            continue
+        listed = tuple(
+            x for x in (_listed(d, eth.returned) for d in datagrams) if flt.datagram_ok(x)
+        )
+        if listed:
+            shown += 1
+            yield ListedFrame(
+                frame.number, (frame.timestamp_ns - first_ns) / 1e9, direction, listed
+            )
+
+
+def format_line(frame: ListedFrame, d: ListedDatagram, first: bool) -> str:
+    """One text line, like tshark's summary: number, time, direction, datagram."""
+    head = f"{frame.number:>7} {frame.time_s:>12.6f} {frame.direction:<3}" if first else " " * 24
+    if d.logical_address is not None:
+        where = f"lad=0x{d.logical_address:08X}"
+    else:
+        where = f"adp=0x{d.adp or 0:04X} ado=0x{d.ado or 0:04X}"
+    text = f"{head} {d.cmd:<4} idx=0x{d.index:02X} {where} len={d.length_bytes:<4} wkc={d.wkc}"
+    return text + (f"  {d.info}" if d.info else "")
+
+
+__all__ = ["DatagramFilter", "ListedFrame", "describe_mailbox", "format_line", "list_frames",
+           "mnemonic"]

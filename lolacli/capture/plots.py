@@ -1,0 +1,59 @@
+"""PNG figures of a capture analysis (matplotlib, Agg backend, imported on call)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lolacli.capture.analyze import CaptureReport
+
+
+def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
+    """Cycle-period histogram, round trip over time and round-trip CDF; returns the paths
+    written (a plot with nothing to show is skipped)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = Path(report.path).stem
+    written: list[Path] = []
+    periods = report.cycle_period_ns / 1000.0
+    rt = report.round_trip_ns / 1000.0
+    if periods.size:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        ax.hist(periods, bins=min(200, max(10, periods.size // 20)))
+        ax.set_xlabel("cycle period (µs)")
+        ax.set_ylabel("cycles")
+        ax.set_title(f"{stem}: cycle period ({report.to_dict()['cyclic_stream']} stream)")
+        written.append(_save(fig, out / f"{stem}-cycle-period.png"))
+    if rt.size:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        at = report.round_trip_at_ns
+        x = (at - at[0]) / 1e9 if at is not None and at.size == rt.size else np.arange(rt.size)
+        ax.plot(x, rt, ".", markersize=2)
+        ax.set_xlabel("time (s)" if at is not None else "pair")
+        ax.set_ylabel("round trip (µs)")
+        ax.set_title(f"{stem}: round trip over time")
+        written.append(_save(fig, out / f"{stem}-round-trip.png"))
+        fig, ax = plt.subplots(figsize=(7, 4))
+        s = np.sort(rt)
+        ax.plot(s, np.arange(1, s.size + 1) / s.size)
+        ax.set_xlabel("round trip (µs)")
+        ax.set_ylabel("fraction of pairs")
+        ax.set_title(f"{stem}: round-trip CDF")
+        ax.grid(True, alpha=0.3)
+        written.append(_save(fig, out / f"{stem}-round-trip-cdf.png"))
+    return written
+
+
+def _save(fig: object, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()  # type: ignore[attr-defined]
+    fig.savefig(path, dpi=100)  # type: ignore[attr-defined]
+    plt.close(fig)  # type: ignore[arg-type]
+    return path
