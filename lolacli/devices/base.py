@@ -9,7 +9,9 @@ runs :meth:`Device.step`, and packs the inputs through the TxPDO mapping.
 
 from __future__ import annotations
 
-from lolacli.devices.od import DataType, ObjectCode, ObjectDictionary, data_type_for
+from typing import Any
+
+from lolacli.devices.od import DataType, Entry, ObjectCode, ObjectDictionary, data_type_for
 from lolacli.eni.model import Direction, Pdo, Slave
 
 MAPPING_RX = 0x1600
@@ -17,6 +19,8 @@ MAPPING_TX = 0x1A00
 ASSIGN_RX = 0x1C12
 ASSIGN_TX = 0x1C13
 SM_TYPES = 0x1C00
+MAX_ENTRIES = 8  # sub-indices of a PDO mapping object (the count in sub 0 says how many are used)
+MAX_PDOS = 4  # sub-indices of a PDO assignment object
 
 
 class Device:
@@ -29,6 +33,7 @@ class Device:
         self.od = ObjectDictionary()
         self.state = 1
         self.t_ns = 0
+        self._layouts: dict[Direction, tuple[tuple[Direction, int], list[Any]]] = {}
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
@@ -68,49 +73,63 @@ class Device:
                 if e.index:
                     self.od.ensure_entry(e.index, e.subindex, e.name,
                                          data_type_for(e.data_type, e.bit_size))
+            used = len(subs)
+            subs += [("Mapped object", DataType.UNSIGNED32, 0, "rw")] * (MAX_ENTRIES - used)
             self.od.add_record(pdo.index, pdo.name or f"PDO 0x{pdo.index:04X}", subs,
                                writable_count=True)
+            self.od.set(pdo.index, 0, used)
         for index, assigned in ((ASSIGN_RX, rx), (ASSIGN_TX, tx)):
             subs = [("PDO", DataType.UNSIGNED16, p.index, "rw") for p in assigned]
+            used = len(subs)
+            subs += [("PDO", DataType.UNSIGNED16, 0, "rw")] * max(0, MAX_PDOS - used)
             self.od.add_record(index, "PDO assignment", subs, code=ObjectCode.ARRAY,
                                writable_count=True)
+            self.od.set(index, 0, used)
 
     # ------------------------------------------------------------- mapping
     def mapping(self, direction: Direction) -> list[tuple[int, int, int]]:
         """(index, subindex, bits) in process-image order, from 0x1C12/0x1C13."""
+        return [(index, sub, bits) for index, sub, bits, _ in self._layout(direction)]
+
+    def _layout(self, direction: Direction) -> list[tuple[int, int, int, Entry | None]]:
+        key = (direction, self.od.version)
+        cached = self._layouts.get(direction)
+        if cached is not None and cached[0] == key:
+            return cached[1]
         assign = ASSIGN_RX if direction == Direction.OUTPUT else ASSIGN_TX
-        out: list[tuple[int, int, int]] = []
+        out: list[tuple[int, int, int, Entry | None]] = []
         for n in range(1, self.od.get_int(assign, 0) + 1):
             pdo = self.od.get_int(assign, n)
             if pdo not in self.od.objects:
                 continue
             for k in range(1, self.od.get_int(pdo, 0) + 1):
                 word = self.od.get_int(pdo, k)
-                out.append((word >> 16, (word >> 8) & 0xFF, word & 0xFF))
+                index, sub, bits = word >> 16, (word >> 8) & 0xFF, word & 0xFF
+                entry = self.od.entry(index, sub) if index and (index, sub) in self.od else None
+                out.append((index, sub, bits, entry))
+        self._layouts[direction] = (key, out)
         return out
 
     def process_data_bytes(self) -> tuple[int, int]:
-        outputs = sum(b for *_, b in self.mapping(Direction.OUTPUT))
-        inputs = sum(b for *_, b in self.mapping(Direction.INPUT))
+        outputs = sum(m[2] for m in self._layout(Direction.OUTPUT))
+        inputs = sum(m[2] for m in self._layout(Direction.INPUT))
         return (outputs + 7) // 8, (inputs + 7) // 8
 
     def unpack_outputs(self, outputs: bytes) -> None:
         image = int.from_bytes(outputs, "little")
         bit = 0
-        for index, sub, bits in self.mapping(Direction.OUTPUT):
-            if index and (index, sub) in self.od:
+        for _index, _sub, bits, entry in self._layout(Direction.OUTPUT):
+            if entry is not None:
                 value = (image >> bit) & ((1 << bits) - 1)
-                entry = self.od.entry(index, sub)
-                entry.value = value.to_bytes(max(1, (bits + 7) // 8), "little")
+                entry.value = value.to_bytes((bits + 7) // 8 or 1, "little")
             bit += bits
 
     def pack_inputs(self) -> bytes:
         image = 0
         bit = 0
-        for index, sub, bits in self.mapping(Direction.INPUT):
-            if index and (index, sub) in self.od:
-                raw = self.od.entry(index, sub).value
-                image |= (int.from_bytes(raw, "little") & ((1 << bits) - 1)) << bit
+        for _index, _sub, bits, entry in self._layout(Direction.INPUT):
+            if entry is not None:
+                image |= (int.from_bytes(entry.value, "little") & ((1 << bits) - 1)) << bit
             bit += bits
         return image.to_bytes((bit + 7) // 8, "little")
 

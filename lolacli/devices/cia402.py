@@ -24,6 +24,7 @@ TORQUE_ACTUAL = 0x6077
 MAX_VELOCITY = 0x607F
 ERROR_CODE = 0x603F
 TARGET_VELOCITY = 0x60FF
+INTERPOLATION_PERIOD = 0x60C2
 
 MODE_CSP = 8
 MODE_CSV = 9
@@ -138,6 +139,10 @@ class Cia402Drive(Device):
             else:
                 od.add_var(index, name, dtype, 0, access=access, pdo=True)
         od.add_var(MAX_VELOCITY, "Max profile velocity", DataType.UNSIGNED32, 0)
+        od.add_record(INTERPOLATION_PERIOD, "Interpolation time period", [
+            ("Interpolation time period value", DataType.UNSIGNED8, 1, "rw"),
+            ("Interpolation time index", DataType.INTEGER8, -3, "rw"),
+        ])
         od.add_var(0x6502, "Supported drive modes", DataType.UNSIGNED32, 0x0380, access="ro")
         od.set(MODES, 0, MODE_CSP)
         self.power = Cia402State.NOT_READY_TO_SWITCH_ON

@@ -49,10 +49,18 @@ def _sine_value(data_type: int, bits: int, phase: float, t_ns: int, scale: float
 
 
 class AnalogInput(Device):
+    """Inputs are sines; they are sampled every ``sample_period_ns`` (1 kHz, like the
+    sensors behind a real terminal or gateway), not on every bus cycle."""
+
     device_type = 0x00000000
     scale = 10.0
+    sample_period_ns = 1_000_000
 
     def step(self, t_ns: int) -> None:
+        sample = t_ns // self.sample_period_ns
+        if sample == getattr(self, "_last_sample", None):
+            return
+        self._last_sample = sample
         for i, (index, sub, bits) in enumerate(_inputs(self)):
             entry = self.od.entry(index, sub)
             entry.value = _sine_value(entry.data_type, bits, 0.7 * i, t_ns, self.scale)

@@ -181,6 +181,7 @@ class ObjectDictionary:
 
     def __init__(self) -> None:
         self.objects: dict[int, OdObject] = {}
+        self.version = 0  # bumped by every checked write: caches of mappings key on it
 
     def __iter__(self) -> Iterator[OdObject]:
         return iter(sorted(self.objects.values(), key=lambda o: o.index))
@@ -202,6 +203,7 @@ class ObjectDictionary:
     ) -> Entry:
         obj = OdObject(index, name, ObjectCode.VAR)
         self.objects[index] = obj
+        self.version += 1
         entry = Entry(index, 0, name, data_type, access, encode_value(data_type, value), pdo)
         obj.entries[0] = entry
         return entry
@@ -224,6 +226,7 @@ class ObjectDictionary:
         for i, (sub_name, dtype, value, access) in enumerate(subs, start=1):
             obj.entries[i] = Entry(index, i, sub_name, dtype, access, encode_value(dtype, value))
         self.objects[index] = obj
+        self.version += 1
         return obj
 
     def ensure_entry(self, index: int, subindex: int, name: str, data_type: int) -> Entry:
@@ -237,6 +240,7 @@ class ObjectDictionary:
             size = max(1, (type_bits(data_type) + 7) // 8)
             entry = Entry(index, subindex, name, data_type, "rw", bytes(size), True)
             obj.entries[subindex] = entry
+            self.version += 1
             if subindex and 0 not in obj.entries:
                 obj.entries[0] = Entry(index, 0, "Number of entries", DataType.UNSIGNED8, "ro",
                                        b"\x00")
@@ -273,6 +277,7 @@ class ObjectDictionary:
             if len(data) < size:
                 raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_LOW)
         entry.value = bytes(data)
+        self.version += 1
 
     def get(self, index: int, subindex: int = 0) -> int | float | str | bytes:
         entry = self.entry(index, subindex)

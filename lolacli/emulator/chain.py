@@ -123,6 +123,7 @@ class Chain:
         self.timing = timing or ChainTiming()
         self.faults = faults or Faults()
         self.stats = ChainStats()
+        self._deferred_t_ns: int | None = None
         for i, esc in enumerate(slaves):
             esc.set_topology(last=i == len(slaves) - 1)
 
@@ -130,8 +131,15 @@ class Chain:
         """Fault: the slave at 1-based ``position`` refuses SAFEOP -> OP with ``code``."""
         self.slaves[position - 1].refuse_op_code = code
 
-    def process(self, frame: bytes, t_ns: int) -> tuple[bytes | None, int]:
-        """The frame as it returns to the master, and its delay; ``None`` when lost."""
+    def process(
+        self, frame: bytes, t_ns: int, *, defer_cycles: bool = False
+    ) -> tuple[bytes | None, int]:
+        """The frame as it returns to the master, and its delay; ``None`` when lost.
+
+        A frame with logical datagrams also runs one application cycle in every slave
+        (outputs to the devices, new inputs for the next frame). ``defer_cycles`` leaves
+        that to :meth:`run_deferred_cycles`, so a real-time transport can answer first.
+        """
         self.stats.frames += 1
         slots = self._parse(frame)
         if slots is None:
@@ -147,15 +155,26 @@ class Chain:
             esc.port_times = when
             for slot in slots:
                 self._pass(esc, slot, buf, view, when.port0_ns)
-            if logical:
-                esc.cycle(when.port0_ns)
         view.release()
+        if logical:
+            self._deferred_t_ns = t_ns
+            if not defer_cycles:
+                self.run_deferred_cycles()
         if logical:
             self.stats.logical_frames += 1
         if self.slaves:
             buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         return bytes(buf), self.timing.round_trip_ns(len(frame), len(self.slaves))
+
+    def run_deferred_cycles(self) -> None:
+        """Run the application cycle the last logical frame asked for, if not done yet."""
+        t_ns = self._deferred_t_ns
+        if t_ns is None:
+            return
+        self._deferred_t_ns = None
+        for esc in self.slaves:
+            esc.cycle(t_ns)
 
     @staticmethod
     def _pass(esc: Esc, slot: _Slot, buf: bytearray, view: memoryview, t_ns: int) -> None:

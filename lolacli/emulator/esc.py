@@ -26,6 +26,7 @@ _I64 = struct.Struct("<q")
 _FMMU = struct.Struct("<IHBBHBBB3x")
 _SM = struct.Struct("<HHBBBB")
 
+MAX_CORRECTION_NS = 1000
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
 # requested state -> states it may be reached from (ETG.1000.6 Figure 10)
 _ALLOWED_FROM: dict[int, frozenset[int]] = {
@@ -142,6 +143,7 @@ class Esc:
         self.last_port = True
         self.port_times: PortTimes | None = None
         self._readonly = _readonly_mask()
+        self._cache: _Config | None = None
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -163,6 +165,7 @@ class Esc:
         status = r.EEPROM_STATUS_READ_8_BYTES if cfg.eeprom_8_byte_reads else 0
         _U16.pack_into(m, r.EEPROM_CONTROL, status)
         self._mailbox_queue.clear()
+        self._cache = None
         self.outputs_valid = False
         self.pending_op = False
         self._set_al(AlState.INIT, AlStatusCode.NO_ERROR, error=False)
@@ -292,6 +295,8 @@ class Esc:
                 mem[a] = b
 
     def _after_write(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
+        if _overlaps(start, end, r.FMMU_BASE, r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES):
+            self._cache = None
         if start < r.PROCESS_RAM:
             self._register_side_effects(start, end, payload, t_ns)
         if end > r.PROCESS_RAM:
@@ -388,6 +393,7 @@ class Esc:
             on = state != AlState.INIT if mailbox else state in (AlState.SAFEOP, AlState.OP)
             base = self._sm_address(sm)
             self.mem[base + 7] = 0 if on else r.SM_PDI_DEACTIVATE
+        self._cache = None
 
     def _check_mailbox_sms(self) -> int | None:
         layout = self.layout
@@ -438,13 +444,16 @@ class Esc:
         )
         return SmView(index, start, length, control, status, activate, pdi)
 
+    def _config(self) -> _Config:
+        """SM and FMMU configuration, decoded once per register change."""
+        if self._cache is None:
+            sms = [self.sync_manager(i) for i in range(self.config.sync_managers)]
+            fmmus = [self.fmmu(i) for i in range(self.config.fmmus)]
+            self._cache = _Config.build(sms, fmmus)
+        return self._cache
+
     def _active_sms(self) -> list[SmView]:
-        out = []
-        for i in range(self.config.sync_managers):
-            sm = self.sync_manager(i)
-            if sm.enabled and sm.length and not sm.pdi_deactivated:
-                out.append(sm)
-        return out
+        return self._config().active
 
     def _mailbox_sms(self, start: int, end: int, *, write: bool) -> list[int]:
         if end <= r.PROCESS_RAM:
@@ -530,36 +539,26 @@ class Esc:
         return FmmuEntry(ls, length, lsb, lstop, ps, psb, typ, bool(act & 1))
 
     def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
-        n = len(data)
-        fmmus = [f for f in (self.fmmu(i) for i in range(self.config.fmmus)) if f.enabled]
-        hits = [f for f in fmmus if f.length_bytes and _overlaps(
-            address, address + n, f.logical_start, f.logical_start + f.length_bytes)]
+        end = address + len(data)
+        hits = [f for f in self._config().open_fmmus if f.logical_start < end
+                and address < f.logical_start + f.length_bytes]
         if not hits:
             return 0
         wkc = 0
-        incoming = bytes(data)
-        if cmd in (Command.LWR, Command.LRW):
-            wrote = [f for f in hits if f.type & r.FMMU_TYPE_WRITE and self._sm_open(f)]
+        if cmd != Command.LRD:
+            incoming = bytes(data)
+            wrote = [f for f in hits if f.type & r.FMMU_TYPE_WRITE]
             for f in wrote:
                 self._fmmu_write(f, address, incoming)
             if wrote:
                 wkc += 2 if cmd == Command.LRW else 1
-        if cmd in (Command.LRD, Command.LRW):
-            read = [f for f in hits if f.type & r.FMMU_TYPE_READ and self._sm_open(f)]
+        if cmd != Command.LWR:
+            read = [f for f in hits if f.type & r.FMMU_TYPE_READ]
             for f in read:
                 self._fmmu_read(f, address, data)
             if read:
                 wkc += 1
         return wkc
-
-    def _sm_open(self, f: FmmuEntry) -> bool:
-        """FMMU access to a sync manager's buffer needs that SM enabled and PDI-active."""
-        end = f.physical_start + f.length_bytes
-        for i in range(self.config.sync_managers):
-            sm = self.sync_manager(i)
-            if sm.length and _overlaps(f.physical_start, end, sm.start, sm.start + sm.length):
-                return sm.enabled and not sm.pdi_deactivated
-        return True
 
     def _fmmu_write(self, f: FmmuEntry, address: int, incoming: bytes) -> None:
         if _byte_aligned(f):
@@ -659,7 +658,10 @@ class Esc:
         magnitude = min(abs(diff), 0x7FFFFFFF)
         sign = 0x80000000 if diff < 0 else 0
         _U32.pack_into(self.mem, r.DC_SYSTEM_TIME_DIFFERENCE, magnitude | sign)
-        self.clock.correction_ns -= diff // 2  # a first-order loop: halves the error per write
+        # The ESC corrects drift by speeding up or slowing down its clock, never by jumps:
+        # half the error per write, at most MAX_CORRECTION_NS (offsets are the master's job).
+        step = max(-MAX_CORRECTION_NS, min(MAX_CORRECTION_NS, diff // 2))
+        self.clock.correction_ns -= step
 
     @property
     def system_time_difference_ns(self) -> int:
@@ -704,6 +706,29 @@ class SmView:
     @property
     def direction(self) -> int:
         return self.control & r.SM_CONTROL_DIRECTION_MASK
+
+
+@dataclass(frozen=True, slots=True)
+class _Config:
+    """Decoded SM/FMMU registers: active SMs and the FMMUs whose buffers are open."""
+
+    active: list[SmView]
+    open_fmmus: list[FmmuEntry]
+
+    @staticmethod
+    def build(sms: list[SmView], fmmus: list[FmmuEntry]) -> _Config:
+        active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
+        open_fmmus = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
+        return _Config(active, open_fmmus)
+
+
+def _sm_open(f: FmmuEntry, sms: list[SmView]) -> bool:
+    """FMMU access to a sync manager's buffer needs that SM enabled and PDI-active."""
+    end = f.physical_start + f.length_bytes
+    for sm in sms:
+        if sm.length and _overlaps(f.physical_start, end, sm.start, sm.start + sm.length):
+            return sm.enabled and not sm.pdi_deactivated
+    return True
 
 
 def _overlaps(a0: int, a1: int, b0: int, b1: int) -> bool:

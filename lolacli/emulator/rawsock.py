@@ -104,7 +104,7 @@ class RawSocketServer:
             return
         t_ns = time.monotonic_ns()
         self.stats.received += 1
-        reply, _delay_ns = self.chain.process(frame, t_ns)
+        reply, _delay_ns = self.chain.process(frame, t_ns, defer_cycles=True)
         if reply is None:
             self.stats.lost += 1
             return
@@ -114,3 +114,4 @@ class RawSocketServer:
             raise TransportError(f"{self.iface}: send failed: {exc.strerror or exc}") from None
         self.stats.answered += 1
         self.stats.max_service_ns = max(self.stats.max_service_ns, time.monotonic_ns() - t_ns)
+        self.chain.run_deferred_cycles()  # device updates after the answer is on its way
