@@ -113,7 +113,7 @@ class CoeInitCmd:
     complete_access: bool = False
     fixed: bool = False
     comment: str = ""
-    ccs: int = 2  # 2 download (write), 1 upload (read)
+    ccs: int = 1  # SDO initiate request (CiA 301): 1 download (write), 2 upload (read)
     timeout_ms: int | None = None
 
 

@@ -402,7 +402,7 @@ class _Reader:
             complete_access=self.attr_flag(el, "CompleteAccess"),
             fixed=self.attr_flag(el, "Fixed"),
             comment=self.text(el, "Comment").strip(),
-            ccs=self.number(el, "Ccs", 2) or 2,
+            ccs=self.number(el, "Ccs", 1) or 1,
             timeout_ms=self.number(el, "Timeout"),
         )
 
