@@ -50,7 +50,7 @@ def _ints(field: str) -> list[int]:
     return [int(v, 0) for v in field.split(",")] if field else []
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def tshark_frames(path: Path) -> tuple[OracleFrame, ...]:
     """Every frame tshark decodes as EtherCAT commands (``ecat``), in file order."""
     cmd = ["tshark", "-r", str(path), "-Y", "ecat", "-T", "fields", "-E", "separator=\t"]

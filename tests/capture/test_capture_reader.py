@@ -1,0 +1,282 @@
+"""Reader unit tests on synthetic files: byte orders, resolutions, sections, damage."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from lolacli.capture import writer as w
+from lolacli.capture.analyze import analyze_file
+from lolacli.capture.reader import CaptureReader, ts_params, ts_to_ns
+from lolacli.errors import CaptureError
+from lolacli.wire.commands import Command
+from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+OUT_MAC = b"\x10\x10\x10\x10\x10\x10"
+RET_MAC = b"\x12\x10\x10\x10\x10\x10"
+
+
+def ecat(cmd: int, idx: int, wkc: int = 0, ret: bool = False, adp: int = 0, ado: int = 0x130,
+         n: int = 2) -> bytes:
+    d = Datagram.physical(cmd, adp, ado, n, index=idx, wkc=wkc)
+    return encode_frame(make_frame([d], src=RET_MAC if ret else OUT_MAC), pad=True)
+
+
+def lrw(idx: int, wkc: int = 0, ret: bool = False) -> bytes:
+    d = Datagram.logical(Command.LRW, 0x10000, 8, index=idx, wkc=wkc)
+    return encode_frame(make_frame([d], src=RET_MAC if ret else OUT_MAC), pad=True)
+
+
+def cyclic(n: int, period_ns: int = 500_000, rt_ns: int = 40_000, t0: int = 1_700_000_000_000_000_000):
+    """(ts_ns, frame) pairs of n LRW out/return pairs."""
+    out = []
+    for i in range(n):
+        t = t0 + i * period_ns
+        out.append((t, lrw(i & 0xFF)))
+        out.append((t + rt_ns, lrw(i & 0xFF, wkc=3, ret=True)))
+    return out
+
+
+def write_pcap(path, frames, *, big=False, ns=False):
+    body = w.pcap_header(big=big, ns=ns)
+    body += b"".join(w.pcap_record(t, f, big=big, ns=ns) for t, f in frames)
+    path.write_bytes(body)
+    return path
+
+
+def write_pcapng(path, frames, *, big=False, tsresol=9, units=None):
+    body = w.shb(big=big) + w.idb(tsresol=tsresol, big=big)
+    conv = units or (lambda t: t)
+    body += b"".join(w.epb(conv(t), f, big=big) for t, f in frames)
+    path.write_bytes(body)
+    return path
+
+
+@pytest.mark.parametrize("big", [False, True])
+@pytest.mark.parametrize("ns", [False, True])
+def test_pcap_byte_orders_and_resolutions(tmp_path, big, ns):
+    frames = cyclic(50, rt_ns=41_000)
+    path = write_pcap(tmp_path / "c.pcap", frames, big=big, ns=ns)
+    read = list(CaptureReader(path))
+    assert [f.timestamp_ns for f in read] == [t for t, _ in frames]
+    assert [f.data for f in read] == [f for _, f in frames]
+    rep = analyze_file(path).to_dict()
+    assert rep["pairs"] == 50 and rep["lost_frames"] == 0
+    assert rep["round_trip_us"]["mean"] == pytest.approx(41.0)
+    assert rep["cycle_period_us"]["median"] == pytest.approx(500.0)
+
+
+@pytest.mark.parametrize("big", [False, True])
+def test_pcapng_byte_orders(tmp_path, big):
+    frames = cyclic(20)
+    path = write_pcapng(tmp_path / "c.pcapng", frames, big=big)
+    assert [f.timestamp_ns for f in CaptureReader(path)] == [t for t, _ in frames]
+    assert analyze_file(path, engine="python").to_dict()["pairs"] == 20
+    assert analyze_file(path).to_dict()["pairs"] == 20
+
+
+@pytest.mark.parametrize(
+    "tsresol, to_units",
+    [
+        (None, lambda t: t // 1000),          # default 10^-6
+        (3, lambda t: t // 1_000_000),        # milliseconds
+        (9, lambda t: t),
+        (12, lambda t: t * 1000),             # picoseconds
+        (0x80 | 20, lambda t: (t << 20) // 1_000_000_000),   # 2^-20 s
+        (0x80 | 40, lambda t: (t << 40) // 1_000_000_000),   # 2^-40 s
+    ],
+)
+def test_if_tsresol(tmp_path, tsresol, to_units):
+    t0 = 1_000_123_456_000  # small enough for picoseconds in 64 bits
+    frames = [(t0, lrw(1)), (t0 + 2_000_000, lrw(1, wkc=3, ret=True))]
+    body = w.shb() + w.idb(tsresol=tsresol) + b"".join(w.epb(to_units(t), f) for t, f in frames)
+    path = tmp_path / "r.pcapng"
+    path.write_bytes(body)
+    got = [f.timestamp_ns for f in CaptureReader(path)]
+    mode, a, b, off = ts_params(6 if tsresol is None else tsresol)
+    assert got == [ts_to_ns(to_units(t), mode, a, b, off) for t, _ in frames]
+    for t_got, (t, _) in zip(got, frames, strict=True):
+        step = 1_000_000 if tsresol == 3 else 1000
+        assert abs(t_got - t) < step
+    rep_fast, rep_slow = analyze_file(path).to_dict(), analyze_file(path, engine="python").to_dict()
+    assert rep_fast["round_trip_us"]["mean"] == rep_slow["round_trip_us"]["mean"]
+    assert rep_fast["round_trip_us"]["mean"] == pytest.approx(2000.0, abs=1.0)
+
+
+def test_if_tsoffset(tmp_path):
+    body = w.shb() + w.idb(tsresol=9, tsoffset_s=100) + w.epb(5, lrw(1))
+    path = tmp_path / "o.pcapng"
+    path.write_bytes(body)
+    assert [f.timestamp_ns for f in CaptureReader(path)] == [100_000_000_005]
+
+
+def test_several_sections_and_interfaces(tmp_path):
+    """Section 1 little endian µs with two interfaces; section 2 big endian ns. Interface
+    ids restart per section."""
+    t = 1_000_000_000_000
+    s1 = (w.shb() + w.idb(tsresol=None) + w.idb(tsresol=9)
+          + w.epb(t // 1000, lrw(1)) + w.epb(t + 30_000, lrw(1, 3, True), interface=1))
+    s2 = (w.shb(big=True) + w.idb(tsresol=9, big=True)
+          + w.epb(t + 500_000, lrw(2), big=True) + w.epb(t + 540_000, lrw(2, 3, True), big=True)
+          + w.spb(ecat(Command.BRD, 7), big=True)
+          + w.opb(t + 600_000, ecat(Command.BRD, 7, 2, True), big=True))
+    path = tmp_path / "multi.pcapng"
+    path.write_bytes(s1 + s2)
+    reader = CaptureReader(path)
+    frames = list(reader)
+    assert [f.timestamp_ns for f in frames] == [
+        t, t + 30_000, t + 500_000, t + 540_000, t + 540_000, t + 600_000]
+    assert [f.interface for f in frames] == [0, 1, 0, 0, 0, 0]
+    assert reader.stats.sections == 2 and len(reader.stats.interfaces) == 3
+    for engine in ("numba", "python"):
+        rep = analyze_file(path, engine=engine, chunk_bytes=1 << 16).to_dict()
+        assert rep["frames_total"] == 6 and rep["pairs"] == 3
+        assert rep["round_trip_us"]["max"] == pytest.approx(60.0)
+
+
+def test_unknown_block_type_is_skipped(tmp_path):
+    frames = cyclic(3)
+    body = w.shb() + w.custom_block(0x0BADBEEF, b"hello") + w.idb()
+    body += b"".join(w.epb(t, f) for t, f in frames) + w.custom_block(0x80000001, bytes(40))
+    path = tmp_path / "unknown-block.pcapng"
+    path.write_bytes(body)
+    rep = analyze_file(path).to_dict()
+    assert rep["pairs"] == 3 and rep["malformed_frames"] == 0
+    assert rep["other"]["skipped_blocks"] == 2
+
+
+def test_vlan_and_udp_ecat_frames(tmp_path):
+    plain = lrw(5)
+    vlan = plain[:12] + b"\x81\x00\x00\x05" + plain[12:]
+    payload = plain[14:]
+    udp = b"\x88\xa4\x88\xa4" + (8 + len(payload)).to_bytes(2, "big") + b"\0\0" + payload
+    ip = bytes([0x45, 0, 0, 20 + len(udp), 0, 0, 0, 0, 64, 17, 0, 0, 10, 0, 0, 1, 10, 0, 0, 2])
+    udp_frame = plain[:12] + b"\x08\x00" + ip + udp
+    arp = b"\xff" * 6 + OUT_MAC + b"\x08\x06" + bytes(28)
+    path = write_pcap(tmp_path / "v.pcap", [(1, vlan), (2, udp_frame), (3, arp)])
+    rep = analyze_file(path).to_dict()
+    assert rep["ecat_frames"] == 2 and rep["non_ecat_frames"] == 1
+    assert rep["other"]["vlan_frames"] == 1 and rep["other"]["udp_frames"] == 1
+
+
+def test_snaplen_cut_frame_is_malformed(tmp_path):
+    full = lrw(1)
+    body = w.pcap_header() + w.pcap_record(1, full[:20], original_length=len(full))
+    body += w.pcap_record(2, full)
+    path = tmp_path / "cut.pcap"
+    path.write_bytes(body)
+    rep = analyze_file(path).to_dict()
+    assert rep["malformed_frames"] == 1 and rep["ecat_frames"] == 1
+
+
+def test_table_growth_and_stack_depth(tmp_path):
+    """Many distinct pending signatures force the pairing table to grow; both engines
+    still agree with each other."""
+    frames = []
+    t = 10**18
+    for i in range(9000):   # outgoing only, all different addresses: nothing pairs
+        frames.append((t + i * 1000, ecat(Command.FPRD, i & 0xFF, adp=0x1000 + i)))
+    for i in range(9000):
+        frames.append((t + 10**7 + i * 1000, ecat(Command.FPRD, i & 0xFF, 1, True, adp=0x1000 + i)))
+    path = write_pcap(tmp_path / "many.pcap", frames)
+    fast = analyze_file(path).to_dict()
+    slow = analyze_file(path, engine="python").to_dict()
+    assert fast["pairs"] == slow["pairs"] == 9000
+    fast.pop("engine"), slow.pop("engine")
+    assert fast == slow
+
+
+# --- bad input: exit 3 (unreadable) or 0/1 with malformed counted --------------------
+
+
+def _run(cli, path):
+    code, out, err = cli("capture", "analyze", str(path), "--format", "json")
+    assert "Traceback" not in err
+    return code, out, err
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("empty.pcap", b""),
+        ("bad-magic.pcap", b"\x00\x01\x02\x03" + bytes(40)),
+        ("truncated-header.pcap", w.pcap_header()[:10]),
+        ("truncated-shb.pcapng", w.shb()[:9]),
+        ("text.pcap", b"this is not a capture file at all\n" * 4),
+        ("linktype-raw-ip.pcap", w.pcap_header(link_type=101) + w.pcap_record(1, bytes(40))),
+    ],
+)
+def test_unreadable_files_exit_3(cli, tmp_path, name, content):
+    path = tmp_path / name
+    path.write_bytes(content)
+    code, out, err = _run(cli, path)
+    assert code == 3, (code, out, err)
+    assert out == ""
+    assert str(path) in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(CaptureError):
+        analyze_file(path)
+
+
+def test_missing_file_exits_3(cli, tmp_path):
+    code, _, err = _run(cli, tmp_path / "nope.pcap")
+    assert code == 3 and "nope.pcap" in err
+
+
+def test_pcapng_without_ethernet_interface_exits_3(cli, tmp_path):
+    path = tmp_path / "linktype-usb.pcapng"
+    path.write_bytes(w.shb() + w.idb(link_type=220) + w.epb(1, bytes(30)))
+    code, _, err = _run(cli, path)
+    assert code == 3 and "Ethernet" in err
+
+
+def test_truncated_record_counts_malformed(cli, tmp_path):
+    good = write_pcap(tmp_path / "g.pcap", cyclic(10)).read_bytes()
+    path = tmp_path / "truncated-record.pcap"
+    path.write_bytes(good[:-30])
+    code, out, _ = _run(cli, path)
+    rep = json.loads(out)
+    assert code in (0, 1)
+    assert rep["malformed_frames"] == 1 and rep["frames_total"] == 19
+
+
+def test_truncated_pcapng_block_counts_malformed(cli, tmp_path):
+    good = write_pcapng(tmp_path / "g.pcapng", cyclic(10)).read_bytes()
+    path = tmp_path / "truncated-block.pcapng"
+    path.write_bytes(good[:-7])
+    code, out, _ = _run(cli, path)
+    rep = json.loads(out)
+    assert rep["malformed_frames"] == 1 and rep["frames_total"] == 19
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_bytes_never_traceback(cli, tmp_path, seed):
+    import random
+
+    rnd = random.Random(seed)
+    good = bytearray(write_pcapng(tmp_path / "g.pcapng", cyclic(30)).read_bytes())
+    if seed < 3:   # random garbage after a valid header
+        data = bytes(good[:60]) + os.urandom(2000)
+    else:          # flip bytes inside a valid file
+        for _ in range(20):
+            good[rnd.randrange(60, len(good))] = rnd.randrange(256)
+        data = bytes(good)
+    path = tmp_path / f"random-{seed}.pcapng"
+    path.write_bytes(data)
+    code, out, err = _run(cli, path)
+    assert code in (0, 1, 3), err
+    if code != 3:
+        json.loads(out)
+    fast = analyze_file(path).to_dict() if code != 3 else None
+    if fast is not None:
+        slow = analyze_file(path, engine="python").to_dict()
+        fast.pop("engine"), slow.pop("engine")
+        assert fast == slow
+
+
+def test_random_bytes_without_header_exit_3(cli, tmp_path):
+    path = tmp_path / "random.bin"
+    path.write_bytes(bytes(range(256)) * 8)
+    code, _, _ = _run(cli, path)
+    assert code == 3
