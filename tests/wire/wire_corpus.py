@@ -8,6 +8,7 @@ depending on another package's reader.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import struct
 import subprocess
@@ -15,9 +16,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import CORPUS, corpus_files
 
-PCAPS = corpus_files("pcap")
+# Same rule as tests/conftest.py (not imported by name: "conftest" is not a unique module).
+ROOT = Path(__file__).resolve().parents[2]
+CORPUS = Path(os.environ.get("LOLACLI_CORPUS", ROOT.parent / "shared" / "corpus"))
+PCAPS = sorted((CORPUS / "pcap").glob("*")) if (CORPUS / "pcap").is_dir() else []
+PCAP_IDS = [p.name for p in PCAPS]
 TSHARK = shutil.which("tshark")
 
 _PCAPNG_SHB = 0x0A0D0D0A

@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import corpus_ids
 from wire_corpus import (
+    PCAP_IDS,
     PCAPS,
     need_corpus_and_tshark,
     read_packets,
@@ -63,7 +63,7 @@ def _check_datagrams(number: int, frame: Frame, row: dict[str, list[str]]) -> No
     assert [_int(x) for x in row["ecatf.length"]] == [frame.header_length], where
 
 
-@pytest.mark.parametrize("path", PCAPS, ids=corpus_ids(PCAPS))
+@pytest.mark.parametrize("path", PCAPS, ids=PCAP_IDS)
 def test_every_ecat_frame_matches_tshark(path: Path) -> None:
     need_corpus_and_tshark()
     packets = read_packets(path)
@@ -154,7 +154,7 @@ def _check_upload_response(m: SdoUploadResponse, f: dict[str, Any]) -> None:
             assert m.data.hex(":") == f["ecat_mailbox.coe.dsoldata"]
 
 
-@pytest.mark.parametrize("path", PCAPS, ids=corpus_ids(PCAPS))
+@pytest.mark.parametrize("path", PCAPS, ids=PCAP_IDS)
 def test_every_tshark_mailbox_matches(path: Path) -> None:
     need_corpus_and_tshark()
     packets = read_packets(path)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import random
 from collections.abc import Callable
 
-from test_pinned import (
+from test_wire_pinned import (
     AKD_ARMW,
     AKD_EOE,
     DC_DIFFERENCE,
