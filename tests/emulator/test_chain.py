@@ -1,0 +1,119 @@
+"""The chain: direction bit, delay model, faults, and robustness against garbage frames."""
+
+from __future__ import annotations
+
+import random
+import struct
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lolacli.emulator.chain import ChainTiming, Faults
+from lolacli.emulator.slave import build_chain
+from lolacli.files import load_eni
+from lolacli.wire.commands import Command as C
+from lolacli.wire.frame import Datagram, decode_frame, encode_frame, frame_bytes_on_wire, make_frame
+from tests.emulator.bus import EXAMPLES, Bus
+
+LOLA = load_eni(EXAMPLES / "lola.xml")
+
+
+def _brd() -> bytes:
+    return encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, 2)]), pad=True)
+
+
+def test_returned_frame_has_the_locally_administered_bit_and_same_length() -> None:
+    chain = build_chain(LOLA)
+    frame = _brd()
+    reply, _ = chain.process(frame, 0)
+    assert reply is not None and len(reply) == len(frame)
+    assert decode_frame(reply).ethernet.returned
+    assert not decode_frame(frame).ethernet.returned
+    assert reply[:6] == frame[:6] and reply[7:12] == frame[7:12]
+
+
+def test_delay_is_wire_time_plus_slaves_plus_cables() -> None:
+    timing = ChainTiming()
+    chain = build_chain(LOLA, timing=timing)
+    cyclic = LOLA.cyclic_frames[0]
+    datagrams = [
+        Datagram.logical(c.cmd, c.logical_address, c.data_length_bytes)
+        if c.logical_address is not None
+        else Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, c.data_length_bytes)
+        for c in cyclic.commands
+    ]
+    frame = encode_frame(make_frame(datagrams))
+    _, delay = chain.process(frame, 0)
+    wire_bytes = frame_bytes_on_wire([c.data_length_bytes for c in cyclic.commands])
+    assert wire_bytes == cyclic.frame_bytes == 846  # DESIGN.md: the LOLA frame
+    per_slave = timing.processing_ns + timing.forward_ns + 2 * timing.cable_ns
+    assert delay == wire_bytes * 80 + 25 * per_slave  # 100 Mbit/s: 80 ns per byte
+    assert 67_000 < wire_bytes * 80 < 68_000  # 67.7 µs
+
+
+def test_armw_reference_reads_the_others_write() -> None:
+    bus = Bus(build_chain(LOLA))
+    d = bus.one(C.ARMW, 0, 0x0910, 8)
+    assert d.wkc == 25
+    assert struct.unpack("<Q", d.data)[0] == bus.chain.slaves[0].system_time_ns(
+        bus.t_ns - 50_000 + bus.chain.timing.cable_ns)
+
+
+def test_drop_fault_loses_about_the_asked_share() -> None:
+    chain = build_chain(LOLA, faults=Faults(drop_probability=0.25, seed=7))
+    frame = _brd()
+    lost = sum(chain.process(frame, 0)[0] is None for _ in range(2000))
+    assert 400 < lost < 600
+    assert chain.stats.dropped == lost
+
+
+def test_random_and_mutated_frames_never_raise_and_valid_frames_still_answer() -> None:
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    rng = random.Random(1234)
+    valid = [
+        encode_frame(make_frame([Datagram.logical(C.LRW, 0x10000, 11),
+                                 Datagram.physical(C.BRD, 0, 0x130, 2)]), pad=True),
+        encode_frame(make_frame([Datagram.physical(C.FPWR, 0x3E9, 0x1800, 140)]), pad=True),
+        _brd(),
+    ]
+    malformed = 0
+    for i in range(20_000):
+        base = bytearray(rng.choice(valid))
+        kind = i % 4
+        if kind == 0:
+            frame = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 80)))
+        elif kind == 1:
+            for _ in range(rng.randrange(1, 6)):
+                base[rng.randrange(12, len(base))] = rng.randrange(256)
+            frame = bytes(base)
+        elif kind == 2:
+            frame = bytes(base[: rng.randrange(0, len(base))])
+        else:
+            base[12:14] = b"\x88\xa4"
+            frame = bytes(base[:14]) + bytes(rng.randrange(256) for _ in range(40))
+        reply, _ = chain.process(frame, i)
+        malformed += reply is None
+    assert chain.stats.malformed == malformed > 1000
+    assert chain.slaves[0].mem[0x0300] == 0xFF  # the invalid-frame counter saturates
+    reply, _ = chain.process(_brd(), 0)
+    assert reply is not None and decode_frame(reply).datagrams[0].wkc == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(list(C)), st.integers(0, 0xFFFF),
+                          st.integers(0, 0x2000), st.binary(max_size=64)),
+                min_size=1, max_size=6))
+def test_any_well_formed_frame_is_answered(dgrams: list[tuple[C, int, int, bytes]]) -> None:
+    chain = build_chain(load_eni(EXAMPLES / "ek1100_io.xml"))
+    frame = encode_frame(make_frame([Datagram.physical(c, adp, ado, data)
+                                     for c, adp, ado, data in dgrams]), pad=True)
+    reply, delay = chain.process(frame, 0)
+    assert reply is not None and delay > 0
+    back = decode_frame(reply).datagrams
+    assert [(d.cmd, d.index, len(d.data)) for d in back] == [
+        (c, 0, len(data)) for c, _, _, data in dgrams]
+    for d in back:
+        assert d.wkc <= 3 * len(chain.slaves)
