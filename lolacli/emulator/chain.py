@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.registers import AlStatusCode
 from lolacli.errors import WireError
-from lolacli.wire.commands import LOGICAL
+from lolacli.wire.commands import LOGICAL, Command
 from lolacli.wire.frame import (
     DATAGRAM_HEADER_BYTES,
     ECAT_HEADER_BYTES,
@@ -94,19 +94,33 @@ class ChainStats:
     logical_frames: int = 0
 
 
-@dataclass(frozen=True, slots=True)
+_AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
+_CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
+
+
+@dataclass(slots=True)
 class _Slot:
+    """A datagram's place in the frame and which slaves it addresses.
+
+    ``target`` is the one addressed position for APxx/FPxx (-1: nobody), ``None`` when
+    every slave takes part (broadcast, logical, ARMW/FRMW)."""
+
     header: int  # offset of the datagram header in the frame
     cmd: int
     length: int
+    adp: int  # as the next slave sees it
+    ado: int
+    target: int | None = None
+    wkc_added: int = 0
+    data: memoryview | None = None
 
     @property
-    def data(self) -> int:
+    def data_offset(self) -> int:
         return self.header + DATAGRAM_HEADER_BYTES
 
     @property
-    def wkc(self) -> int:
-        return self.data + self.length
+    def wkc_offset(self) -> int:
+        return self.data_offset + self.length
 
 
 class Chain:
@@ -151,10 +165,27 @@ class Chain:
         view = memoryview(buf)
         times = self.timing.port_times(t_ns, len(self.slaves))
         logical = any(s.cmd in LOGICAL for s in slots)
-        for esc, when in zip(self.slaves, times, strict=True):
+        self._address(slots)
+        for slot in slots:
+            slot.data = view[slot.data_offset : slot.data_offset + slot.length]
+        for position, (esc, when) in enumerate(zip(self.slaves, times, strict=True)):
             esc.port_times = when
+            t = when.port0_ns
             for slot in slots:
-                self._pass(esc, slot, buf, view, when.port0_ns)
+                if slot.target is None:
+                    slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, slot.data, t)
+                    slot.wkc_added += added
+                elif slot.target == position:
+                    seen = 0 if slot.cmd in _AUTO_INCREMENT_SINGLE else slot.adp
+                    slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, slot.data, t)[1]
+        for slot in slots:
+            if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
+                slot.adp = (slot.adp + len(self.slaves)) & 0xFFFF
+            _U16.pack_into(buf, slot.header + 2, slot.adp)
+            if slot.wkc_added:
+                (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
+                _U16.pack_into(buf, slot.wkc_offset, (wkc + slot.wkc_added) & 0xFFFF)
+            slot.data = None
         view.release()
         if logical:
             self._deferred_t_ns = t_ns
@@ -176,16 +207,26 @@ class Chain:
         for esc in self.slaves:
             esc.cycle(t_ns)
 
-    @staticmethod
-    def _pass(esc: Esc, slot: _Slot, buf: bytearray, view: memoryview, t_ns: int) -> None:
-        _cmd, _idx, adp, ado, _len = _HEAD.unpack_from(buf, slot.header)
-        data = view[slot.data : slot.data + slot.length]
-        new_adp, increment = esc.process(slot.cmd, adp, ado, data, t_ns)
-        if new_adp != adp:
-            _U16.pack_into(buf, slot.header + 2, new_adp)
-        if increment:
-            (wkc,) = _U16.unpack_from(buf, slot.wkc)
-            _U16.pack_into(buf, slot.wkc, (wkc + increment) & 0xFFFF)
+    def _address(self, slots: list[_Slot]) -> None:
+        """Resolve single-slave datagrams to their position once per frame."""
+        stations: dict[int, int] | None = None
+        for slot in slots:
+            if slot.cmd in _AUTO_INCREMENT_SINGLE:
+                position = (-slot.adp) & 0xFFFF
+                slot.target = position if position < len(self.slaves) else -1
+            elif slot.cmd in _CONFIGURED_SINGLE:
+                if stations is None:
+                    stations = self._stations()
+                slot.target = stations.get(slot.adp, -1)
+
+    def _stations(self) -> dict[int, int]:
+        """Configured address -> first position answering it (station address or alias)."""
+        out: dict[int, int] = {}
+        for i, esc in enumerate(self.slaves):
+            out.setdefault(esc.station_address, i)
+            if esc.alias_enabled:
+                out.setdefault(esc.station_alias, i)
+        return dict(sorted(out.items(), key=lambda kv: kv[1]))
 
     def _parse(self, frame: bytes) -> list[_Slot] | None:
         """Datagram positions in the frame; a malformed frame counts as an RX error."""
@@ -202,6 +243,6 @@ class Chain:
         slots = []
         pos += ECAT_HEADER_BYTES
         for d in decoded.datagrams:
-            slots.append(_Slot(pos, d.cmd, len(d.data)))
+            slots.append(_Slot(pos, d.cmd, len(d.data), d.adp, d.ado))
             pos += DATAGRAM_HEADER_BYTES + len(d.data) + WKC_BYTES
         return slots

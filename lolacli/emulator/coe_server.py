@@ -174,9 +174,12 @@ class SdoServer:
             self.transfers += 1
             cmd = 0x43 | ((4 - len(data)) << 2)
             return self._coe(SERVICE_SDO_RESPONSE, head(cmd, index, subindex) + data.ljust(4, b"\0"))
-        first = data[: self._room]
-        if len(first) < len(data):
-            self._upload = _Transfer(index, subindex, bytearray(data[len(first) :]), 0)
+        # Segmented when it does not fit: the initiate response then carries only the
+        # complete size and every byte comes in segments (ETG.1000.6 §5.6.2.4). SOEM also
+        # accepts data here, but KickCAT and ethercrab discard it, so send none.
+        first = data if len(data) <= self._room else b""
+        if not first:
+            self._upload = _Transfer(index, subindex, bytearray(data), 0)
         else:
             self.transfers += 1
         body = head(0x41 | (command & 0x10), index, subindex) + _U32.pack(len(data)) + first

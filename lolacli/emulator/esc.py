@@ -206,11 +206,14 @@ class Esc:
         return int(_U32.unpack_from(self.mem, address)[0])
 
     # ------------------------------------------------------------- addressing
+    @property
+    def alias_enabled(self) -> bool:
+        return bool(self.mem[r.DL_CONTROL_ALIAS_ENABLE_BYTE] & 0x01)
+
     def addressed_configured(self, adp: int) -> bool:
-        if adp == self.station_address:
+        if adp == self.mem[r.STATION_ADDRESS] | self.mem[r.STATION_ADDRESS + 1] << 8:
             return True
-        alias_on = self.mem[r.DL_CONTROL_ALIAS_ENABLE_BYTE] & 0x01
-        return bool(alias_on) and adp == self.station_alias
+        return self.alias_enabled and adp == self.station_alias
 
     def process(
         self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
