@@ -14,16 +14,23 @@ from lolacli.cli.common import default_eni, stderr_console
 
 @app.command("emulate")
 def emulate_cmd(
-    iface: Annotated[str, typer.Option("--iface", "-i", help="Interface to serve on (veth, TAP, NIC).")],
+    iface: Annotated[
+        str, typer.Option("--iface", "-i", help="Interface to serve on (veth, TAP, NIC).")
+    ],
     eni: Annotated[
-        Path | None, typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain.")
+        Path | None,
+        typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain."),
     ] = None,
     drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
     stuck_safeop: Annotated[
         list[int] | None,
-        typer.Option("--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."),
+        typer.Option(
+            "--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."
+        ),
     ] = None,
-    drift_ppb: Annotated[int, typer.Option("--drift-ppb", help="Clock drift step along the line.")] = 0,
+    drift_ppb: Annotated[
+        int, typer.Option("--drift-ppb", help="Clock drift step along the line.")
+    ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
     duration_s: Annotated[
         float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")

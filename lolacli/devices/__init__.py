@@ -17,8 +17,9 @@ def device_for(slave: Slave) -> Device:
         return Cia402Drive(slave)
     if "gateway" in name or "can" in name.split() or "imu" in name or "fts" in name:
         return CanGateway(slave)
-    if any(0x6000 <= i < 0x7000 for i in indexes) and ("ai" in name or "analog" in name
-                                                       or name.startswith("el3")):
+    if any(0x6000 <= i < 0x7000 for i in indexes) and (
+        "ai" in name or "analog" in name or name.startswith("el3")
+    ):
         return AnalogInput(slave)
     return DigitalIo(slave)
 

@@ -45,22 +45,44 @@ class Device:
     def _communication_objects(self) -> None:
         od, ident = self.od, self.slave.identity
         od.add_var(0x1000, "Device type", DataType.UNSIGNED32, self.device_type, access="ro")
-        od.add_var(0x1008, "Manufacturer device name", DataType.VISIBLE_STRING,
-                   self.slave.name, access="const")
-        od.add_var(0x1009, "Manufacturer hardware version", DataType.VISIBLE_STRING, "1.0",
-                   access="const")
-        od.add_var(0x100A, "Manufacturer software version", DataType.VISIBLE_STRING,
-                   "lolacli emulator", access="const")
-        od.add_record(0x1018, "Identity", [
-            ("Vendor ID", DataType.UNSIGNED32, ident.vendor_id, "ro"),
-            ("Product code", DataType.UNSIGNED32, ident.product_code, "ro"),
-            ("Revision", DataType.UNSIGNED32, ident.revision, "ro"),
-            ("Serial number", DataType.UNSIGNED32, ident.serial, "ro"),
-        ])
-        od.add_record(SM_TYPES, "Sync manager communication type", [
-            ("SM0", DataType.UNSIGNED8, 1, "ro"), ("SM1", DataType.UNSIGNED8, 2, "ro"),
-            ("SM2", DataType.UNSIGNED8, 3, "ro"), ("SM3", DataType.UNSIGNED8, 4, "ro"),
-        ], code=ObjectCode.ARRAY)
+        od.add_var(
+            0x1008,
+            "Manufacturer device name",
+            DataType.VISIBLE_STRING,
+            self.slave.name,
+            access="const",
+        )
+        od.add_var(
+            0x1009, "Manufacturer hardware version", DataType.VISIBLE_STRING, "1.0", access="const"
+        )
+        od.add_var(
+            0x100A,
+            "Manufacturer software version",
+            DataType.VISIBLE_STRING,
+            "lolacli emulator",
+            access="const",
+        )
+        od.add_record(
+            0x1018,
+            "Identity",
+            [
+                ("Vendor ID", DataType.UNSIGNED32, ident.vendor_id, "ro"),
+                ("Product code", DataType.UNSIGNED32, ident.product_code, "ro"),
+                ("Revision", DataType.UNSIGNED32, ident.revision, "ro"),
+                ("Serial number", DataType.UNSIGNED32, ident.serial, "ro"),
+            ],
+        )
+        od.add_record(
+            SM_TYPES,
+            "Sync manager communication type",
+            [
+                ("SM0", DataType.UNSIGNED8, 1, "ro"),
+                ("SM1", DataType.UNSIGNED8, 2, "ro"),
+                ("SM2", DataType.UNSIGNED8, 3, "ro"),
+                ("SM3", DataType.UNSIGNED8, 4, "ro"),
+            ],
+            code=ObjectCode.ARRAY,
+        )
 
     def _pdo_objects(self, pdos: tuple[Pdo, ...]) -> None:
         rx = [p for p in pdos if p.direction == Direction.OUTPUT]
@@ -71,19 +93,22 @@ class Device:
                 value = (e.index << 16) | (e.subindex << 8) | e.bit_size
                 subs.append((e.name or "Mapped object", DataType.UNSIGNED32, value, "rw"))
                 if e.index:
-                    self.od.ensure_entry(e.index, e.subindex, e.name,
-                                         data_type_for(e.data_type, e.bit_size))
+                    self.od.ensure_entry(
+                        e.index, e.subindex, e.name, data_type_for(e.data_type, e.bit_size)
+                    )
             used = len(subs)
             subs += [("Mapped object", DataType.UNSIGNED32, 0, "rw")] * (MAX_ENTRIES - used)
-            self.od.add_record(pdo.index, pdo.name or f"PDO 0x{pdo.index:04X}", subs,
-                               writable_count=True)
+            self.od.add_record(
+                pdo.index, pdo.name or f"PDO 0x{pdo.index:04X}", subs, writable_count=True
+            )
             self.od.set(pdo.index, 0, used)
         for index, assigned in ((ASSIGN_RX, rx), (ASSIGN_TX, tx)):
             subs = [("PDO", DataType.UNSIGNED16, p.index, "rw") for p in assigned]
             used = len(subs)
             subs += [("PDO", DataType.UNSIGNED16, 0, "rw")] * max(0, MAX_PDOS - used)
-            self.od.add_record(index, "PDO assignment", subs, code=ObjectCode.ARRAY,
-                               writable_count=True)
+            self.od.add_record(
+                index, "PDO assignment", subs, code=ObjectCode.ARRAY, writable_count=True
+            )
             self.od.set(index, 0, used)
 
     # ------------------------------------------------------------- mapping

@@ -119,8 +119,13 @@ class Cia402Drive(Device):
 
     def define(self) -> None:
         od = self.od
-        od.add_var(0x1008, "Manufacturer device name", DataType.VISIBLE_STRING,
-                   self.LONG_NAME, access="const")
+        od.add_var(
+            0x1008,
+            "Manufacturer device name",
+            DataType.VISIBLE_STRING,
+            self.LONG_NAME,
+            access="const",
+        )
         for index, name, dtype, access in (
             (CONTROLWORD, "Controlword", DataType.UNSIGNED16, "rw"),
             (STATUSWORD, "Statusword", DataType.UNSIGNED16, "ro"),
@@ -139,10 +144,14 @@ class Cia402Drive(Device):
             else:
                 od.add_var(index, name, dtype, 0, access=access, pdo=True)
         od.add_var(MAX_VELOCITY, "Max profile velocity", DataType.UNSIGNED32, 0)
-        od.add_record(INTERPOLATION_PERIOD, "Interpolation time period", [
-            ("Interpolation time period value", DataType.UNSIGNED8, 1, "rw"),
-            ("Interpolation time index", DataType.INTEGER8, -3, "rw"),
-        ])
+        od.add_record(
+            INTERPOLATION_PERIOD,
+            "Interpolation time period",
+            [
+                ("Interpolation time period value", DataType.UNSIGNED8, 1, "rw"),
+                ("Interpolation time index", DataType.INTEGER8, -3, "rw"),
+            ],
+        )
         od.add_var(0x6502, "Supported drive modes", DataType.UNSIGNED32, 0x0380, access="ro")
         od.set(MODES, 0, MODE_CSP)
         self.power = Cia402State.NOT_READY_TO_SWITCH_ON
@@ -190,8 +199,12 @@ class Cia402Drive(Device):
 
     def _update_status(self) -> None:
         status = int(self.power) | STATUS_REMOTE
-        if self.power in (S.READY_TO_SWITCH_ON, S.SWITCHED_ON, S.OPERATION_ENABLED,
-                          S.QUICK_STOP_ACTIVE):
+        if self.power in (
+            S.READY_TO_SWITCH_ON,
+            S.SWITCHED_ON,
+            S.OPERATION_ENABLED,
+            S.QUICK_STOP_ACTIVE,
+        ):
             status |= STATUS_VOLTAGE_ENABLED
         if self.power == S.OPERATION_ENABLED:
             status |= STATUS_FOLLOWING

@@ -8,7 +8,7 @@ answer with it directly.
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -84,11 +84,21 @@ _VARIABLE_LENGTH = frozenset({DataType.VISIBLE_STRING, DataType.OCTET_STRING})
 
 #: ENI/ESI type names -> data types.
 TYPE_NAMES: dict[str, DataType] = {
-    "BOOL": DataType.BOOLEAN, "BIT": DataType.BOOLEAN, "SINT": DataType.INTEGER8,
-    "INT": DataType.INTEGER16, "DINT": DataType.INTEGER32, "LINT": DataType.INTEGER64,
-    "USINT": DataType.UNSIGNED8, "BYTE": DataType.UNSIGNED8, "UINT": DataType.UNSIGNED16,
-    "WORD": DataType.UNSIGNED16, "UDINT": DataType.UNSIGNED32, "DWORD": DataType.UNSIGNED32,
-    "ULINT": DataType.UNSIGNED64, "REAL": DataType.REAL32, "LREAL": DataType.REAL64,
+    "BOOL": DataType.BOOLEAN,
+    "BIT": DataType.BOOLEAN,
+    "SINT": DataType.INTEGER8,
+    "INT": DataType.INTEGER16,
+    "DINT": DataType.INTEGER32,
+    "LINT": DataType.INTEGER64,
+    "USINT": DataType.UNSIGNED8,
+    "BYTE": DataType.UNSIGNED8,
+    "UINT": DataType.UNSIGNED16,
+    "WORD": DataType.UNSIGNED16,
+    "UDINT": DataType.UNSIGNED32,
+    "DWORD": DataType.UNSIGNED32,
+    "ULINT": DataType.UNSIGNED64,
+    "REAL": DataType.REAL32,
+    "LREAL": DataType.REAL64,
     "STRING": DataType.VISIBLE_STRING,
 }
 
@@ -99,8 +109,11 @@ def data_type_for(name: str, bit_size: int) -> DataType:
     if known is not None:
         return known
     return {
-        1: DataType.BOOLEAN, 8: DataType.UNSIGNED8, 16: DataType.UNSIGNED16,
-        32: DataType.UNSIGNED32, 64: DataType.UNSIGNED64,
+        1: DataType.BOOLEAN,
+        8: DataType.UNSIGNED8,
+        16: DataType.UNSIGNED16,
+        32: DataType.UNSIGNED32,
+        64: DataType.UNSIGNED64,
     }.get(bit_size, DataType.UNSIGNED8)
 
 
@@ -212,7 +225,7 @@ class ObjectDictionary:
         self,
         index: int,
         name: str,
-        subs: list[tuple[str, int, int | float | str | bytes, str]],
+        subs: Sequence[tuple[str, int, int | float | str | bytes, str]],
         *,
         code: ObjectCode = ObjectCode.RECORD,
         writable_count: bool = False,
@@ -242,8 +255,9 @@ class ObjectDictionary:
             obj.entries[subindex] = entry
             self.version += 1
             if subindex and 0 not in obj.entries:
-                obj.entries[0] = Entry(index, 0, "Number of entries", DataType.UNSIGNED8, "ro",
-                                       b"\x00")
+                obj.entries[0] = Entry(
+                    index, 0, "Number of entries", DataType.UNSIGNED8, "ro", b"\x00"
+                )
             if subindex:
                 obj.entries[0].value = bytes([max(obj.entries[0].value[0], subindex)])
         return entry

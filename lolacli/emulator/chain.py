@@ -112,7 +112,6 @@ class _Slot:
     ado: int
     target: int | None = None
     wkc_added: int = 0
-    data: memoryview | None = None
 
     @property
     def data_offset(self) -> int:
@@ -166,18 +165,17 @@ class Chain:
         times = self.timing.port_times(t_ns, len(self.slaves))
         logical = any(s.cmd in LOGICAL for s in slots)
         self._address(slots)
-        for slot in slots:
-            slot.data = view[slot.data_offset : slot.data_offset + slot.length]
+        datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
         for position, (esc, when) in enumerate(zip(self.slaves, times, strict=True)):
             esc.port_times = when
             t = when.port0_ns
-            for slot in slots:
+            for slot, data in zip(slots, datas, strict=True):
                 if slot.target is None:
-                    slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, slot.data, t)
+                    slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, data, t)
                     slot.wkc_added += added
                 elif slot.target == position:
                     seen = 0 if slot.cmd in _AUTO_INCREMENT_SINGLE else slot.adp
-                    slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, slot.data, t)[1]
+                    slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, data, t)[1]
         for slot in slots:
             if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
                 slot.adp = (slot.adp + len(self.slaves)) & 0xFFFF
@@ -185,7 +183,8 @@ class Chain:
             if slot.wkc_added:
                 (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
                 _U16.pack_into(buf, slot.wkc_offset, (wkc + slot.wkc_added) & 0xFFFF)
-            slot.data = None
+        for data in datas:
+            data.release()
         view.release()
         if logical:
             self._deferred_t_ns = t_ns

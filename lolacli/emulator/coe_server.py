@@ -173,7 +173,9 @@ class SdoServer:
         if 0 < len(data) <= 4:
             self.transfers += 1
             cmd = 0x43 | ((4 - len(data)) << 2)
-            return self._coe(SERVICE_SDO_RESPONSE, head(cmd, index, subindex) + data.ljust(4, b"\0"))
+            return self._coe(
+                SERVICE_SDO_RESPONSE, head(cmd, index, subindex) + data.ljust(4, b"\0")
+            )
         # Segmented when it does not fit: the initiate response then carries only the
         # complete size and every byte comes in segments (ETG.1000.6 §5.6.2.4). SOEM also
         # accepts data here, but KickCAT and ethercrab discard it, so send none.
@@ -269,6 +271,7 @@ class SdoServer:
         access = {"ro": 0x07, "const": 0x07, "wo": 0x38, "rw": 0x3F}.get(entry.access, 0x07)
         if entry.pdo_mappable:
             access |= 0x40
-        payload = struct.pack("<HBBHHH", index, subindex, info, entry.data_type,
-                              entry.bit_size, access)
+        payload = struct.pack(
+            "<HBBHHH", index, subindex, info, entry.data_type, entry.bit_size, access
+        )
         return self._info_reply(INFO_ENTRY_DESCRIPTION_RESPONSE, payload + entry.name.encode())

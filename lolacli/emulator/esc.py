@@ -215,9 +215,7 @@ class Esc:
             return True
         return self.alias_enabled and adp == self.station_alias
 
-    def process(
-        self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
-    ) -> tuple[int, int]:
+    def process(self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int) -> tuple[int, int]:
         """Process one datagram passing through: returns (new ADP field, WKC increment).
 
         ``data`` is the datagram's data in the frame buffer, changed in place. ``adp``/
@@ -243,9 +241,7 @@ class Esc:
         return adp, 0
 
     # --------------------------------------------------------- physical access
-    def _physical(
-        self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool
-    ) -> int:
+    def _physical(self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool) -> int:
         n = len(data)
         if ado + n > r.MEMORY_BYTES:
             return 0
@@ -543,8 +539,11 @@ class Esc:
 
     def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
         end = address + len(data)
-        hits = [f for f in self._config().open_fmmus if f.logical_start < end
-                and address < f.logical_start + f.length_bytes]
+        hits = [
+            f
+            for f in self._config().open_fmmus
+            if f.logical_start < end and address < f.logical_start + f.length_bytes
+        ]
         if not hits:
             return 0
         wkc = 0

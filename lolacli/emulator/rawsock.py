@@ -36,8 +36,10 @@ def open_socket(iface: str) -> socket.socket:
     try:
         sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ECAT))
     except PermissionError as exc:
-        raise TransportError(f"no permission for a raw socket ({exc.strerror}); run as root "
-                             "or give python CAP_NET_RAW") from None
+        raise TransportError(
+            f"no permission for a raw socket ({exc.strerror}); run as root "
+            "or give python CAP_NET_RAW"
+        ) from None
     except OSError as exc:
         raise TransportError(f"cannot open a raw socket: {exc.strerror or exc}") from None
     try:

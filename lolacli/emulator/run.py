@@ -29,7 +29,9 @@ def make_chain(eni: Eni, options: EmulateOptions) -> Chain:
     chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
     for position in options.stuck_safeop:
         if not 1 <= position <= len(chain.slaves):
-            raise UsageError(f"--stuck-safeop {position}: the chain has slaves 1..{len(chain.slaves)}")
+            raise UsageError(
+                f"--stuck-safeop {position}: the chain has slaves 1..{len(chain.slaves)}"
+            )
         chain.stuck_in_safeop(position)
     return chain
 

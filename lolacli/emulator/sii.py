@@ -79,10 +79,28 @@ class CoeDetails(IntFlag):
 
 #: CoE data type codes of ENI/ESI type names (ETG.1000.6 Table 64).
 DATA_TYPE_CODES = {
-    "BOOL": 0x01, "BIT": 0x01, "SINT": 0x02, "INT": 0x03, "DINT": 0x04, "USINT": 0x05,
-    "UINT": 0x06, "UDINT": 0x07, "REAL": 0x08, "STRING": 0x09, "LREAL": 0x11,
-    "LINT": 0x15, "ULINT": 0x1B, "BYTE": 0x05, "WORD": 0x06, "DWORD": 0x07,
-    "BIT2": 0x31, "BIT3": 0x32, "BIT4": 0x33, "BIT5": 0x34, "BIT6": 0x35, "BIT7": 0x36,
+    "BOOL": 0x01,
+    "BIT": 0x01,
+    "SINT": 0x02,
+    "INT": 0x03,
+    "DINT": 0x04,
+    "USINT": 0x05,
+    "UINT": 0x06,
+    "UDINT": 0x07,
+    "REAL": 0x08,
+    "STRING": 0x09,
+    "LREAL": 0x11,
+    "LINT": 0x15,
+    "ULINT": 0x1B,
+    "BYTE": 0x05,
+    "WORD": 0x06,
+    "DWORD": 0x07,
+    "BIT2": 0x31,
+    "BIT3": 0x32,
+    "BIT4": 0x33,
+    "BIT5": 0x34,
+    "BIT6": 0x35,
+    "BIT7": 0x36,
     "BIT8": 0x37,
 }
 
@@ -222,14 +240,26 @@ def build_sii(spec: SiiSpec) -> bytes:
     _U16.pack_into(head, 0, 0x0C05)  # PDI control: SPI, enhanced link detection
     _U16.pack_into(head, 8, spec.station_alias)
     _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
-    for word, value in ((0x08, spec.vendor_id), (0x0A, spec.product_code),
-                        (0x0C, spec.revision), (0x0E, spec.serial)):
+    for word, value in (
+        (0x08, spec.vendor_id),
+        (0x0A, spec.product_code),
+        (0x0C, spec.revision),
+        (0x0E, spec.serial),
+    ):
         _U32.pack_into(head, 2 * word, value & 0xFFFFFFFF)
     if spec.mailbox is not None:
         out_start, out_len, in_start, in_len = spec.mailbox
-        for word, value in ((0x14, out_start), (0x15, out_len), (0x16, in_start),
-                            (0x17, in_len), (0x18, out_start), (0x19, out_len),
-                            (0x1A, in_start), (0x1B, in_len), (0x1C, spec.protocols)):
+        for word, value in (
+            (0x14, out_start),
+            (0x15, out_len),
+            (0x16, in_start),
+            (0x17, in_len),
+            (0x18, out_start),
+            (0x19, out_len),
+            (0x1A, in_start),
+            (0x1B, in_len),
+            (0x1C, spec.protocols),
+        ):
             _U16.pack_into(head, 2 * word, value)
     _U16.pack_into(head, 2 * 0x3E, spec.eeprom_kibit - 1)
     _U16.pack_into(head, 2 * 0x3F, 1)
@@ -301,8 +331,11 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
                 continue
             sm, kind = by_index[i]
             control = sm.control or SM_CONTROL[kind]
-            out.append(SiiSyncManager(sm.start_address, sm.length_bytes, control,
-                                      1 if sm.enable else 0, kind))
+            out.append(
+                SiiSyncManager(
+                    sm.start_address, sm.length_bytes, control, 1 if sm.enable else 0, kind
+                )
+            )
         return tuple(out)
     if slave.mailbox is None and not slave.pdos and not slave.outputs and not slave.inputs:
         return ()
@@ -348,9 +381,7 @@ def sii_spec_from_slave(slave: Slave, *, complete_access: bool = False) -> SiiSp
         sync_managers=sms,
         fmmus=(1, 2, 3) if mailbox else (1, 2),
         pdos=slave.pdos,
-        pdo_sync_manager={
-            p.index: sm_of[p.direction] for p in slave.pdos if p.direction in sm_of
-        },
+        pdo_sync_manager={p.index: sm_of[p.direction] for p in slave.pdos if p.direction in sm_of},
         dc=slave.dc is not None or mailbox is not None,
     )
 

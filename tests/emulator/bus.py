@@ -55,11 +55,13 @@ class Bus:
         return self.one(Command.FPWR, station, ado, data).wkc
 
     # ------------------------------------------------------------ mailbox
-    def mailbox_exchange(self, station: int, payload: bytes, out: tuple[int, int],
-                         inn: tuple[int, int]) -> bytes:
+    def mailbox_exchange(
+        self, station: int, payload: bytes, out: tuple[int, int], inn: tuple[int, int]
+    ) -> bytes:
         self.counter = self.counter % 7 + 1
-        box = encode_mailbox(make_mailbox(MailboxType.CoE, payload, counter=self.counter),
-                             buffer_bytes=out[1])
+        box = encode_mailbox(
+            make_mailbox(MailboxType.CoE, payload, counter=self.counter), buffer_bytes=out[1]
+        )
         assert self.fpwr(station, out[0], box) == 1
         assert self.fprd(station, 0x080D, 1)[0] & 0x08, "mailbox in not full"
         reply = self.fprd(station, inn[0], inn[1])
@@ -67,8 +69,9 @@ class Bus:
 
     def sdo_upload(self, station: int, index: int, sub: int, mbx: tuple[tuple[int, int], ...]):
         out, inn = mbx
-        first = decode_sdo(self.mailbox_exchange(
-            station, encode_sdo(SdoUploadRequest(index, sub)), out, inn))
+        first = decode_sdo(
+            self.mailbox_exchange(station, encode_sdo(SdoUploadRequest(index, sub)), out, inn)
+        )
         if isinstance(first, SdoAbort):
             return first
         assert isinstance(first, SdoUploadResponse)
@@ -77,8 +80,11 @@ class Bus:
         data = bytearray(first.data)
         toggle = False
         while len(data) < first.complete_size:
-            seg = decode_sdo(self.mailbox_exchange(
-                station, encode_sdo(SdoUploadSegmentRequest(toggle)), out, inn))
+            seg = decode_sdo(
+                self.mailbox_exchange(
+                    station, encode_sdo(SdoUploadSegmentRequest(toggle)), out, inn
+                )
+            )
             assert isinstance(seg, SdoUploadSegmentResponse), seg
             assert seg.toggle == toggle
             data += seg.data
@@ -87,17 +93,24 @@ class Bus:
                 break
         return bytes(data[: first.complete_size])
 
-    def sdo_download(self, station: int, index: int, sub: int, data: bytes,
-                     mbx: tuple[tuple[int, int], ...], *, segment_bytes: int = 0):
+    def sdo_download(
+        self,
+        station: int,
+        index: int,
+        sub: int,
+        data: bytes,
+        mbx: tuple[tuple[int, int], ...],
+        *,
+        segment_bytes: int = 0,
+    ):
         out, inn = mbx
         if len(data) <= 4:
             request = SdoDownloadRequest(index, sub, data)
             return decode_sdo(self.mailbox_exchange(station, encode_sdo(request), out, inn))
         first = data[:segment_bytes] if segment_bytes else data
-        request = SdoDownloadRequest(index, sub, first, expedited=False,
-                                     complete_size=len(data))
+        request = SdoDownloadRequest(index, sub, first, expedited=False, complete_size=len(data))
         reply = decode_sdo(self.mailbox_exchange(station, encode_sdo(request), out, inn))
-        rest, toggle = data[len(first):], False
+        rest, toggle = data[len(first) :], False
         while rest:
             chunk, rest = rest[:segment_bytes], rest[segment_bytes:]
             seg = SdoDownloadSegmentRequest(chunk, toggle=toggle, last=not rest)
@@ -147,11 +160,15 @@ class Bus:
         for c in frame.commands:
             if c.logical_address is not None:
                 data = outputs if outputs is not None else bytes(c.data_length_bytes)
-                datagrams.append(Datagram.logical(c.cmd, c.logical_address,
-                                                  data.ljust(c.data_length_bytes, b"\0")))
+                datagrams.append(
+                    Datagram.logical(
+                        c.cmd, c.logical_address, data.ljust(c.data_length_bytes, b"\0")
+                    )
+                )
             else:
-                datagrams.append(Datagram.physical(c.cmd, c.adp or 0, c.ado or 0,
-                                                   c.data_length_bytes))
+                datagrams.append(
+                    Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, c.data_length_bytes)
+                )
         self.t_ns += CYCLE_NS
         replies = self.frame(*datagrams)
         return replies, replies[0].data

@@ -56,7 +56,8 @@ def test_armw_reference_reads_the_others_write() -> None:
     d = bus.one(C.ARMW, 0, 0x0910, 8)
     assert d.wkc == 25
     assert struct.unpack("<Q", d.data)[0] == bus.chain.slaves[0].system_time_ns(
-        bus.t_ns - 50_000 + bus.chain.timing.cable_ns)
+        bus.t_ns - 50_000 + bus.chain.timing.cable_ns
+    )
 
 
 def test_drop_fault_loses_about_the_asked_share() -> None:
@@ -74,8 +75,12 @@ def test_random_and_mutated_frames_never_raise_and_valid_frames_still_answer() -
     bus.bring_up(eni)
     rng = random.Random(1234)
     valid = [
-        encode_frame(make_frame([Datagram.logical(C.LRW, 0x10000, 11),
-                                 Datagram.physical(C.BRD, 0, 0x130, 2)]), pad=True),
+        encode_frame(
+            make_frame(
+                [Datagram.logical(C.LRW, 0x10000, 11), Datagram.physical(C.BRD, 0, 0x130, 2)]
+            ),
+            pad=True,
+        ),
         encode_frame(make_frame([Datagram.physical(C.FPWR, 0x3E9, 0x1800, 140)]), pad=True),
         _brd(),
     ]
@@ -103,17 +108,28 @@ def test_random_and_mutated_frames_never_raise_and_valid_frames_still_answer() -
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(st.tuples(st.sampled_from(list(C)), st.integers(0, 0xFFFF),
-                          st.integers(0, 0x2000), st.binary(max_size=64)),
-                min_size=1, max_size=6))
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(list(C)),
+            st.integers(0, 0xFFFF),
+            st.integers(0, 0x2000),
+            st.binary(max_size=64),
+        ),
+        min_size=1,
+        max_size=6,
+    )
+)
 def test_any_well_formed_frame_is_answered(dgrams: list[tuple[C, int, int, bytes]]) -> None:
     chain = build_chain(load_eni(EXAMPLES / "ek1100_io.xml"))
-    frame = encode_frame(make_frame([Datagram.physical(c, adp, ado, data)
-                                     for c, adp, ado, data in dgrams]), pad=True)
+    frame = encode_frame(
+        make_frame([Datagram.physical(c, adp, ado, data) for c, adp, ado, data in dgrams]), pad=True
+    )
     reply, delay = chain.process(frame, 0)
     assert reply is not None and delay > 0
     back = decode_frame(reply).datagrams
     assert [(d.cmd, d.index, len(d.data)) for d in back] == [
-        (c, 0, len(data)) for c, _, _, data in dgrams]
+        (c, 0, len(data)) for c, _, _, data in dgrams
+    ]
     for d in back:
         assert d.wkc <= 3 * len(chain.slaves)

@@ -112,16 +112,21 @@ def test_sdo_information_services(bus: Bus) -> None:
     assert all(isinstance(f, OdListResponse) for f in fragments)
     _list_type, indexes = od_list_from_fragments(fragments)  # type: ignore[arg-type]
     assert {0x1000, 0x1018, 0x1C12, 0x6040, 0x607A} <= set(indexes)
-    desc = decode_sdo(bus.mailbox_exchange(
-        STATION, encode_sdo(ObjectDescriptionRequest(index=0x1018)), *MBX))
+    desc = decode_sdo(
+        bus.mailbox_exchange(STATION, encode_sdo(ObjectDescriptionRequest(index=0x1018)), *MBX)
+    )
     assert isinstance(desc, ObjectDescriptionResponse)
     assert (desc.max_subindex, desc.object_code, desc.name_text) == (4, 9, "Identity")
-    entry = decode_sdo(bus.mailbox_exchange(
-        STATION, encode_sdo(EntryDescriptionRequest(index=0x6041, subindex=0)), *MBX))
+    entry = decode_sdo(
+        bus.mailbox_exchange(
+            STATION, encode_sdo(EntryDescriptionRequest(index=0x6041, subindex=0)), *MBX
+        )
+    )
     assert isinstance(entry, EntryDescriptionResponse)
     assert (entry.data_type, entry.bit_length) == (0x0006, 16)
-    missing = decode_sdo(bus.mailbox_exchange(
-        STATION, encode_sdo(ObjectDescriptionRequest(index=0x5555)), *MBX))
+    missing = decode_sdo(
+        bus.mailbox_exchange(STATION, encode_sdo(ObjectDescriptionRequest(index=0x5555)), *MBX)
+    )
     assert isinstance(missing, SdoInfoError) and missing.code == 0x06020000
 
 

@@ -61,7 +61,7 @@ def test_read_write_wkc_is_three_and_read_only_registers_hold(drive_bus: Bus) ->
     d = drive_bus.one(C.APRW, 0, r.STATION_ADDRESS, struct.pack("<H", 0x1001))
     assert d.wkc == 3 and d.data == b"\x00\x00"
     assert drive_bus.one(C.APRD, 0, r.STATION_ADDRESS, 2).data == b"\x01\x10"
-    drive_bus.one(C.APWR, 0, r.TYPE, b"\xAA\xBB")  # ESC information is read-only
+    drive_bus.one(C.APWR, 0, r.TYPE, b"\xaa\xbb")  # ESC information is read-only
     assert drive_bus.one(C.APRD, 0, r.TYPE, 2).data == b"\x11\x02"
 
 
@@ -163,10 +163,10 @@ def test_fmmu_bit_granular_mapping_and_wkc() -> None:
     # remap the DO terminal's FMMU: logical 0x20000 bits 4..7 -> physical 0x0F00 bits 0..3
     fmmu = struct.pack("<IHBBHBBB3x", 0x20000, 1, 4, 7, 0x0F00, 0, 2, 1)
     assert bus.fpwr(0x03EB, 0x0600, fmmu) == 1
-    d = bus.frame(Datagram.logical(C.LWR, 0x20000, b"\xA5"))[0]
+    d = bus.frame(Datagram.logical(C.LWR, 0x20000, b"\xa5"))[0]
     assert d.wkc == 1
     assert do8.mem[0x0F00] & 0x0F == 0x0A  # high nibble of 0xA5
-    d = bus.frame(Datagram.logical(C.LRW, 0x20000, b"\x5F"))[0]
+    d = bus.frame(Datagram.logical(C.LRW, 0x20000, b"\x5f"))[0]
     assert d.wkc == 2  # a write-only FMMU adds 2 for LRW
 
 

@@ -45,8 +45,11 @@ def veth() -> Iterator[tuple[str, str]]:
     _ip("link", "add", master, "type", "veth", "peer", "name", emulator)
     try:
         for name in (master, emulator):
-            subprocess.run(["sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"],
-                           capture_output=True, check=False)
+            subprocess.run(
+                ["sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"],
+                capture_output=True,
+                check=False,
+            )
             _ip("link", "set", name, "up")
         yield master, emulator
     finally:
@@ -55,9 +58,23 @@ def veth() -> Iterator[tuple[str, str]]:
 
 def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", iface,
-         "--eni", str(eni), "--quiet", *extra],
-        cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "lolacli",
+            "bus",
+            "emulate",
+            "--iface",
+            iface,
+            "--eni",
+            str(eni),
+            "--quiet",
+            *extra,
+        ],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
     )
     assert proc.stderr is not None
     line = proc.stderr.readline()  # "emulating N slaves of …" once the socket is open
@@ -122,7 +139,11 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         slave = master.slaves[0]
         ident = eni.slaves[0].identity
         assert (slave.name, slave.man, slave.id, slave.rev) == (
-            eni.slaves[0].name, ident.vendor_id, ident.product_code, ident.revision)
+            eni.slaves[0].name,
+            ident.vendor_id,
+            ident.product_code,
+            ident.revision,
+        )
         _to_op(master, pysoem, 2000)
         assert master.expected_wkc == eni.cyclic_frames[0].commands[0].expected_wkc == 3
         # SDO: device type, a writable object round trip, a segmented read, an abort
@@ -163,8 +184,7 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
         master.open(veth[0])
         assert master.config_init() == 25
         identities = [(s.man, s.id) for s in master.slaves]
-        assert identities == [(s.identity.vendor_id, s.identity.product_code)
-                              for s in eni.slaves]
+        assert identities == [(s.identity.vendor_id, s.identity.product_code) for s in eni.slaves]
         assert master.slaves[21].name == eni.slaves[21].name  # the CAN gateway
         # Python answers a 25-slave frame in about 1 ms on a loaded host: allow 20 ms
         _to_op(master, pysoem, 20_000)

@@ -55,14 +55,24 @@ def test_single_drive_image_header_and_categories() -> None:
     assert (words[0x1A], words[0x1B]) == (0x1900, 140)
     assert words[0x1C] & 0x04  # CoE
     cats = categories(image)
-    assert set(cats) >= {SiiCategory.STRINGS, SiiCategory.GENERAL, SiiCategory.FMMU,
-                         SiiCategory.SYNCM, SiiCategory.TXPDO, SiiCategory.RXPDO}
+    assert set(cats) >= {
+        SiiCategory.STRINGS,
+        SiiCategory.GENERAL,
+        SiiCategory.FMMU,
+        SiiCategory.SYNCM,
+        SiiCategory.TXPDO,
+        SiiCategory.RXPDO,
+    }
     strings = cats[SiiCategory.STRINGS]
     assert strings[1 : 2 + len(slave.name)] == bytes([len(slave.name)]) + slave.name.encode()
     assert cats[SiiCategory.GENERAL][3] == 1  # name is string 1 (SOEM reads string 1)
     layout = sii_layout(image)
     assert [sm.type for sm in layout.sync_managers] == [
-        SmType.MAILBOX_OUT, SmType.MAILBOX_IN, SmType.OUTPUTS, SmType.INPUTS]
+        SmType.MAILBOX_OUT,
+        SmType.MAILBOX_IN,
+        SmType.OUTPUTS,
+        SmType.INPUTS,
+    ]
     assert (layout.outputs_bytes, layout.inputs_bytes) == (11, 11)
     assert layout.name == slave.name
 
@@ -147,9 +157,11 @@ def _image(known: dict[int, int]) -> bytes:
     return bytes(image)
 
 
-CAPTURES = [p for p in corpus_files("pcap", "ethercrab__*.pcapng")
-            if p.name in ("ethercrab__twincat-scan-boxes.pcapng",
-                          "ethercrab__rs-example-sii-el2004.pcapng")]
+CAPTURES = [
+    p
+    for p in corpus_files("pcap", "ethercrab__*.pcapng")
+    if p.name in ("ethercrab__twincat-scan-boxes.pcapng", "ethercrab__rs-example-sii-el2004.pcapng")
+]
 
 
 @pytest.mark.parametrize("path", CAPTURES, ids=[p.name for p in CAPTURES])
@@ -165,8 +177,7 @@ def test_sii_transcript_replays_against_emulated_escs(path: Path) -> None:
         reply, _ = chain.process(raw, 0)
         assert reply is not None
         ours = decode_frame(reply).datagrams
-        for d, theirs, mine in zip(decode_frame(raw).datagrams, back.datagrams, ours,
-                                   strict=True):
+        for d, theirs, mine in zip(decode_frame(raw).datagrams, back.datagrams, ours, strict=True):
             if d.ado not in (0x0502, 0x0508) or d.cmd not in (C.APRD, C.FPRD):
                 continue
             if theirs.wkc != 1:
