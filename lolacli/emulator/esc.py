@@ -18,6 +18,7 @@ from lolacli.emulator import registers as r
 from lolacli.emulator.registers import AlState, AlStatusCode
 from lolacli.emulator.sii import SiiLayout, sii_layout
 from lolacli.wire.commands import Command
+from lolacli.wire.registers import decode_system_time_difference, encode_system_time_difference
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -657,9 +658,9 @@ class Esc:
         own = self.system_time_ns(t_ns)
         mask = (1 << width_bits) - 1
         diff = ((own - received + (1 << (width_bits - 1))) & mask) - (1 << (width_bits - 1))
-        magnitude = min(abs(diff), 0x7FFFFFFF)
-        sign = 0x80000000 if diff < 0 else 0
-        _U32.pack_into(self.mem, r.DC_SYSTEM_TIME_DIFFERENCE, magnitude | sign)
+        clipped = max(-0x7FFFFFFF, min(0x7FFFFFFF, diff))
+        at = r.DC_SYSTEM_TIME_DIFFERENCE
+        self.mem[at : at + 4] = encode_system_time_difference(clipped)
         # The ESC corrects drift by speeding up or slowing down its clock, never by jumps:
         # half the error per write, at most MAX_CORRECTION_NS (offsets are the master's job).
         step = max(-MAX_CORRECTION_NS, min(MAX_CORRECTION_NS, diff // 2))
@@ -667,9 +668,7 @@ class Esc:
 
     @property
     def system_time_difference_ns(self) -> int:
-        raw = self.u32(r.DC_SYSTEM_TIME_DIFFERENCE)
-        magnitude = raw & 0x7FFFFFFF
-        return -magnitude if raw & 0x80000000 else magnitude
+        return decode_system_time_difference(memoryview(self.mem), r.DC_SYSTEM_TIME_DIFFERENCE)
 
     # ------------------------------------------------------- error counters
     def count_invalid_frame(self, port: int = 0) -> None:

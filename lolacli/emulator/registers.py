@@ -1,12 +1,14 @@
 """ESC register addresses and codes the emulator uses (ETG.1000.4 §6, ET1100 datasheet §2).
 
-Private to the emulator until :mod:`lolacli.wire.registers` lands; the names follow the
-specification tables so the switch is mechanical.
+AL states come from :mod:`lolacli.wire.registers`; the AL status codes here are the ones
+the emulated slaves raise (a superset of the wire module's frequent ones, 0x0019 included).
 """
 
 from __future__ import annotations
 
 from enum import IntEnum, IntFlag
+
+from lolacli.wire.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
 
 # --- ESC information (ETG.1000.4 Table 31) --------------------------------------------
 TYPE = 0x0000
@@ -101,20 +103,6 @@ PROCESS_RAM = 0x1000
 MEMORY_BYTES = 0x10000
 
 
-class AlState(IntEnum):
-    """AL state codes (ETG.1000.6 Table 9)."""
-
-    INIT = 0x01
-    PREOP = 0x02
-    BOOT = 0x03
-    SAFEOP = 0x04
-    OP = 0x08
-
-
-AL_ERROR_INDICATOR = 0x10  # AL status bit 4; in AL control it is "error acknowledge"
-AL_STATE_MASK = 0x0F
-
-
 class AlStatusCode(IntEnum):
     """AL status codes (ETG.1000.6 Table 11) the emulated slaves raise."""
 
@@ -143,3 +131,6 @@ class EscFeature(IntFlag):
     ENHANCED_LINK_DETECTION_EBUS = 0x0020
     ENHANCED_LINK_DETECTION_MII = 0x0040
     SEPARATE_FCS_ERRORS = 0x0080
+
+
+__all__ = ["AL_ERROR_INDICATOR", "AL_STATE_MASK", "AlState", "AlStatusCode", "EscFeature"]
