@@ -236,3 +236,64 @@ def test_emulate_reports_missing_interface(cli) -> None:
     code, _out, err = cli("bus", "emulate", "--iface", "nosuchif0", "--duration", "1")
     assert code == 4
     assert "no such interface: nosuchif0" in err
+
+
+def test_kickcat_lola_chain(veth) -> None:
+    kickcat = pytest.importorskip("kickcat")
+    from lolacli.files import load_eni
+
+    eni = load_eni(EXAMPLES / "lola.xml")
+    proc = _emulate(veth[1], EXAMPLES / "lola.xml")
+    try:
+        link = kickcat.create_link(veth[0], "")
+        link.set_timeout(0.02)  # a Python chain answers 25-slave frames in about 1 ms
+        bus = kickcat.Bus(link)
+        bus.init(0.1)
+        slaves = bus.slaves()
+        assert len(slaves) == 25
+        bus.create_mapping()
+        sizes = [(s.input_size, s.output_size) for s in slaves]
+        assert sizes == [
+            ((sl.inputs_bits + 7) // 8, (sl.outputs_bits + 7) // 8) for sl in eni.slaves
+        ]
+        bus.request_state(kickcat.State.SAFE_OP)
+        bus.wait_for_state(kickcat.State.SAFE_OP, 2.0)
+        for s in slaves:
+            s.set_output_bytes(bytes(s.output_size))
+        bus.process_data_no_check()
+        bus.request_state(kickcat.State.OPERATIONAL)
+        bus.wait_for_state(kickcat.State.OPERATIONAL, 2.0, lambda: bus.process_data_no_check())
+        errors = 0
+        for _ in range(300):
+            try:
+                bus.process_data()
+            except RuntimeError:
+                errors += 1
+            time.sleep(0.002)
+        assert errors == 0
+    finally:
+        _stop(proc)
+
+
+def test_pysoem_sees_a_slave_stuck_in_safeop(veth, pysoem) -> None:
+    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--stuck-safeop", "1")
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 1
+        master.config_map()
+        assert master.state_check(pysoem.SAFEOP_STATE, 5_000_000) == pysoem.SAFEOP_STATE
+        master.send_processdata()
+        master.receive_processdata(2000)
+        master.state = pysoem.OP_STATE
+        master.write_state()
+        for _ in range(50):
+            master.send_processdata()
+            master.receive_processdata(2000)
+        master.read_state()
+        slave = master.slaves[0]
+        assert slave.state == pysoem.SAFEOP_STATE | 0x10  # error indicator set
+        assert slave.al_status == 0x0019  # no valid outputs
+    finally:
+        master.close()
+        _stop(proc)
