@@ -34,6 +34,7 @@ class Device:
         self.state = 1
         self.t_ns = 0
         self._layouts: dict[Direction, tuple[tuple[Direction, int], list[Any]]] = {}
+        self._sizes: tuple[int, tuple[int, int]] | None = None
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
@@ -136,9 +137,12 @@ class Device:
         return out
 
     def process_data_bytes(self) -> tuple[int, int]:
-        outputs = sum(m[2] for m in self._layout(Direction.OUTPUT))
-        inputs = sum(m[2] for m in self._layout(Direction.INPUT))
-        return (outputs + 7) // 8, (inputs + 7) // 8
+        version = self.od.version
+        if self._sizes is None or self._sizes[0] != version:
+            outputs = sum(m[2] for m in self._layout(Direction.OUTPUT))
+            inputs = sum(m[2] for m in self._layout(Direction.INPUT))
+            self._sizes = (version, ((outputs + 7) // 8, (inputs + 7) // 8))
+        return self._sizes[1]
 
     def unpack_outputs(self, outputs: bytes) -> None:
         image = int.from_bytes(outputs, "little")

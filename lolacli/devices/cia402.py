@@ -8,10 +8,11 @@ rate limit of CSP following), 0x603F error code, 0x1008 a long name (segmented S
 
 from __future__ import annotations
 
+import struct
 from enum import IntEnum
 
 from lolacli.devices.base import Device
-from lolacli.devices.od import DataType
+from lolacli.devices.od import DataType, Entry
 
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
@@ -156,6 +157,7 @@ class Cia402Drive(Device):
         od.set(MODES, 0, MODE_CSP)
         self.power = Cia402State.NOT_READY_TO_SWITCH_ON
         self._previous_cw = 0
+        self._cyclic: dict[int, Entry] | None = None
         self._update_status()
 
     def fault(self, error_code: int = 0x5530) -> None:
@@ -164,40 +166,59 @@ class Cia402Drive(Device):
         self.power = Cia402State.FAULT_REACTION_ACTIVE
         self._update_status()
 
+    def _entries(self) -> dict[int, Entry]:
+        """The cyclic objects' entries, looked up once (the hot path reads their bytes)."""
+        if self._cyclic is None:
+            self._cyclic = {
+                index: self.od.entry(index, 0)
+                for index in (
+                    CONTROLWORD,
+                    STATUSWORD,
+                    MODES,
+                    MODES_DISPLAY,
+                    TARGET_POSITION,
+                    POSITION_ACTUAL,
+                    VELOCITY_ACTUAL,
+                    TARGET_VELOCITY,
+                    MAX_VELOCITY,
+                    ERROR_CODE,
+                )
+            }
+        return self._cyclic
+
     def step(self, t_ns: int) -> None:
-        od = self.od
-        cw = od.get_int(CONTROLWORD)
+        e = self._entries()
+        cw = _get(e[CONTROLWORD])
         command = decode_controlword(cw, self._previous_cw)
         self._previous_cw = cw
         self.power = next_state(self.power, command)
-        if self.power == Cia402State.SWITCH_ON_DISABLED and od.get_int(ERROR_CODE):
-            od.set(ERROR_CODE, 0, 0)
-        mode = od.get_int(MODES)
-        od.set(MODES_DISPLAY, 0, mode)
+        if self.power == Cia402State.SWITCH_ON_DISABLED and _get(e[ERROR_CODE]):
+            e[ERROR_CODE].value = bytes(2)
+        e[MODES_DISPLAY].value = e[MODES].value
         dt_ns = t_ns - self.t_ns if self.t_ns else 0
-        self._move(mode, dt_ns)
-        self._update_status()
+        self._move(e, _get(e[MODES], signed=True), dt_ns)
+        self._update_status(e)
 
-    def _move(self, mode: int, dt_ns: int) -> None:
-        od = self.od
-        actual = od.get_int(POSITION_ACTUAL)
+    def _move(self, e: dict[int, Entry], mode: int, dt_ns: int) -> None:
+        actual = _get(e[POSITION_ACTUAL], signed=True)
         if self.power != Cia402State.OPERATION_ENABLED:
-            od.set(VELOCITY_ACTUAL, 0, 0)
+            e[VELOCITY_ACTUAL].value = bytes(4)
             return
         if mode == MODE_CSV:
-            velocity = od.get_int(TARGET_VELOCITY)
+            velocity = _get(e[TARGET_VELOCITY], signed=True)
             new = actual + (velocity * dt_ns) // 1_000_000_000
         else:
-            new = od.get_int(TARGET_POSITION)
-            limit = od.get_int(MAX_VELOCITY)
+            new = _get(e[TARGET_POSITION], signed=True)
+            limit = _get(e[MAX_VELOCITY])
             if limit and dt_ns:
                 step = max(1, (limit * dt_ns) // 1_000_000_000)
                 new = actual + max(-step, min(step, new - actual))
         velocity = ((new - actual) * 1_000_000_000) // dt_ns if dt_ns > 0 else 0
-        od.set(POSITION_ACTUAL, 0, _int32(new))
-        od.set(VELOCITY_ACTUAL, 0, _int32(velocity))
+        e[POSITION_ACTUAL].value = _I32.pack(_int32(new))
+        e[VELOCITY_ACTUAL].value = _I32.pack(_int32(velocity))
 
-    def _update_status(self) -> None:
+    def _update_status(self, e: dict[int, Entry] | None = None) -> None:
+        e = e or self._entries()
         status = int(self.power) | STATUS_REMOTE
         if self.power in (
             S.READY_TO_SWITCH_ON,
@@ -208,9 +229,16 @@ class Cia402Drive(Device):
             status |= STATUS_VOLTAGE_ENABLED
         if self.power == S.OPERATION_ENABLED:
             status |= STATUS_FOLLOWING
-            if self.od.get_int(POSITION_ACTUAL) == self.od.get_int(TARGET_POSITION):
+            if e[POSITION_ACTUAL].value == e[TARGET_POSITION].value:
                 status |= STATUS_TARGET_REACHED
-        self.od.set(STATUSWORD, 0, status)
+        e[STATUSWORD].value = status.to_bytes(2, "little")
+
+
+def _get(entry: Entry, *, signed: bool = False) -> int:
+    return int.from_bytes(entry.value, "little", signed=signed)
+
+
+_I32 = struct.Struct("<i")
 
 
 def _int32(value: int) -> int:

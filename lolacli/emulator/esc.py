@@ -596,16 +596,16 @@ class Esc:
         if self.app is None or self.al_state not in (AlState.SAFEOP, AlState.OP):
             return
         self.counters.cycles += 1
-        layout = self.layout
+        sms = self._config().sms
         outputs_bytes, inputs_bytes = self._process_sizes()
-        out_sm = self.sync_manager(layout.outputs_sm)
         outputs = b""
         if outputs_bytes and self.al_state == AlState.OP:
-            outputs = bytes(self.mem[out_sm.start : out_sm.start + outputs_bytes])
+            start = sms[self.layout.outputs_sm].start
+            outputs = bytes(self.mem[start : start + outputs_bytes])
         inputs = self.app.cycle(outputs, t_ns)
         if inputs_bytes:
-            in_sm = self.sync_manager(layout.inputs_sm)
-            self.mem[in_sm.start : in_sm.start + len(inputs)] = inputs
+            start = sms[self.layout.inputs_sm].start
+            self.mem[start : start + len(inputs)] = inputs
 
     # --------------------------------------------------------------- SII
     def _eeprom_command(self) -> None:
@@ -713,6 +713,7 @@ class SmView:
 class _Config:
     """Decoded SM/FMMU registers: active SMs and the FMMUs whose buffers are open."""
 
+    sms: list[SmView]
     active: list[SmView]
     open_fmmus: list[FmmuEntry]
 
@@ -720,7 +721,7 @@ class _Config:
     def build(sms: list[SmView], fmmus: list[FmmuEntry]) -> _Config:
         active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
         open_fmmus = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
-        return _Config(active, open_fmmus)
+        return _Config(sms, active, open_fmmus)
 
 
 def _sm_open(f: FmmuEntry, sms: list[SmView]) -> bool:
