@@ -186,6 +186,7 @@ class Chain:
         for data in datas:
             data.release()
         view.release()
+        self.tick(t_ns)
         if logical:
             self._deferred_t_ns = t_ns
             if not defer_cycles:
@@ -196,6 +197,11 @@ class Chain:
             buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         return bytes(buf), self.timing.round_trip_ns(len(frame), len(self.slaves))
+
+    def tick(self, t_ns: int) -> None:
+        """Let time pass in every slave (process-data watchdogs)."""
+        for esc in self.slaves:
+            esc.check_watchdog(t_ns)
 
     def run_deferred_cycles(self) -> None:
         """Run the application cycle the last logical frame asked for, if not done yet."""

@@ -145,6 +145,8 @@ class Esc:
         self.port_times: PortTimes | None = None
         self._readonly = _readonly_mask()
         self._cache: _Config | None = None
+        self._now_ns = 0
+        self._last_outputs_ns = 0
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -224,6 +226,7 @@ class Esc:
         32-bit address is ``adp | ado << 16``).
         """
         self.counters.datagrams += 1
+        self._now_ns = t_ns
         if cmd in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW):
             hit = adp == 0
             new_adp = (adp + 1) & 0xFFFF
@@ -373,7 +376,33 @@ class Esc:
         outputs, _ = self._process_sizes()
         return outputs == 0 or self.outputs_valid
 
+    # ------------------------------------------------------------ watchdog
+    def watchdog_timeout_ns(self) -> int | None:
+        """Process-data watchdog: (divider + 2) × 40 ns × 0x0420, when the output SM
+        enables it (control bit 6) and the time is not 0 (ET1100 datasheet §2.31)."""
+        time_ticks = self.u16(r.WATCHDOG_TIME_PROCESS_DATA)
+        sm = self._config().sms[self.layout.outputs_sm]
+        if not time_ticks or not sm.control & r.SM_CONTROL_WATCHDOG:
+            return None
+        return (self.u16(r.WATCHDOG_DIVIDER) + 2) * 40 * time_ticks
+
+    def check_watchdog(self, t_ns: int) -> None:
+        """In OP without new outputs for the watchdog time: back to SAFEOP, error 0x001B."""
+        if self.al_state != AlState.OP or not self._process_sizes()[0]:
+            return
+        timeout = self.watchdog_timeout_ns()
+        if timeout is None or t_ns - self._last_outputs_ns <= timeout:
+            return
+        self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] &= ~0x01
+        counter = r.WATCHDOG_COUNTER_PROCESS_DATA
+        self.mem[counter] = min(0xFF, self.mem[counter] + 1)
+        self._enter(AlState.SAFEOP)
+        self._set_al(AlState.SAFEOP, AlStatusCode.SYNC_MANAGER_WATCHDOG, error=True)
+
     def _enter(self, state: int) -> None:
+        if state == AlState.OP:
+            self._last_outputs_ns = self._now_ns
+            self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] |= 0x01
         self.pending_op = False
         if state in (AlState.INIT, AlState.PREOP):
             self.outputs_valid = False
@@ -505,6 +534,7 @@ class Esc:
 
     def _outputs_written(self) -> None:
         self.outputs_valid = True
+        self._last_outputs_ns = self._now_ns
         if self.pending_op and self.al_state == AlState.SAFEOP:
             self._enter(AlState.OP)
 

@@ -248,3 +248,18 @@ def test_error_counters_count_invalid_frames_and_clear_on_write(drive_bus: Bus) 
     assert drive_bus.one(C.APRD, 0, r.RX_ERROR_COUNTER, 1).data == b"\x02"
     drive_bus.one(C.APWR, 0, r.RX_ERROR_COUNTER, 1)
     assert drive_bus.one(C.APRD, 0, r.RX_ERROR_COUNTER, 1).data == b"\x00"
+
+
+def test_process_data_watchdog_drops_to_safeop_without_outputs(drive_bus: Bus) -> None:
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    drive_bus.bring_up(eni)
+    esc = drive_bus.chain.slaves[0]
+    assert esc.watchdog_timeout_ns() == 100_000_000  # ENI: divider 0x09C2, 1000 ticks
+    for _ in range(150):  # outputs every 1 ms keep it in OP for 150 ms
+        drive_bus.cycle(eni)
+    assert esc.al_state == AlState.OP and not esc.al_error
+    drive_bus.t_ns += 101_000_000  # silence longer than the watchdog
+    drive_bus.one(C.BRD, 0, r.AL_STATUS, 2)
+    assert esc.al_state == AlState.SAFEOP and esc.al_error
+    assert esc.al_status_code == AlStatusCode.SYNC_MANAGER_WATCHDOG
+    assert drive_bus.fprd(0x03E9, r.WATCHDOG_STATUS_PROCESS_DATA, 4) == b"\x00\x00\x01\x00"

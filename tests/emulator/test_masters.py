@@ -96,7 +96,6 @@ def pysoem():
 
 
 def _to_op(master, pysoem, timeout_us: int) -> None:
-    assert master.config_map() > 0
     assert master.config_dc()
     assert master.state_check(pysoem.SAFEOP_STATE, 5_000_000) == pysoem.SAFEOP_STATE
     master.send_processdata()
@@ -144,9 +143,8 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
             ident.product_code,
             ident.revision,
         )
-        _to_op(master, pysoem, 2000)
-        assert master.expected_wkc == eni.cyclic_frames[0].commands[0].expected_wkc == 3
-        # SDO: device type, a writable object round trip, a segmented read, an abort
+        assert master.config_map() > 0
+        # SDO in SAFEOP: in OP the drive's process-data watchdog (100 ms) wants outputs
         assert struct.unpack("<I", slave.sdo_read(0x1000, 0))[0] == 0x00020192
         slave.sdo_write(0x607F, 0, struct.pack("<I", 250_000))
         assert struct.unpack("<I", slave.sdo_read(0x607F, 0))[0] == 250_000
@@ -157,6 +155,8 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         with pytest.raises(pysoem.SdoError) as exc:
             slave.sdo_read(0x2345, 0)
         assert exc.value.abort_code == 0x06020000
+        _to_op(master, pysoem, 2000)
+        assert master.expected_wkc == eni.cyclic_frames[0].commands[0].expected_wkc == 3
         # process data: enable the drive, command a position, see it followed
         bad = _cycles(master, 10_000, 0.001, 2000)  # 10 s at 1 kHz
         assert bad == []
@@ -186,11 +186,12 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
         identities = [(s.man, s.id) for s in master.slaves]
         assert identities == [(s.identity.vendor_id, s.identity.product_code) for s in eni.slaves]
         assert master.slaves[21].name == eni.slaves[21].name  # the CAN gateway
+        assert master.config_map() > 0
+        assert struct.unpack("<I", master.slaves[24].sdo_read(0x1018, 1))[0] == 2
         # Python answers a 25-slave frame in about 1 ms on a loaded host: allow 20 ms
         _to_op(master, pysoem, 20_000)
         assert master.expected_wkc == 70 == eni.cyclic_frames[0].commands[0].expected_wkc
         assert _cycles(master, 1000, 0.002, 20_000) == []
-        assert struct.unpack("<I", master.slaves[24].sdo_read(0x1018, 1))[0] == 2
     finally:
         master.close()
         _stop(proc)
