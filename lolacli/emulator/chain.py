@@ -137,6 +137,8 @@ class Chain:
         self.faults = faults or Faults()
         self.stats = ChainStats()
         self._deferred_t_ns: int | None = None
+        # when the frame reaches each slave, relative to its start: fixed for a line
+        self._port_offsets = self.timing.port_times(0, len(slaves))
         for i, esc in enumerate(slaves):
             esc.set_topology(last=i == len(slaves) - 1)
 
@@ -162,13 +164,14 @@ class Chain:
             return None, 0
         buf = bytearray(frame)
         view = memoryview(buf)
-        times = self.timing.port_times(t_ns, len(self.slaves))
+        times = self._port_offsets
         logical = any(s.cmd in LOGICAL for s in slots)
         self._address(slots)
         datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
-        for position, (esc, when) in enumerate(zip(self.slaves, times, strict=True)):
-            esc.port_times = when
-            t = when.port0_ns
+        for position, (esc, offsets) in enumerate(zip(self.slaves, times, strict=True)):
+            esc.frame_t_ns = t_ns
+            esc.port_offsets = offsets
+            t = t_ns + offsets.port0_ns
             for slot, data in zip(slots, datas, strict=True):
                 if slot.target is None:
                     slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, data, t)

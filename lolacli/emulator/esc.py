@@ -28,6 +28,8 @@ _FMMU = struct.Struct("<IHBBHBBB3x")
 _SM = struct.Struct("<HHBBBB")
 
 MAX_CORRECTION_NS = 1000
+_MASK64 = (1 << 64) - 1
+_LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
 # requested state -> states it may be reached from (ETG.1000.6 Figure 10)
 _ALLOWED_FROM: dict[int, frozenset[int]] = {
@@ -142,11 +144,13 @@ class Esc:
         self.refuse_op_code: int | None = None  # fault: stay in SAFEOP with this code
         self._mailbox_queue: list[bytes] = []
         self.last_port = True
-        self.port_times: PortTimes | None = None
+        self.frame_t_ns = 0  # when the current frame left the master
+        self.port_offsets: PortTimes | None = None  # its arrival at port 0 / port 1, relative
         self._readonly = _readonly_mask()
         self._cache: _Config | None = None
         self._now_ns = 0
         self._last_outputs_ns = 0
+        self._watchdog_ns: int | None = -1  # -1: to be computed from the registers
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -227,6 +231,8 @@ class Esc:
         """
         self.counters.datagrams += 1
         self._now_ns = t_ns
+        if cmd in _LOGICAL:
+            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
         if cmd in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW):
             hit = adp == 0
             new_adp = (adp + 1) & 0xFFFF
@@ -240,8 +246,6 @@ class Esc:
             return adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
         if cmd in (Command.BRD, Command.BWR, Command.BRW):
             return (adp + 1) & 0xFFFF, self._physical(cmd, ado, data, t_ns, addressed=True)
-        if cmd in (Command.LRD, Command.LWR, Command.LRW):
-            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
         return adp, 0
 
     # --------------------------------------------------------- physical access
@@ -250,6 +254,12 @@ class Esc:
         if ado + n > r.MEMORY_BYTES:
             return 0
         if cmd in (Command.ARMW, Command.FRMW):
+            if ado == r.DC_SYSTEM_TIME and n in (4, 8):  # the DC distribution: hot path
+                if addressed:
+                    data[:] = (self.system_time_ns(t_ns) & _MASK64).to_bytes(8, "little")[:n]
+                else:
+                    self._system_time_written(ado, ado + n, bytes(data), t_ns)
+                return 1
             if addressed:
                 return 1 if self._read(ado, data, t_ns, merge=False) else 0
             return 1 if self._write(ado, bytes(data), t_ns) else 0
@@ -271,8 +281,10 @@ class Esc:
         if _overlaps(address, end, r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8):
             _U64.pack_into(self.mem, r.DC_SYSTEM_TIME, self.system_time_ns(t_ns) & (2**64 - 1))
         if merge:
-            for i, b in enumerate(self.mem[address:end]):
-                data[i] |= b
+            n = end - address
+            merged = int.from_bytes(data, "little")
+            merged |= int.from_bytes(self.mem[address:end], "little")
+            data[:] = merged.to_bytes(n, "little")
         else:
             data[:] = self.mem[address:end]
         self._after_read(address, end)
@@ -300,6 +312,9 @@ class Esc:
     def _after_write(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
         if _overlaps(start, end, r.FMMU_BASE, r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES):
             self._cache = None
+            self._watchdog_ns = -1
+        if _overlaps(start, end, r.WATCHDOG_DIVIDER, r.WATCHDOG_TIME_PROCESS_DATA + 2):
+            self._watchdog_ns = -1
         if start < r.PROCESS_RAM:
             self._register_side_effects(start, end, payload, t_ns)
         if end > r.PROCESS_RAM:
@@ -382,15 +397,17 @@ class Esc:
         enables it (control bit 6) and the time is not 0 (ET1100 datasheet §2.31)."""
         time_ticks = self.u16(r.WATCHDOG_TIME_PROCESS_DATA)
         sm = self._config().sms[self.layout.outputs_sm]
-        if not time_ticks or not sm.control & r.SM_CONTROL_WATCHDOG:
+        if not time_ticks or not sm.length or not sm.control & r.SM_CONTROL_WATCHDOG:
             return None
         return (self.u16(r.WATCHDOG_DIVIDER) + 2) * 40 * time_ticks
 
     def check_watchdog(self, t_ns: int) -> None:
         """In OP without new outputs for the watchdog time: back to SAFEOP, error 0x001B."""
-        if self.al_state != AlState.OP or not self._process_sizes()[0]:
+        if self.mem[r.AL_STATUS] != AlState.OP:
             return
-        timeout = self.watchdog_timeout_ns()
+        if self._watchdog_ns == -1:
+            self._watchdog_ns = self.watchdog_timeout_ns()
+        timeout = self._watchdog_ns
         if timeout is None or t_ns - self._last_outputs_ns <= timeout:
             return
         self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] &= ~0x01
@@ -569,31 +586,31 @@ class Esc:
         return FmmuEntry(ls, length, lsb, lstop, ps, psb, typ, bool(act & 1))
 
     def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
+        """LRD/LWR/LRW through the FMMUs (ETG.1000.4 §6.5): this slave's write FMMUs
+        take from the datagram first, then its read FMMUs put into it; WKC +1 for a read,
+        +1 (LWR) or +2 (LRW) for a write."""
         end = address + len(data)
-        hits = [
-            f
-            for f in self._config().open_fmmus
-            if f.logical_start < end and address < f.logical_start + f.length_bytes
-        ]
-        if not hits:
-            return 0
+        config = self._config()
         wkc = 0
         if cmd != Command.LRD:
-            incoming = bytes(data)
-            wrote = [f for f in hits if f.type & r.FMMU_TYPE_WRITE]
-            for f in wrote:
-                self._fmmu_write(f, address, incoming)
+            wrote = False
+            for f in config.write_fmmus:
+                if f.logical_start < end and address < f.logical_start + f.length_bytes:
+                    self._fmmu_write(f, address, data)
+                    wrote = True
             if wrote:
                 wkc += 2 if cmd == Command.LRW else 1
         if cmd != Command.LWR:
-            read = [f for f in hits if f.type & r.FMMU_TYPE_READ]
-            for f in read:
-                self._fmmu_read(f, address, data)
+            read = False
+            for f in config.read_fmmus:
+                if f.logical_start < end and address < f.logical_start + f.length_bytes:
+                    self._fmmu_read(f, address, data)
+                    read = True
             if read:
                 wkc += 1
         return wkc
 
-    def _fmmu_write(self, f: FmmuEntry, address: int, incoming: bytes) -> None:
+    def _fmmu_write(self, f: FmmuEntry, address: int, incoming: memoryview) -> None:
         if _byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(incoming), f.logical_start + f.length_bytes)
@@ -667,13 +684,13 @@ class Esc:
         return self.clock.local_ns(t_ns) + offset
 
     def _latch_receive_times(self) -> None:
-        times = self.port_times
-        if times is None:
+        offsets = self.port_offsets
+        if offsets is None:
             return
-        local0 = self.clock.local_ns(times.port0_ns)
+        local0 = self.clock.local_ns(self.frame_t_ns + offsets.port0_ns)
         _U32.pack_into(self.mem, r.DC_RECEIVE_TIME_PORT0, local0 & 0xFFFFFFFF)
-        if times.port1_ns is not None:
-            local1 = self.clock.local_ns(times.port1_ns)
+        if offsets.port1_ns is not None:
+            local1 = self.clock.local_ns(self.frame_t_ns + offsets.port1_ns)
             _U32.pack_into(self.mem, r.DC_RECEIVE_TIME_PORT0 + 4, local1 & 0xFFFFFFFF)
         _U64.pack_into(self.mem, r.DC_RECEIVE_TIME_PROCESSING_UNIT, local0 & (2**64 - 1))
 
@@ -745,13 +762,16 @@ class _Config:
 
     sms: list[SmView]
     active: list[SmView]
-    open_fmmus: list[FmmuEntry]
+    write_fmmus: list[FmmuEntry]
+    read_fmmus: list[FmmuEntry]
 
     @staticmethod
     def build(sms: list[SmView], fmmus: list[FmmuEntry]) -> _Config:
         active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
-        open_fmmus = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
-        return _Config(sms, active, open_fmmus)
+        usable = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
+        write = [f for f in usable if f.type & r.FMMU_TYPE_WRITE]
+        read = [f for f in usable if f.type & r.FMMU_TYPE_READ]
+        return _Config(sms, active, write, read)
 
 
 def _sm_open(f: FmmuEntry, sms: list[SmView]) -> bool:
