@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import random
 import struct
 
@@ -85,11 +86,12 @@ def test_random_and_mutated_frames_never_raise_and_valid_frames_still_answer() -
         _brd(),
     ]
     malformed = 0
-    for i in range(20_000):
+    frames = int(os.environ.get("LOLACLI_FUZZ_FRAMES", "100000"))  # 1 000 000 in slow runs
+    for i in range(frames):
         base = bytearray(rng.choice(valid))
         kind = i % 4
         if kind == 0:
-            frame = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 80)))
+            frame = rng.randbytes(rng.randrange(0, 80))
         elif kind == 1:
             for _ in range(rng.randrange(1, 6)):
                 base[rng.randrange(12, len(base))] = rng.randrange(256)
@@ -97,11 +99,10 @@ def test_random_and_mutated_frames_never_raise_and_valid_frames_still_answer() -
         elif kind == 2:
             frame = bytes(base[: rng.randrange(0, len(base))])
         else:
-            base[12:14] = b"\x88\xa4"
-            frame = bytes(base[:14]) + bytes(rng.randrange(256) for _ in range(40))
+            frame = bytes(base[:12]) + b"\x88\xa4" + rng.randbytes(40)
         reply, _ = chain.process(frame, i)
         malformed += reply is None
-    assert chain.stats.malformed == malformed > 1000
+    assert chain.stats.malformed == malformed > frames // 10
     assert chain.slaves[0].mem[0x0300] == 0xFF  # the invalid-frame counter saturates
     reply, _ = chain.process(_brd(), 0)
     assert reply is not None and decode_frame(reply).datagrams[0].wkc == 1

@@ -298,3 +298,46 @@ def test_pysoem_sees_a_slave_stuck_in_safeop(veth, pysoem) -> None:
     finally:
         master.close()
         _stop(proc)
+
+
+def test_emulate_status_line_and_clean_sigterm(veth) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", veth[1]],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(2.5)  # the status line comes every second
+    proc.send_signal(15)
+    out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert out == ""  # nothing on stdout: status goes to stderr
+    assert "emulating 25 slaves" in err
+    assert "INIT×25" in err and "frames" in err
+    assert "stopped:" in err
+
+
+def test_emulate_duration_stops_with_exit_0(veth) -> None:
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lolacli",
+            "bus",
+            "emulate",
+            "--iface",
+            veth[1],
+            "--eni",
+            str(EXAMPLES / "single_drive.xml"),
+            "--duration",
+            "0.5",
+            "--quiet",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "stopped: 0 frames received" in done.stderr
