@@ -52,6 +52,7 @@ class _Transfer:
     data: bytearray
     toggle: int
     size: int = 0
+    complete: bool = False
 
 
 class SdoServer:
@@ -126,25 +127,56 @@ class SdoServer:
 
     # ------------------------------------------------------------- download
     def _download_initiate(self, command: int, index: int, subindex: int, body: bytes) -> bytes:
-        if command & 0x10:
-            raise SdoAbortError(index, subindex, AbortCode.COMPLETE_ACCESS_UNSUPPORTED)
+        complete = bool(command & 0x10)
         expedited, sized = command & 0x02, command & 0x01
         if expedited:
             size = 4 - ((command >> 2) & 0x03) if sized else 4
-            self._store(index, subindex, body[4 : 4 + size])
+            self._store(index, subindex, body[4 : 4 + size], complete)
         else:
             (size,) = _U32.unpack_from(body, 4)
             data = body[8 : 8 + size]
             if len(data) >= size:
-                self._store(index, subindex, data)
+                self._store(index, subindex, data, complete)
             else:
                 self.od.entry(index, subindex)  # exists? (abort early otherwise)
-                self._download = _Transfer(index, subindex, bytearray(data), 0, size)
-        return self._coe(SERVICE_SDO_RESPONSE, _SDO.pack(0x60, index, subindex) + bytes(4))
+                self._download = _Transfer(index, subindex, bytearray(data), 0, size, complete)
+        response = _SDO.pack(0x60 | (0x10 if complete else 0), index, subindex) + bytes(4)
+        return self._coe(SERVICE_SDO_RESPONSE, response)
 
-    def _store(self, index: int, subindex: int, data: bytes) -> None:
-        self.od.write(index, subindex, bytes(data))
+    def _store(self, index: int, subindex: int, data: bytes, complete: bool = False) -> None:
+        if complete:
+            self._store_complete(index, subindex, bytes(data))
+        else:
+            self.od.write(index, subindex, bytes(data))
         self.transfers += 1
+
+    def _store_complete(self, index: int, subindex: int, data: bytes) -> None:
+        """Complete access download: sub 0 (8 bits padded to 16 when starting at 0), then
+        the entries in order, each by its own size (ETG.1000.6 §5.6.2.1)."""
+        obj = self.od.objects.get(index)
+        if obj is None:
+            raise SdoAbortError(index, subindex, AbortCode.OBJECT_DOES_NOT_EXIST)
+        if subindex > 1:
+            raise SdoAbortError(index, subindex, AbortCode.UNSUPPORTED_ACCESS)
+        pos, count = 0, obj.max_subindex
+        if subindex == 0:
+            if len(data) < 2:
+                raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_LOW)
+            count, pos = data[0], 2
+        writes = []
+        for sub in range(1, count + 1):
+            entry = self.od.entry(index, sub)
+            size = max(1, (entry.bit_size + 7) // 8)
+            if pos + size > len(data):
+                raise SdoAbortError(index, sub, AbortCode.LENGTH_TOO_LOW)
+            writes.append((sub, data[pos : pos + size]))
+            pos += size
+        if subindex == 0:
+            self.od.write(index, 0, b"\x00")  # as a master does: count 0, entries, count
+        for sub, value in writes:
+            self.od.write(index, sub, value)
+        if subindex == 0:
+            self.od.write(index, 0, bytes([count]))
 
     def _download_segment(self, command: int, body: bytes) -> bytes:
         transfer = self._download
@@ -160,7 +192,8 @@ class SdoServer:
         transfer.toggle ^= 0x10
         if command & 0x01:
             self._download = None
-            self._store(transfer.index, transfer.subindex, bytes(transfer.data[: transfer.size]))
+            data = bytes(transfer.data[: transfer.size])
+            self._store(transfer.index, transfer.subindex, data, transfer.complete)
         return self._coe(SERVICE_SDO_RESPONSE, bytes([0x20 | toggle]) + bytes(7))
 
     # --------------------------------------------------------------- upload

@@ -40,7 +40,7 @@ class SlaveApplication:
 
 def build_slave(slave: Slave, *, drift_ppb: int = 0, start_ns: int = 0) -> Esc:
     """The ESC of one ENI slave with its device behind it."""
-    sii = sii_from_slave(slave)
+    sii = sii_from_slave(slave, complete_access=True)  # real CiA 402 drives offer it
     device = device_for(slave)
     mailbox_in = slave.mailbox.in_length_bytes if slave.mailbox is not None else 0
     app = SlaveApplication(device, mailbox_in)

@@ -140,3 +140,24 @@ def test_unsupported_mailbox_protocol_gets_a_mailbox_error() -> None:
     box = decode_mailbox(reply)
     assert box.mailbox_type == MailboxType.ERR
     assert struct.unpack_from("<HH", box.payload) == (1, 2)
+
+
+def test_complete_access_download_of_a_pdo_mapping(bus: Bus) -> None:
+    from lolacli.wire.sdo import SdoDownloadRequest
+
+    entries = [0x60410010, 0x60640020]
+    payload = bytes([len(entries), 0]) + b"".join(struct.pack("<I", e) for e in entries)
+    request = SdoDownloadRequest(
+        0x1A00, 0, payload, complete_access=True, expedited=False, complete_size=len(payload)
+    )
+    reply = decode_sdo(bus.mailbox_exchange(STATION, encode_sdo(request), *MBX))
+    assert isinstance(reply, SdoDownloadResponse) and reply.complete_access
+    drive = bus.chain.slaves[0].app.device  # type: ignore[union-attr]
+    assert drive.process_data_bytes() == (11, 6)
+    upload = decode_sdo(
+        bus.mailbox_exchange(
+            STATION, encode_sdo(SdoUploadRequest(0x1A00, 0, complete_access=True)), *MBX
+        )
+    )
+    assert isinstance(upload, SdoUploadResponse)
+    assert upload.data[:10] == payload
