@@ -151,6 +151,7 @@ class Esc:
         self._now_ns = 0
         self._last_outputs_ns = 0
         self._watchdog_ns: int | None = -1  # -1: to be computed from the registers
+        self._last_mailbox_in: bytes | None = None
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -438,7 +439,7 @@ class Esc:
             mailbox = sm in (layout.mailbox_out_sm, layout.mailbox_in_sm)
             on = state != AlState.INIT if mailbox else state in (AlState.SAFEOP, AlState.OP)
             base = self._sm_address(sm)
-            self.mem[base + 7] = 0 if on else r.SM_PDI_DEACTIVATE
+            self.mem[base + 7] = (self.mem[base + 7] & 0x02) | (0 if on else r.SM_PDI_DEACTIVATE)
         self._cache = None
 
     def _check_mailbox_sms(self) -> int | None:
@@ -526,8 +527,28 @@ class Esc:
     def _sm_registers_written(self, start: int, end: int) -> None:
         for i in range(self.config.sync_managers):
             base = self._sm_address(i)
-            if _overlaps(start, end, base, base + 8) and not self.mem[base + 6] & 1:
+            if not _overlaps(start, end, base, base + 8):
+                continue
+            if not self.mem[base + 6] & 1:
                 self._set_sm_full(i, False)
+            elif i == self.layout.mailbox_in_sm:
+                self._repeat_request(base)
+
+    def _repeat_request(self, base: int) -> None:
+        """Mailbox repeat (ETG.1000.4 §6.7.2): the master toggled activate bit 1 after a
+        lost mailbox read; post the last message again and acknowledge in PDI bit 1."""
+        requested = self.mem[base + 6] & 0x02
+        if requested == self.mem[base + 7] & 0x02:
+            return
+        if self._last_mailbox_in is not None:
+            index = self.layout.mailbox_in_sm
+            if self._sm_full(index):  # a newer message is waiting: it goes back in line
+                sm = self.sync_manager(index)
+                self._mailbox_queue.insert(0, bytes(self.mem[sm.start : sm.start + sm.length]))
+                self._set_sm_full(index, False)
+            self._mailbox_queue.insert(0, self._last_mailbox_in)
+            self._post_next_mailbox()
+        self.mem[base + 7] = (self.mem[base + 7] & ~0x02) | requested
 
     def _sm_written(self, start: int, end: int) -> None:
         for sm in self._active_sms():
@@ -571,6 +592,7 @@ class Esc:
             return
         message = self._mailbox_queue.pop(0)[: sm.length]
         self.mem[sm.start : sm.start + sm.length] = message + bytes(sm.length - len(message))
+        self._last_mailbox_in = message
         self._set_sm_full(index, True)
 
     def post_mailbox(self, message: bytes) -> None:

@@ -263,3 +263,19 @@ def test_process_data_watchdog_drops_to_safeop_without_outputs(drive_bus: Bus) -
     assert esc.al_state == AlState.SAFEOP and esc.al_error
     assert esc.al_status_code == AlStatusCode.SYNC_MANAGER_WATCHDOG
     assert drive_bus.fprd(0x03E9, r.WATCHDOG_STATUS_PROCESS_DATA, 4) == b"\x00\x00\x01\x00"
+
+
+def test_mailbox_repeat_request_posts_the_last_message_again(drive_bus: Bus) -> None:
+    """SOEM after a lost mailbox read: toggle SM1 activate bit 1 (word write at 0x080D),
+    wait for PDI control bit 1 (0x080F) to follow, read the mailbox again."""
+    _configure_mailbox(drive_bus)
+    drive_bus.fpwr(0x03E9, r.AL_CONTROL, b"\x02\x00")
+    esc = drive_bus.chain.slaves[0]
+    esc.post_mailbox(b"\x05\x00" + bytes(4) + b"first")
+    assert drive_bus.fprd(0x03E9, 0x1900, 140)[6:11] == b"first"  # ...and the reply is lost
+    assert not drive_bus.fprd(0x03E9, 0x080D, 1)[0] & 0x08
+    status = struct.unpack("<H", drive_bus.fprd(0x03E9, 0x080D, 2))[0]
+    assert drive_bus.fpwr(0x03E9, 0x080D, struct.pack("<H", status ^ 0x0200)) == 1
+    assert drive_bus.fprd(0x03E9, 0x080F, 1)[0] & 0x02 == (status ^ 0x0200) >> 8 & 0x02
+    assert drive_bus.fprd(0x03E9, 0x080D, 1)[0] & 0x08  # full again
+    assert drive_bus.fprd(0x03E9, 0x1900, 140)[6:11] == b"first"
