@@ -55,9 +55,10 @@ def _compile() -> SimpleNamespace:
     namespace: dict[str, Any] = {"__name__": "lolacli.capture.scan"}
     code = compile(source_path.read_text(encoding="utf-8"), str(source_path), "exec")
     exec(code, namespace)  # noqa: S102  (our own module, compiled for numba)
+    namespace["_byte"] = _byte_int64
     for name in scan.KERNELS:
-        namespace[name] = numba.njit(cache=True, nogil=True)(namespace[name])
-    namespace["_byte"] = numba.njit(cache=True, nogil=True)(_byte_int64)
+        inline = "always" if name in scan.INLINE else "never"
+        namespace[name] = numba.njit(cache=True, nogil=True, inline=inline)(namespace[name])
     return SimpleNamespace(**{name: namespace[name] for name in scan.KERNELS})
 
 

@@ -419,34 +419,37 @@ def scan(  # type: ignore[no-untyped-def]
             incl = _u32(buf, pos + 8, big)
             if incl > MAX_RECORD:
                 return pos, ST_CORRUPT
-            if pos + 16 + incl > end:
+            size = 16 + incl
+            if pos + size > end:
                 break
             frac = _u32(buf, pos + 4, big)
             ts = _u32(buf, pos, big) * 1000000000 + (frac if ns_res else frac * 1000)
-            _packet(buf, pos + 16, incl, _u32(buf, pos + 12, big), ts, st, cmd_counts, dg,
-                    pk, pn, pts, pmeta, sk, sc, wk, wv,
-                    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
-            pos += 16 + incl
-            continue
-        if pos + 8 > end:
-            break
-        btype = _u32(buf, pos, big)
-        if btype == 0x0A0D0D0A:
-            return pos, ST_BLOCK
-        total = _u32(buf, pos + 4, big)
-        if total < 12 or total % 4 != 0 or total > MAX_RECORD:
-            return pos, ST_CORRUPT
-        if pos + total > end:
-            break
-        if btype == 1:
-            return pos, ST_BLOCK
-        if btype == 6 or btype == 2 or btype == 3:
-            _pcapng_packet(buf, pos, total, btype, big, ifs, n_if, st, cmd_counts, dg,
-                           pk, pn, pts, pmeta, sk, sc, wk, wv,
-                           o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+            d = pos + 16
+            orig = _u32(buf, pos + 12, big)
         else:
-            st[S_SKIPPED] += 1
-        pos += total
+            if pos + 8 > end:
+                break
+            btype = _u32(buf, pos, big)
+            if btype == 0x0A0D0D0A:
+                return pos, ST_BLOCK
+            size = _u32(buf, pos + 4, big)
+            if size < 12 or size % 4 != 0 or size > MAX_RECORD:
+                return pos, ST_CORRUPT
+            if pos + size > end:
+                break
+            if btype == 1:
+                return pos, ST_BLOCK
+            if btype != 6 and btype != 2 and btype != 3:
+                st[S_SKIPPED] += 1
+                pos += size
+                continue
+            d, incl, orig, ts = _pcapng_record(buf, pos, size, btype, big, ifs, n_if, st)
+            if d < 0:
+                pos += size
+                continue
+        _packet(buf, d, incl, orig, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
+                o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+        pos += size
     if eof:
         if pos == end:
             return pos, ST_DONE
@@ -454,16 +457,14 @@ def scan(  # type: ignore[no-untyped-def]
     return pos, ST_NEED_MORE
 
 
-def _pcapng_packet(  # type: ignore[no-untyped-def]
-    buf, pos, total, btype, big, ifs, n_if, st, cmd_counts, dg,
-    pk, pn, pts, pmeta, sk, sc, wk, wv,
-    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
-):
+def _pcapng_record(buf, pos, total, btype, big, ifs, n_if, st):  # type: ignore[no-untyped-def]
+    """``(data offset, captured, original, ts_ns)`` of an EPB/OPB/SPB; data offset -1 when
+    the packet is not analysed (counted here as malformed or non-Ethernet)."""
     if btype == 3:
-        if total < 16:
+        if total < 16 or n_if == 0:
             st[S_FRAMES] += 1
             st[S_MALFORMED] += 1
-            return
+            return -1, 0, 0, 0
         orig = _u32(buf, pos + 8, big)
         incl = min(orig, total - 16)
         iface = 0
@@ -473,7 +474,7 @@ def _pcapng_packet(  # type: ignore[no-untyped-def]
         if total < 32:
             st[S_FRAMES] += 1
             st[S_MALFORMED] += 1
-            return
+            return -1, 0, 0, 0
         if btype == 6:
             iface = _u32(buf, pos + 8, big)
         else:
@@ -485,20 +486,15 @@ def _pcapng_packet(  # type: ignore[no-untyped-def]
         if 28 + incl > total - 4 or iface >= n_if:
             st[S_FRAMES] += 1
             st[S_MALFORMED] += 1
-            return
+            return -1, 0, 0, 0
         b = iface * 5
         ts = _ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3])
-    if iface >= n_if:
-        st[S_FRAMES] += 1
-        st[S_MALFORMED] += 1
-        return
     if ifs[iface * 5 + 4] == 0:
         st[S_FRAMES] += 1
         st[S_NONECAT] += 1
         st[S_NON_ETH] += 1
-        return
-    _packet(buf, start, incl, orig, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
-            o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+        return -1, 0, 0, 0
+    return start, incl, orig, ts
 
 
 def rehash(ok, on, ots, ometa, nk, nn, nts, nmeta, keep_empty):  # type: ignore[no-untyped-def]
@@ -537,8 +533,18 @@ def finish(st, o_burst):  # type: ignore[no-untyped-def]
         st[S_DC_BURST] = 0
 
 
+#: Everything called per frame is inlined: a call that passes arrays costs reference
+#: counting of each array in numba, which would dominate the per-frame time. Not
+#: ``_slot`` and ``_check_wkc``: inlined (numba 0.60-0.61), the WKC table lookups gave
+#: wrong results (the engine-equivalence tests caught it).
+INLINE = frozenset({
+    "_byte", "_u16", "_u32", "_mix", "_key", "_addr_key", "_ts_ns", "_push",
+    "_count_stream", "_returned_extras", "_drift", "_ecat", "_packet", "_full",
+    "_pcapng_record",
+})
+
 KERNELS = (
     "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_addr_key", "_ts_ns", "_push", "_count_stream",
     "_check_wkc", "_returned_extras", "_drift", "_ecat", "_packet", "_full", "scan",
-    "_pcapng_packet", "rehash", "finish",
+    "_pcapng_record", "rehash", "finish",
 )

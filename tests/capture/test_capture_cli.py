@@ -40,8 +40,10 @@ def faulty(tmp_path):
 def test_analyze_json_contract(cli, corpus):
     code, out, err = cli("capture", "analyze", PCAP / "ethercrab__replay-issue-255.pcapng",
                          "--format", "json")
-    assert code == 0, err
     rep = json.loads(out)
+    assert rep["wkc"]["reference"] == "first-seen" and rep["wkc"]["checked_datagrams"] > 0
+    assert rep["wkc_mismatches"] == 0 and rep["lost_frames"] == 0
+    assert code == 0, err
     for key in ("schema", "frames_total", "ecat_frames", "non_ecat_frames", "malformed_frames",
                 "datagrams_total", "datagrams_by_cmd", "outgoing_frames", "returned_frames",
                 "pairs", "unmatched_outgoing", "round_trip_us", "cycle_period_us",

@@ -1,0 +1,260 @@
+"""Throughput of `lolacli capture analyze` against tshark, on the same synthetic capture.
+
+    python benchmarks/capture_throughput.py                  # 1 M cyclic pairs (2 M frames)
+    python benchmarks/capture_throughput.py --frames 200000  # quick
+    python benchmarks/capture_throughput.py --rss-gb 2       # also a ~2 GB file: peak RSS
+
+The capture is what a 2 kHz master produces: per cycle one outgoing frame with an LRW
+(``--lrw-bytes`` of process data) and a BRD of the AL status, and its returned copy
+(locally administered source MAC, WKC 3 per slave for the LRW) 40–90 µs later. Every
+500 cycles an expedited CoE SDO upload (FPWR request + FPRD response, both directions)
+sits between two cycles, and every 50,000th return is dropped (a lost frame). The file is
+written with numpy-built chunks (fixed-size records), never per frame in Python.
+
+Both tools run as subprocesses on the same file in the same run; wall time includes their
+start-up. tshark: ``tshark -r F -T fields -e frame.time_epoch -e ecat.cmd -e ecat.idx
+-e ecat.cnt > /dev/null``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from lolacli.capture import writer as w  # noqa: E402
+from lolacli.wire.commands import Command  # noqa: E402
+from lolacli.wire.frame import Datagram, encode_frame, make_frame  # noqa: E402
+
+OUT_MAC = b"\x01\x01\x01\x01\x01\x01"
+SLAVES = 25
+PERIOD_NS = 500_000
+SDO_EVERY = 500
+LOST_EVERY = 50_000
+CHUNK_CYCLES = 50_000
+
+
+def _cyclic_template(lrw_bytes: int) -> bytes:
+    lrw = Datagram.logical(Command.LRW, 0x0001_0000, lrw_bytes, index=0)
+    brd = Datagram.physical(Command.BRD, 0, 0x0130, 2, index=0)
+    return encode_frame(make_frame([lrw, brd], src=OUT_MAC), pad=True)
+
+
+def _sdo_frames(counter: int) -> list[tuple[int, bytes]]:
+    """(offset_ns, frame) of one expedited upload of 0x6041:00 from station 0x1001."""
+    req = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x20, 0x40, 0x41, 0x60, 0x00]) + bytes(4)
+    resp = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x30, 0x4B, 0x41, 0x60, 0x00,
+                  0x37, 0x02, 0, 0])
+    out = []
+    for k, (cmd, ado, data) in enumerate(((Command.FPWR, 0x1000, req.ljust(128, b"\0")),
+                                          (Command.FPRD, 0x1100, resp.ljust(128, b"\0")))):
+        for ret in (False, True):
+            d = Datagram.physical(cmd, 0x1001, ado, data if (ret or cmd == Command.FPWR)
+                                  else bytes(128), index=0x80 + k, wkc=1 if ret else 0)
+            src = b"\x03" + OUT_MAC[1:] if ret else OUT_MAC
+            out.append((60_000 * k + (30_000 if ret else 0) + 100_000,
+                        encode_frame(make_frame([d], src=src), pad=True)))
+    return out
+
+
+class Layout:
+    """Byte offsets in one record (record header + frame + padding)."""
+
+    def __init__(self, pcapng: bool, frame_len: int, lrw_bytes: int) -> None:
+        self.pcapng = pcapng
+        self.head = 28 if pcapng else 16
+        pad = (-frame_len) % 4 if pcapng else 0
+        self.size = self.head + frame_len + pad + (4 if pcapng else 0)
+        f = self.head
+        self.src0 = f + 6
+        self.lrw_idx = f + 16 + 1
+        self.lrw_wkc = f + 16 + 10 + lrw_bytes
+        self.brd_idx = self.lrw_wkc + 2 + 1
+        self.brd_wkc = self.lrw_wkc + 2 + 10 + 2
+
+
+def _record_header(layout: Layout, frame_len: int) -> bytes:
+    if layout.pcapng:
+        return struct.pack("<IIIIIII", 6, layout.size, 0, 0, 0, frame_len, frame_len)
+    return struct.pack("<IIII", 0, 0, frame_len, frame_len)
+
+
+def _chunk(layout: Layout, template: bytes, first_cycle: int, n: int, t0: int,
+           rng: np.random.Generator) -> tuple[np.ndarray, int]:
+    """2n fixed-size records (out, ret per cycle) minus lost returns."""
+    rec = np.zeros((2 * n, layout.size), np.uint8)
+    head = np.frombuffer(_record_header(layout, len(template)) + template, np.uint8)
+    rec[:, : head.size] = head
+    if layout.pcapng:
+        rec[:, -4:] = np.frombuffer(struct.pack("<I", layout.size), np.uint8)
+    cycles = np.arange(first_cycle, first_cycle + n, dtype=np.int64)
+    t_out = t0 + cycles * PERIOD_NS + rng.integers(0, 2_000, n)
+    t_ret = t_out + 40_000 + rng.integers(0, 50_000, n)
+    ts = np.empty(2 * n, np.int64)
+    ts[0::2], ts[1::2] = t_out, t_ret
+    if layout.pcapng:
+        words = np.stack([(ts >> 32).astype(np.uint32), (ts & 0xFFFFFFFF).astype(np.uint32)], 1)
+        rec[:, 12:20] = words.view(np.uint8).reshape(-1, 8)
+    else:
+        words = np.stack([(ts // 10**9).astype(np.uint32),
+                          (ts % 10**9 // 1000).astype(np.uint32)], 1)
+        rec[:, 0:8] = words.view(np.uint8).reshape(-1, 8)
+    idx = (cycles & 0xFF).astype(np.uint8)
+    rec[0::2, layout.lrw_idx] = idx
+    rec[1::2, layout.lrw_idx] = idx
+    rec[0::2, layout.brd_idx] = idx
+    rec[1::2, layout.brd_idx] = idx
+    rec[1::2, layout.src0] = 0x03
+    rec[1::2, layout.lrw_wkc] = 3 * SLAVES
+    rec[1::2, layout.brd_wkc] = SLAVES
+    keep = np.ones(2 * n, bool)
+    keep[1::2] = (cycles % LOST_EVERY) != LOST_EVERY - 1
+    return rec[keep], int(t_out[-1])
+
+
+def write_capture(path: Path, cycles: int, *, pcapng: bool, lrw_bytes: int,
+                  seed: int = 1) -> dict[str, int]:
+    """Write the synthetic capture; returns its frame counts."""
+    rng = np.random.default_rng(seed)
+    template = _cyclic_template(lrw_bytes)
+    layout = Layout(pcapng, len(template), lrw_bytes)
+    t0 = 1_700_000_000 * 10**9
+    frames = lost = sdo = 0
+    with open(path, "wb") as f:
+        f.write(w.shb() + w.idb(tsresol=9) if pcapng else w.pcap_header())
+        for first in range(0, cycles, CHUNK_CYCLES):
+            n = min(CHUNK_CYCLES, cycles - first)
+            rec, _ = _chunk(layout, template, first, n, t0, rng)
+            frames += rec.shape[0]
+            lost += 2 * n - rec.shape[0]
+            # SDO transactions inside the gap after every SDO_EVERY-th cycle of the chunk
+            # are written after the chunk's records they follow: split the chunk there.
+            marks = [c - first + 1 for c in range(first, first + n) if c % SDO_EVERY == 0]
+            start = 0
+            for m in marks:
+                row = _row_after_cycle(m, first, rec.shape[0])
+                f.write(rec[start:row].tobytes())
+                start = row
+                t_cycle = t0 + (first + m - 1) * PERIOD_NS
+                for off, fr in _sdo_frames(sdo % 7 + 1):
+                    if pcapng:
+                        f.write(w.epb(t_cycle + off + 200_000, fr))
+                    else:
+                        f.write(w.pcap_record(t_cycle + off + 200_000, fr))
+                    frames += 1
+                sdo += 1
+            f.write(rec[start:].tobytes())
+    return {"frames": frames, "lost": lost, "sdo": sdo, "cycles": cycles}
+
+
+def _row_after_cycle(m: int, first: int, rows: int) -> int:
+    """Row index just after cycle (first + m - 1)'s return (no lost cycle before the SDO
+    marks within a chunk shifts rows: lost cycles are rare and at chunk-independent
+    positions, so count them)."""
+    lost_before = sum(
+        1 for c in range(first, first + m) if c % LOST_EVERY == LOST_EVERY - 1
+    )
+    return min(rows, 2 * m - lost_before)
+
+
+def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float, bytes, int]:
+    """Wall time, stdout, and peak RSS (kB) of one command, measured by a wrapper."""
+    probe = (
+        "import resource, subprocess, sys, time, json\n"
+        "t = time.perf_counter()\n"
+        f"p = subprocess.run({cmd!r}, stdout={'subprocess.PIPE' if stdout else 'subprocess.DEVNULL'}, stderr=subprocess.DEVNULL)\n"
+        "dt = time.perf_counter() - t\n"
+        "rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss\n"
+        "sys.stderr.write(json.dumps([dt, rss, p.returncode]))\n"
+        "sys.stdout.buffer.write(p.stdout or b'')\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT)
+    dt, rss, rc = json.loads(r.stderr.decode().strip().splitlines()[-1])
+    return dt, r.stdout, rss if rc in (0, 1) else -1
+
+
+def analyze_cmd(path: Path) -> list[str]:
+    return [sys.executable, "-m", "lolacli", "capture", "analyze", str(path), "--format", "json",
+            "--max-lost", "1000000000"]
+
+
+def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float]:
+    size = path.stat().st_size
+    _timed(analyze_cmd(path))  # warm the page cache and numba's on-disk cache
+    dt, out, rss = _timed(analyze_cmd(path))
+    rep = json.loads(out)
+    assert rep["frames_total"] == expected["frames"], (rep["frames_total"], expected)
+    assert rep["lost_frames"] == expected["lost"], (rep["lost_frames"], expected)
+    assert rep["sdo_transactions"] == expected["sdo"], (rep["sdo_transactions"], expected)
+    frames = rep["frames_total"]
+    result = {"file_mb": size / 1e6, "frames": frames, "lolacli_s": dt,
+              "lolacli_frames_per_s": frames / dt, "lolacli_peak_rss_mb": rss / 1024}
+    print(f"  lolacli capture analyze: {dt:8.2f} s  {frames / dt / 1e6:7.2f} M frames/s  "
+          f"peak RSS {rss / 1024:.0f} MB  (engine {rep['engine']})")
+    if tshark and shutil.which("tshark"):
+        cmd = ["tshark", "-r", str(path), "-T", "fields", "-e", "frame.time_epoch",
+               "-e", "ecat.cmd", "-e", "ecat.idx", "-e", "ecat.cnt"]
+        tdt, _, _ = _timed(cmd, stdout=None)
+        result.update(tshark_s=tdt, tshark_frames_per_s=frames / tdt, ratio=tdt / dt)
+        print(f"  tshark -T fields:        {tdt:8.2f} s  {frames / tdt / 1e6:7.2f} M frames/s")
+        print(f"  ratio lolacli / tshark:  {tdt / dt:8.1f} x")
+    return result
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=2_000_000,
+                    help="approximate EtherCAT frames (2 per cycle); default 2,000,000")
+    ap.add_argument("--lrw-bytes", type=int, default=64, help="LRW process data per frame")
+    ap.add_argument("--format", choices=("pcapng", "pcap", "both"), default="both")
+    ap.add_argument("--no-tshark", action="store_true", help="skip the tshark comparison")
+    ap.add_argument("--rss-gb", type=float, default=0.0,
+                    help="also write a capture of about this many GB and measure analyze on it")
+    ap.add_argument("--keep", type=Path, default=None, help="write files here and keep them")
+    ap.add_argument("--json", action="store_true", help="print the results as JSON at the end")
+    args = ap.parse_args()
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="lolacli-bench-"))
+    folder.mkdir(parents=True, exist_ok=True)
+    results: dict[str, object] = {}
+    try:
+        formats = ("pcapng", "pcap") if args.format == "both" else (args.format,)
+        for fmt in formats:
+            path = folder / f"synthetic-{args.frames}.{fmt}"
+            t = time.perf_counter()
+            expected = write_capture(path, args.frames // 2, pcapng=fmt == "pcapng",
+                                     lrw_bytes=args.lrw_bytes)
+            print(f"{fmt}: {expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
+                  f"(written in {time.perf_counter() - t:.1f} s)")
+            results[fmt] = bench(path, expected, not args.no_tshark)
+        if args.rss_gb:
+            frame_bytes = 28 + len(_cyclic_template(args.lrw_bytes)) + 8
+            cycles = int(args.rss_gb * 1e9 / frame_bytes / 2)
+            path = folder / "large.pcapng"
+            t = time.perf_counter()
+            expected = write_capture(path, cycles, pcapng=True, lrw_bytes=args.lrw_bytes)
+            print(f"large pcapng: {expected['frames']:,} frames, "
+                  f"{path.stat().st_size / 1e9:.2f} GB (written in {time.perf_counter() - t:.1f} s)")
+            results["large"] = bench(path, expected, tshark=False)
+            path.unlink()
+    finally:
+        if args.keep is None:
+            shutil.rmtree(folder, ignore_errors=True)
+    if args.json:
+        print(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()
