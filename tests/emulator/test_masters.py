@@ -341,3 +341,19 @@ def test_emulate_duration_stops_with_exit_0(veth) -> None:
     )
     assert done.returncode == 0, done.stderr
     assert "stopped: 0 frames received" in done.stderr
+
+
+def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
+    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--drop-p", "0.02", "--seed", "3")
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 1  # SOEM's retries ride over the lost frames
+        assert master.config_map() > 0
+        _to_op(master, pysoem, 2000)
+        bad = _cycles(master, 3000, 0.0005, 2000)
+        assert all(wkc == -1 for _, wkc in bad)  # lost, never a wrong WKC
+        assert 15 <= len(bad) <= 120  # 2 % of 3000 = 60
+    finally:
+        master.close()
+        _stop(proc)
