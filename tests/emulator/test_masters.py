@@ -357,3 +357,32 @@ def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
     finally:
         master.close()
         _stop(proc)
+
+
+def test_emulate_without_raw_socket_permission_exits_4() -> None:
+    _need_root()
+    if shutil.which("setpriv") is None:
+        pytest.skip("needs setpriv to drop CAP_NET_RAW")
+    done = subprocess.run(
+        [
+            "setpriv",
+            "--inh-caps=-net_raw",
+            "--bounding-set=-net_raw",
+            sys.executable,
+            "-m",
+            "lolacli",
+            "bus",
+            "emulate",
+            "--iface",
+            "lo",
+            "--duration",
+            "0.5",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 4
+    assert "no permission for a raw socket" in done.stderr
+    assert "Traceback" not in done.stderr
