@@ -56,7 +56,9 @@ def emulate_cmd(
     signal.signal(signal.SIGTERM, _stop)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     console = stderr_console()
-    console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
+
+    def ready() -> None:
+        console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
 
     def should_stop() -> bool:
         return stop["flag"] or (deadline is not None and time.monotonic() >= deadline)
@@ -72,6 +74,6 @@ def emulate_cmd(
             highlight=False,
         )
 
-    stats = serve(iface, chain, should_stop, status)
+    stats = serve(iface, chain, should_stop, status, on_ready=ready)
     status(stats)
     console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")

@@ -55,7 +55,11 @@ def serve(
     should_stop: Callable[[], bool],
     on_status: Callable[[ServerStats], None] | None = None,
     status_interval_s: float = 1.0,
+    on_ready: Callable[[], None] | None = None,
 ) -> ServerStats:
-    """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble."""
+    """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
+    ``on_ready`` is called once the socket is open (frames are answered from then on)."""
     with RawSocketServer(iface, chain) as server:
+        if on_ready is not None:
+            on_ready()
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)
