@@ -124,11 +124,9 @@ def _key(h):  # type: ignore[no-untyped-def]
 def _slot(keys, key):  # type: ignore[no-untyped-def]
     mask = len(keys) - 1
     i = (key ^ (key >> 21)) & mask
-    while True:
-        k = keys[i]
-        if k == key or k == 0:
-            return i
+    while keys[i] != key and keys[i] != 0:
         i = (i + 1) & mask
+    return i
 
 
 def _addr_key(cmd, addr):  # type: ignore[no-untyped-def]
@@ -177,22 +175,23 @@ def _count_stream(sk, sc, st, key):  # type: ignore[no-untyped-def]
 def _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc):  # type: ignore[no-untyped-def]
     key = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
     i = _slot(wk, key)
-    if wk[i] == 0:
-        if st[S_WKC_FIXED] != 0:
-            return
+    known = wk[i] != 0
+    if not known and st[S_WKC_FIXED] == 0:
         wk[i] = key
         wv[i] = wkc
         st[S_W_USED] += 1
-    st[S_WKC_CHECKED] += 1
-    if wv[i] != wkc:
-        st[S_WKC_MISMATCH] += 1
-        r = st[S_N_WKCBAD]
-        o_wkc[r * WKC_COLS] = st[S_FRAMES]
-        o_wkc[r * WKC_COLS + 1] = cmd
-        o_wkc[r * WKC_COLS + 2] = _u32(buf, q + 2, False)
-        o_wkc[r * WKC_COLS + 3] = wv[i]
-        o_wkc[r * WKC_COLS + 4] = wkc
-        st[S_N_WKCBAD] = r + 1
+        known = True
+    if known:
+        st[S_WKC_CHECKED] += 1
+        if wv[i] != wkc:
+            st[S_WKC_MISMATCH] += 1
+            r = st[S_N_WKCBAD]
+            o_wkc[r * WKC_COLS] = st[S_FRAMES]
+            o_wkc[r * WKC_COLS + 1] = cmd
+            o_wkc[r * WKC_COLS + 2] = _u32(buf, q + 2, False)
+            o_wkc[r * WKC_COLS + 3] = wv[i]
+            o_wkc[r * WKC_COLS + 4] = wkc
+            st[S_N_WKCBAD] = r + 1
 
 
 def _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx):  # type: ignore[no-untyped-def]
@@ -286,9 +285,11 @@ def _ecat(  # type: ignore[no-untyped-def]
         cyc = hs == st[S_STREAM_SIG]
     if ret == 0:
         st[S_OUT] += 1
-        _count_stream(sk, sc, st, hs)
         if logical:
             st[S_LOGICAL_OUT] += 1
+        elif st[S_LOGICAL_OUT] == 0:
+            # only needed to pick the cyclic stream of a capture without logical traffic
+            _count_stream(sk, sc, st, hs)
         meta = 0
         if cyc:
             if st[S_CYC_N] > 0:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 from lolacli.errors import WireError
 from lolacli.wire.coe import CoeService, decode_coe_header
-from lolacli.wire.mailbox import MailboxType, decode_mailbox
+from lolacli.wire.mailbox import MailboxHeader, MailboxType, decode_mailbox
 from lolacli.wire.sdo import (
     SdoAbort,
     SdoDownloadRequest,
@@ -39,6 +39,8 @@ from lolacli.wire.sdo import (
 )
 
 WRITE_COMMANDS = (2, 5)  # APWR, FPWR
+#: Decoded mailbox messages kept by their bytes (polling repeats the same requests).
+CACHE_ENTRIES = 4096
 
 
 @dataclass(slots=True)
@@ -103,15 +105,19 @@ class SdoTracker:
         self.stats = MailboxStats()
         self._open: dict[int, SdoTransaction] = {}
         self._last_in: dict[int, tuple[int, bytes]] = {}
+        self._cache: dict[bytes, tuple[MailboxHeader | None, int | None, object]] = {}
 
     def feed(self, frame: int, ts_ns: int, cmd: int, address: int, data: bytes) -> None:
         slave = address & 0xFFFF
-        try:
-            mailbox = decode_mailbox(data)
-        except WireError:
+        decoded = self._cache.get(data)
+        if decoded is None:
+            decoded = _decode(data)
+            if len(self._cache) < CACHE_ENTRIES:
+                self._cache[data] = decoded
+        header, service, message = decoded
+        if header is None:
             self.stats.undecodable += 1
             return
-        header = mailbox.header
         to_slave = cmd in WRITE_COMMANDS
         if not to_slave and header.counter != 0:
             wire = bytes(data[: 6 + header.length])
@@ -123,12 +129,12 @@ class SdoTracker:
         name = _type_name(header.mailbox_type)
         self.stats.by_type[name] = self.stats.by_type.get(name, 0) + 1
         if header.mailbox_type == MailboxType.CoE:
-            self._coe(frame, ts_ns, slave, mailbox.payload)
+            self._coe(frame, ts_ns, slave, service, message)
 
-    def _coe(self, frame: int, ts_ns: int, slave: int, payload: bytes) -> None:
-        try:
-            service = decode_coe_header(payload).service
-        except WireError:
+    def _coe(
+        self, frame: int, ts_ns: int, slave: int, service: int | None, message: object
+    ) -> None:
+        if service is None:
             self.stats.undecodable += 1
             return
         sname = service.name if isinstance(service, CoeService) else str(int(service))
@@ -136,18 +142,13 @@ class SdoTracker:
         counts[sname] = counts.get(sname, 0) + 1
         if service == CoeService.EMERGENCY:
             self.stats.emergencies += 1
-            return
-        if service == CoeService.SDO_INFO:
+        elif service == CoeService.SDO_INFO:
             self.stats.sdo_info_messages += 1
-            return
-        if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
-            return
-        try:
-            message = decode_sdo(payload)
-        except WireError:
-            self.stats.undecodable += 1
-            return
-        self._sdo(frame, ts_ns, slave, message)
+        elif service in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
+            if message is None:
+                self.stats.undecodable += 1
+            else:
+                self._sdo(frame, ts_ns, slave, message)
 
     def _sdo(self, frame: int, ts_ns: int, slave: int, message: object) -> None:
         if isinstance(message, SdoUploadRequest | SdoDownloadRequest):
@@ -230,3 +231,24 @@ def _type_name(mailbox_type: int) -> str:
     if isinstance(mailbox_type, MailboxType):
         return mailbox_type.name
     return f"type{int(mailbox_type)}"
+
+
+def _decode(data: bytes) -> tuple[MailboxHeader | None, int | None, object]:
+    """Mailbox header, CoE service (None when not CoE or undecodable) and SDO message
+    (None when not an SDO request/response or undecodable)."""
+    try:
+        mailbox = decode_mailbox(data)
+    except WireError:
+        return None, None, None
+    if mailbox.header.mailbox_type != MailboxType.CoE:
+        return mailbox.header, None, None
+    try:
+        service = decode_coe_header(mailbox.payload).service
+    except WireError:
+        return mailbox.header, None, None
+    if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
+        return mailbox.header, service, None
+    try:
+        return mailbox.header, service, decode_sdo(mailbox.payload)
+    except WireError:
+        return mailbox.header, service, None
