@@ -35,6 +35,7 @@ class Device:
         self.t_ns = 0
         self._layouts: dict[Direction, tuple[tuple[Direction, int], list[Any]]] = {}
         self._sizes: tuple[int, tuple[int, int]] | None = None
+        self._byte_layouts: dict[Direction, tuple[tuple[Direction, int], Any]] = {}
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
@@ -144,7 +145,34 @@ class Device:
             self._sizes = (version, ((outputs + 7) // 8, (inputs + 7) // 8))
         return self._sizes[1]
 
+    def _byte_layout(self, direction: Direction) -> list[tuple[Entry | None, int, int]] | None:
+        """(entry, byte offset, bytes) when every mapped entry is whole bytes, else None."""
+        key = (direction, self.od.version)
+        cached = self._byte_layouts.get(direction)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        layout = self._layout(direction)
+        out: list[tuple[Entry | None, int, int]] | None = []
+        bit = 0
+        for _index, _sub, bits, entry in layout:
+            if bits % 8 or out is None:
+                out = None
+                break
+            if entry is not None and len(entry.value) != bits // 8:
+                out = None  # a mapping narrower or wider than the object: bit path
+                break
+            out.append((entry, bit // 8, bits // 8))
+            bit += bits
+        self._byte_layouts[direction] = (key, out)
+        return out
+
     def unpack_outputs(self, outputs: bytes) -> None:
+        fast = self._byte_layout(Direction.OUTPUT)
+        if fast is not None:
+            for entry, offset, size in fast:
+                if entry is not None:
+                    entry.value = outputs[offset : offset + size]
+            return
         image = int.from_bytes(outputs, "little")
         bit = 0
         for _index, _sub, bits, entry in self._layout(Direction.OUTPUT):
@@ -154,6 +182,9 @@ class Device:
             bit += bits
 
     def pack_inputs(self) -> bytes:
+        fast = self._byte_layout(Direction.INPUT)
+        if fast is not None:
+            return b"".join(e.value if e is not None else bytes(n) for e, _o, n in fast)
         image = 0
         bit = 0
         for _index, _sub, bits, entry in self._layout(Direction.INPUT):

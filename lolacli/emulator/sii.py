@@ -142,27 +142,15 @@ class SiiLayout:
     outputs_bytes: int = 0
     inputs_bytes: int = 0
 
-    def _sm_of(self, kind: SmType, default: int) -> int:
-        for i, sm in enumerate(self.sync_managers):
-            if sm.type == kind:
-                return i
-        return default
+    mailbox_out_sm: int = 0
+    mailbox_in_sm: int = 1
+    outputs_sm: int = 2
+    inputs_sm: int = 3
 
-    @property
-    def mailbox_out_sm(self) -> int:
-        return self._sm_of(SmType.MAILBOX_OUT, 0)
 
-    @property
-    def mailbox_in_sm(self) -> int:
-        return self._sm_of(SmType.MAILBOX_IN, 1)
-
-    @property
-    def outputs_sm(self) -> int:
-        return self._sm_of(SmType.OUTPUTS, 2)
-
-    @property
-    def inputs_sm(self) -> int:
-        return self._sm_of(SmType.INPUTS, 3)
+def _sm_of(sms: tuple[SiiSyncManager, ...], kind: SmType, default: int) -> int:
+    """The index of the first SM of ``kind`` in the SYNCM category, else ``default``."""
+    return next((i for i, sm in enumerate(sms) if sm.type == kind), default)
 
 
 def crc8_sii(data: bytes) -> int:
@@ -448,6 +436,7 @@ def sii_layout(image: bytes) -> SiiLayout:
         return SiiLayout()
     w = struct.unpack_from("<64H", image, 0)
     cats = categories(image)
+    sms = _sm_entries(cats.get(SiiCategory.SYNCM, b""))
     return SiiLayout(
         vendor_id=w[8] | w[9] << 16,
         product_code=w[10] | w[11] << 16,
@@ -460,7 +449,11 @@ def sii_layout(image: bytes) -> SiiLayout:
         mailbox_in_bytes=w[0x1B],
         protocols=w[0x1C],
         name=_first_string(cats.get(SiiCategory.STRINGS, b"")),
-        sync_managers=_sm_entries(cats.get(SiiCategory.SYNCM, b"")),
+        sync_managers=sms,
         outputs_bytes=(_pdo_bits(cats.get(SiiCategory.RXPDO, b"")) + 7) // 8,
         inputs_bytes=(_pdo_bits(cats.get(SiiCategory.TXPDO, b"")) + 7) // 8,
+        mailbox_out_sm=_sm_of(sms, SmType.MAILBOX_OUT, 0),
+        mailbox_in_sm=_sm_of(sms, SmType.MAILBOX_IN, 1),
+        outputs_sm=_sm_of(sms, SmType.OUTPUTS, 2),
+        inputs_sm=_sm_of(sms, SmType.INPUTS, 3),
     )
