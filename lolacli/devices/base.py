@@ -35,7 +35,9 @@ class Device:
         self.t_ns = 0
         self._layouts: dict[Direction, tuple[tuple[Direction, int], list[Any]]] = {}
         self._sizes: tuple[int, tuple[int, int]] | None = None
-        self._byte_layouts: dict[Direction, tuple[tuple[Direction, int], Any]] = {}
+        self._byte_layouts: dict[
+            Direction, tuple[tuple[Direction, int], list[tuple[Entry | None, int, int]] | None]
+        ] = {}
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
