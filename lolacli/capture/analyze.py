@@ -181,13 +181,13 @@ def analyze_file(
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
-    ``engine`` is ``"auto"`` (numba when installed), ``"numba"`` or ``"python"``; both give
-    identical results. ``progress(done_bytes, total_bytes)`` is called once per chunk.
+    ``engine`` is ``"auto"`` (numba when installed, except for files under 2 MB),
+    ``"numba"`` or ``"python"``; both give identical results. ``progress(done_bytes, total_bytes)`` is called once per chunk.
     ``keep_series`` keeps the return timestamp of every pair (for plots).
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
     reader = CaptureReader(path)  # validates the file header
-    eng = choose_engine(engine)
+    eng = choose_engine(engine, os.path.getsize(reader.path))
     run = _Pass(reader, eng, eni, S.MODE_LOGICAL, 0, keep_series, chunk_bytes, progress)
     run.run()
     if run.st[S.S_LOGICAL_OUT] == 0 and run.st[S.S_OUT] > 0:

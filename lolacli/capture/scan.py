@@ -173,25 +173,25 @@ def _count_stream(sk, sc, st, key):  # type: ignore[no-untyped-def]
 
 
 def _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc):  # type: ignore[no-untyped-def]
-    key = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
-    i = _slot(wk, key)
-    known = wk[i] != 0
-    if not known and st[S_WKC_FIXED] == 0:
-        wk[i] = key
-        wv[i] = wkc
+    wkey = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
+    wslot = _slot(wk, wkey)
+    wknown = wk[wslot] != 0
+    if not wknown and st[S_WKC_FIXED] == 0:
+        wk[wslot] = wkey
+        wv[wslot] = wkc
         st[S_W_USED] += 1
-        known = True
-    if known:
+        wknown = True
+    if wknown:
         st[S_WKC_CHECKED] += 1
-        if wv[i] != wkc:
+        if wv[wslot] != wkc:
             st[S_WKC_MISMATCH] += 1
-            r = st[S_N_WKCBAD]
-            o_wkc[r * WKC_COLS] = st[S_FRAMES]
-            o_wkc[r * WKC_COLS + 1] = cmd
-            o_wkc[r * WKC_COLS + 2] = _u32(buf, q + 2, False)
-            o_wkc[r * WKC_COLS + 3] = wv[i]
-            o_wkc[r * WKC_COLS + 4] = wkc
-            st[S_N_WKCBAD] = r + 1
+            wrow = st[S_N_WKCBAD] * WKC_COLS
+            o_wkc[wrow] = st[S_FRAMES]
+            o_wkc[wrow + 1] = cmd
+            o_wkc[wrow + 2] = _u32(buf, q + 2, False)
+            o_wkc[wrow + 3] = wv[wslot]
+            o_wkc[wrow + 4] = wkc
+            st[S_N_WKCBAD] += 1
 
 
 def _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx):  # type: ignore[no-untyped-def]
@@ -331,8 +331,8 @@ def _ecat(  # type: ignore[no-untyped-def]
         ln = _u16(buf, q + 6, False) & 0x7FF
         wkc = _u16(buf, q + 10 + ln, False)
         if cyc:
-            _check_wkc(buf, q, cmd, _addr_key(cmd, _u32(buf, q + 2, False)), ln, wkc, wk, wv,
-                       st, o_wkc)
+            akey = _addr_key(cmd, _u32(buf, q + 2, False))
+            _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc)
         _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx)
     return True
 

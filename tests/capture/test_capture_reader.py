@@ -9,11 +9,13 @@ import pytest
 
 from lolacli.capture import writer as w
 from lolacli.capture.analyze import analyze_file
+from lolacli.capture.fast import numba_available
 from lolacli.capture.reader import CaptureReader, ts_params, ts_to_ns
 from lolacli.errors import CaptureError
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, encode_frame, make_frame
 
+FAST = "numba" if numba_available() else "python"
 OUT_MAC = b"\x10\x10\x10\x10\x10\x10"
 RET_MAC = b"\x12\x10\x10\x10\x10\x10"
 
@@ -74,7 +76,7 @@ def test_pcapng_byte_orders(tmp_path, big):
     path = write_pcapng(tmp_path / "c.pcapng", frames, big=big)
     assert [f.timestamp_ns for f in CaptureReader(path)] == [t for t, _ in frames]
     assert analyze_file(path, engine="python").to_dict()["pairs"] == 20
-    assert analyze_file(path).to_dict()["pairs"] == 20
+    assert analyze_file(path, engine=FAST).to_dict()["pairs"] == 20
 
 
 @pytest.mark.parametrize(
@@ -100,7 +102,8 @@ def test_if_tsresol(tmp_path, tsresol, to_units):
     for t_got, (t, _) in zip(got, frames, strict=True):
         step = 1_000_000 if tsresol == 3 else 1000
         assert abs(t_got - t) < step
-    rep_fast, rep_slow = analyze_file(path).to_dict(), analyze_file(path, engine="python").to_dict()
+    rep_fast = analyze_file(path, engine=FAST).to_dict()
+    rep_slow = analyze_file(path, engine="python").to_dict()
     assert rep_fast["round_trip_us"]["mean"] == rep_slow["round_trip_us"]["mean"]
     assert rep_fast["round_trip_us"]["mean"] == pytest.approx(2000.0, abs=1.0)
 
@@ -130,7 +133,7 @@ def test_several_sections_and_interfaces(tmp_path):
         t, t + 30_000, t + 500_000, t + 540_000, t + 540_000, t + 600_000]
     assert [f.interface for f in frames] == [0, 1, 0, 0, 0, 0]
     assert reader.stats.sections == 2 and len(reader.stats.interfaces) == 3
-    for engine in ("numba", "python"):
+    for engine in (FAST, "python"):
         rep = analyze_file(path, engine=engine, chunk_bytes=1 << 16).to_dict()
         assert rep["frames_total"] == 6 and rep["pairs"] == 3
         assert rep["round_trip_us"]["max"] == pytest.approx(60.0)
@@ -181,7 +184,7 @@ def test_table_growth_and_stack_depth(tmp_path):
     for i in range(9000):
         frames.append((t + 10**7 + i * 1000, ecat(Command.FPRD, i & 0xFF, 1, True, adp=0x1000 + i)))
     path = write_pcap(tmp_path / "many.pcap", frames)
-    fast = analyze_file(path).to_dict()
+    fast = analyze_file(path, engine=FAST).to_dict()
     slow = analyze_file(path, engine="python").to_dict()
     assert fast["pairs"] == slow["pairs"] == 9000
     fast.pop("engine"), slow.pop("engine")
@@ -268,7 +271,7 @@ def test_random_bytes_never_traceback(cli, tmp_path, seed):
     assert code in (0, 1, 3), err
     if code != 3:
         json.loads(out)
-    fast = analyze_file(path).to_dict() if code != 3 else None
+    fast = analyze_file(path, engine=FAST).to_dict() if code != 3 else None
     if fast is not None:
         slow = analyze_file(path, engine="python").to_dict()
         fast.pop("engine"), slow.pop("engine")
