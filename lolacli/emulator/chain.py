@@ -16,6 +16,15 @@ from dataclasses import dataclass, field
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.registers import AlStatusCode
 from lolacli.errors import WireError
+from lolacli.timing.model import (
+    CABLE_NS_PER_M,
+    DEFAULT_CABLE_M,
+    DEFAULT_PER_SLAVE_DELAY_NS,
+    LINK_100_MBIT_S,
+    frame_bytes,
+    predict_total_ns,
+    wire_time_ns,
+)
 from lolacli.wire.commands import LOGICAL, Command
 from lolacli.wire.frame import (
     DATAGRAM_HEADER_BYTES,
@@ -29,29 +38,30 @@ from lolacli.wire.frame import (
 _U16 = struct.Struct("<H")
 _HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
 SOURCE_MAC_LOCAL_BIT = 0x02
-PREAMBLE_SFD_BYTES = 8
-INTER_FRAME_GAP_BYTES = 12
-FCS_BYTES = 4
-MIN_FRAME_BYTES = 64
 
 
 @dataclass(frozen=True, slots=True)
 class ChainTiming:
-    """Delay model of a line: link rate, per-slave delays, cable.
+    """Delay model of a line, the one :mod:`lolacli.timing` predicts with.
 
     ``processing_ns`` is the delay through an ESC's processing unit on the way out,
-    ``forward_ns`` the delay of passing an ESC on the way back, ``cable_ns`` one cable
-    (about 5 ns per metre).
+    ``forward_ns`` the delay of passing an ESC on the way back (together the timing
+    model's per-slave delay, 1000 ns by default), ``cable_ns`` one cable segment one way
+    (1 m at 5 ns/m). Round trip = wire time of the frame (DESIGN.md frame bytes) + slaves
+    × per-slave delay + every segment out and back.
     """
 
-    link_bit_s: int = 100_000_000
+    link_bit_s: int = LINK_100_MBIT_S
     processing_ns: int = 600
-    forward_ns: int = 400
-    cable_ns: int = 10
+    forward_ns: int = DEFAULT_PER_SLAVE_DELAY_NS - 600
+    cable_ns: int = round(DEFAULT_CABLE_M * CABLE_NS_PER_M)
+
+    @property
+    def per_slave_delay_ns(self) -> int:
+        return self.processing_ns + self.forward_ns
 
     def wire_time_ns(self, frame_bytes: int) -> int:
-        on_wire = max(frame_bytes + FCS_BYTES, MIN_FRAME_BYTES)
-        return (on_wire * 8 * 1_000_000_000) // self.link_bit_s
+        return wire_time_ns(frame_bytes, self.link_bit_s)
 
     def port_times(self, t_ns: int, slaves: int) -> list[PortTimes]:
         """When the frame's head reaches each slave's port 0 (out) and port 1 (back)."""
@@ -65,9 +75,9 @@ class ChainTiming:
                 t += self.forward_ns
         return [PortTimes(o, b) for o, b in zip(out, back, strict=True)]
 
-    def round_trip_ns(self, frame_bytes: int, slaves: int) -> int:
-        per_slave = self.processing_ns + self.forward_ns
-        return self.wire_time_ns(frame_bytes) + slaves * per_slave + 2 * slaves * self.cable_ns
+    def round_trip_ns(self, datagram_lengths: list[int], slaves: int) -> int:
+        wire = wire_time_ns(frame_bytes(datagram_lengths), self.link_bit_s)
+        return predict_total_ns(wire, slaves, self.per_slave_delay_ns, 2 * slaves * self.cable_ns)
 
 
 @dataclass(slots=True)
@@ -199,7 +209,8 @@ class Chain:
         if self.slaves:
             buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
-        return bytes(buf), self.timing.round_trip_ns(len(frame), len(self.slaves))
+        lengths = [slot.length for slot in slots]
+        return bytes(buf), self.timing.round_trip_ns(lengths, len(self.slaves))
 
     def tick(self, t_ns: int) -> None:
         """Let time pass in every slave (process-data watchdogs)."""

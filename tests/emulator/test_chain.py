@@ -47,9 +47,12 @@ def test_delay_is_wire_time_plus_slaves_plus_cables() -> None:
     _, delay = chain.process(frame, 0)
     wire_bytes = frame_bytes_on_wire([c.data_length_bytes for c in cyclic.commands])
     assert wire_bytes == cyclic.frame_bytes == 846  # DESIGN.md: the LOLA frame
-    per_slave = timing.processing_ns + timing.forward_ns + 2 * timing.cable_ns
-    assert delay == wire_bytes * 80 + 25 * per_slave  # 100 Mbit/s: 80 ns per byte
-    assert 67_000 < wire_bytes * 80 < 68_000  # 67.7 µs
+    assert delay == wire_bytes * 80 + 25 * (1000 + 2 * 5)  # 80 ns/byte, 1 µs/slave, 1 m cables
+    assert wire_bytes * 80 == 67_680  # 67.7 µs (DESIGN.md)
+    # the same number as the timing model predicts for this frame
+    from lolacli.timing.model import cable_delay_ns, predict_total_ns, wire_time_ns
+
+    assert delay == predict_total_ns(wire_time_ns(846), 25, 1000, cable_delay_ns([1.0] * 25))
 
 
 def test_armw_reference_reads_the_others_write() -> None:
