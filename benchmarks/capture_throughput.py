@@ -54,7 +54,8 @@ def _cyclic_template(lrw_bytes: int) -> bytes:
 
 def _sdo_frames(counter: int) -> list[tuple[int, bytes]]:
     """(offset_ns, frame) of one expedited upload of 0x6041:00 from station 0x1001."""
-    req = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x20, 0x40, 0x41, 0x60, 0x00]) + bytes(4)
+    req = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x20, 0x40, 0x41, 0x60, 0x00])
+    req += bytes(4)
     resp = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x30, 0x4B, 0x41, 0x60, 0x00,
                   0x37, 0x02, 0, 0])
     out = []
@@ -171,10 +172,11 @@ def _row_after_cycle(m: int, first: int, rows: int) -> int:
 
 def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float, bytes, int]:
     """Wall time, stdout, and peak RSS (kB) of one command, measured by a wrapper."""
+    sink = "subprocess.PIPE" if stdout else "subprocess.DEVNULL"
     probe = (
         "import resource, subprocess, sys, time, json\n"
         "t = time.perf_counter()\n"
-        f"p = subprocess.run({cmd!r}, stdout={'subprocess.PIPE' if stdout else 'subprocess.DEVNULL'}, stderr=subprocess.DEVNULL)\n"
+        f"p = subprocess.run({cmd!r}, stdout={sink}, stderr=subprocess.DEVNULL)\n"
         "dt = time.perf_counter() - t\n"
         "rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss\n"
         "sys.stderr.write(json.dumps([dt, rss, p.returncode]))\n"
@@ -245,8 +247,9 @@ def main() -> None:
             path = folder / "large.pcapng"
             t = time.perf_counter()
             expected = write_capture(path, cycles, pcapng=True, lrw_bytes=args.lrw_bytes)
+            took = time.perf_counter() - t
             print(f"large pcapng: {expected['frames']:,} frames, "
-                  f"{path.stat().st_size / 1e9:.2f} GB (written in {time.perf_counter() - t:.1f} s)")
+                  f"{path.stat().st_size / 1e9:.2f} GB (written in {took:.1f} s)")
             results["large"] = bench(path, expected, tshark=False)
             path.unlink()
     finally:

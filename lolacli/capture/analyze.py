@@ -182,7 +182,8 @@ def analyze_file(
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
     ``engine`` is ``"auto"`` (numba when installed, except for files under 2 MB),
-    ``"numba"`` or ``"python"``; both give identical results. ``progress(done_bytes, total_bytes)`` is called once per chunk.
+    ``"numba"`` or ``"python"``; both give identical results.
+    ``progress(done_bytes, total_bytes)`` is called once per chunk.
     ``keep_series`` keeps the return timestamp of every pair (for plots).
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
@@ -526,7 +527,7 @@ def _cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:
 
 def _fill(f: Any, buf: np.ndarray, start: int) -> tuple[int, bool]:
     """Read into ``buf[start:]``; returns (end, eof)."""
-    view = memoryview(buf)[start:]
+    view = buf.data[start:]
     got = 0
     while got < len(view):
         n = f.readinto(view[got:])

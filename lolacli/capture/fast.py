@@ -65,7 +65,7 @@ def _compile() -> SimpleNamespace:
     exec(code, namespace)  # noqa: S102  (our own module, compiled for numba)
     namespace["_byte"] = _byte_int64
     for name in scan.KERNELS:
-        inline = "always" if name in scan.INLINE else "never"
+        inline: Any = "always" if name in scan.INLINE else "never"
         namespace[name] = numba.njit(cache=True, nogil=True, inline=inline)(namespace[name])
     return SimpleNamespace(**{name: namespace[name] for name in scan.KERNELS})
 

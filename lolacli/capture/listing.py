@@ -127,8 +127,9 @@ def _describe_sdo(message: object) -> str:
     if name is None:
         return f"SDO Info {type(message).__name__}"
     text = f"SDO {name}"
-    if hasattr(message, "index"):
-        text += f" 0x{message.index:04X}:{message.subindex:02X}"
+    index, subindex = getattr(message, "index", None), getattr(message, "subindex", 0)
+    if index is not None:
+        text += f" 0x{index:04X}:{subindex:02X}"
     if isinstance(message, SdoInitiate):
         if message.expedited:
             text += f" expedited {len(message.data)} B 0x{message.data.hex() or '0'}"

@@ -25,6 +25,8 @@ full 32-bit address.
 
 from __future__ import annotations
 
+from typing import Any
+
 # --- st indices -------------------------------------------------------------------------
 S_FRAMES = 0
 S_ECAT = 1
@@ -96,32 +98,32 @@ REG_DC_SYSTIME_DIFF = 0x092C
 MBX_AREA = 0x1000
 
 
-def _byte(buf, p):  # type: ignore[no-untyped-def]
+def _byte(buf: Any, p: Any) -> Any:
     return buf[p]
 
 
-def _u16(buf, p, big):  # type: ignore[no-untyped-def]
+def _u16(buf: Any, p: Any, big: Any) -> Any:
     if big:
         return (_byte(buf, p) << 8) | _byte(buf, p + 1)
     return _byte(buf, p) | (_byte(buf, p + 1) << 8)
 
 
-def _u32(buf, p, big):  # type: ignore[no-untyped-def]
+def _u32(buf: Any, p: Any, big: Any) -> Any:
     if big:
         return (_u16(buf, p, True) << 16) | _u16(buf, p + 2, True)
     return _u16(buf, p, False) | (_u16(buf, p + 2, False) << 16)
 
 
-def _mix(h, v):  # type: ignore[no-untyped-def]
+def _mix(h: Any, v: Any) -> Any:
     h = ((h ^ v) * FNV) & MASK63
     return h ^ (h >> 29)
 
 
-def _key(h):  # type: ignore[no-untyped-def]
+def _key(h: Any) -> Any:
     return h if h != 0 else 1
 
 
-def _slot(keys, key):  # type: ignore[no-untyped-def]
+def _slot(keys: Any, key: Any) -> Any:
     mask = len(keys) - 1
     i = (key ^ (key >> 21)) & mask
     while keys[i] != key and keys[i] != 0:
@@ -129,14 +131,14 @@ def _slot(keys, key):  # type: ignore[no-untyped-def]
     return i
 
 
-def _addr_key(cmd, addr):  # type: ignore[no-untyped-def]
+def _addr_key(cmd: Any, addr: Any) -> Any:
     # APRD APWR APRW ARMW BRD BWR BRW: ADP is incremented by every slave.
     if cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9:
         return addr & 0xFFFF0000
     return addr
 
 
-def _ts_ns(units, mode, a, b, off):  # type: ignore[no-untyped-def]
+def _ts_ns(units: Any, mode: Any, a: Any, b: Any, off: Any) -> Any:
     if mode == 0:
         return units * a // b + off
     sec = units >> a
@@ -147,7 +149,7 @@ def _ts_ns(units, mode, a, b, off):  # type: ignore[no-untyped-def]
     return sec * 1000000000 + ((frac * 1000000000) >> a) + off
 
 
-def _push(pk, pn, pts, pmeta, st, key, ts, meta):  # type: ignore[no-untyped-def]
+def _push(pk: Any, pn: Any, pts: Any, pmeta: Any, st: Any, key: Any, ts: Any, meta: Any) -> Any:
     i = _slot(pk, key)
     if pk[i] == 0:
         pk[i] = key
@@ -164,7 +166,7 @@ def _push(pk, pn, pts, pmeta, st, key, ts, meta):  # type: ignore[no-untyped-def
     pn[i] = n + 1
 
 
-def _count_stream(sk, sc, st, key):  # type: ignore[no-untyped-def]
+def _count_stream(sk: Any, sc: Any, st: Any, key: Any) -> Any:
     i = _slot(sk, key)
     if sk[i] == 0:
         sk[i] = key
@@ -172,7 +174,10 @@ def _count_stream(sk, sc, st, key):  # type: ignore[no-untyped-def]
     sc[i] += 1
 
 
-def _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc):  # type: ignore[no-untyped-def]
+def _check_wkc(
+    buf: Any, q: Any, cmd: Any, akey: Any, ln: Any, wkc: Any, wk: Any, wv: Any, st: Any,
+    o_wkc: Any,
+) -> Any:
     wkey = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
     wslot = _slot(wk, wkey)
     wknown = wk[wslot] != 0
@@ -194,7 +199,10 @@ def _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc):  # type: ignore[n
             st[S_N_WKCBAD] += 1
 
 
-def _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx):  # type: ignore[no-untyped-def]
+def _returned_extras(
+    buf: Any, q: Any, cmd: Any, ado: Any, ln: Any, wkc: Any, ts: Any, st: Any, o_dc: Any,
+    o_mbx: Any,
+) -> Any:
     # Reads of the DC system-time difference (0x092C): sign-and-magnitude nanoseconds.
     if (cmd == 1 or cmd == 4) and wkc >= 1 and ado <= REG_DC_SYSTIME_DIFF:
         if ado + ln >= REG_DC_SYSTIME_DIFF + 4:
@@ -221,7 +229,7 @@ def _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx):  # type: i
                 st[S_N_MBX] += 1
 
 
-def _drift(ts, st, o_burst):  # type: ignore[no-untyped-def]
+def _drift(ts: Any, st: Any, o_burst: Any) -> Any:
     st[S_DC_DGRAMS] += 1
     if st[S_DC_BURST] > 0 and ts - st[S_DC_LAST_TS] > BURST_GAP_NS:
         o_burst[st[S_N_BURST]] = st[S_DC_BURST]
@@ -231,11 +239,11 @@ def _drift(ts, st, o_burst):  # type: ignore[no-untyped-def]
     st[S_DC_LAST_TS] = ts
 
 
-def _ecat(  # type: ignore[no-untyped-def]
-    buf, p, limit, ret, ts, st, cmd_counts, dg,
-    pk, pn, pts, pmeta, sk, sc, wk, wv,
-    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
-):
+def _ecat(
+    buf: Any, p: Any, limit: Any, ret: Any, ts: Any, st: Any, cmd_counts: Any, dg: Any,
+    pk: Any, pn: Any, pts: Any, pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any,
+    o_rtts: Any, o_rtcyc: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+) -> Any:
     """One EtherCAT payload at ``p`` (captured bytes end at ``limit``).
 
     Returns False when the datagrams do not fit (a malformed frame).
@@ -337,11 +345,11 @@ def _ecat(  # type: ignore[no-untyped-def]
     return True
 
 
-def _packet(  # type: ignore[no-untyped-def]
-    buf, d, cap, orig, ts, st, cmd_counts, dg,
-    pk, pn, pts, pmeta, sk, sc, wk, wv,
-    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
-):
+def _packet(
+    buf: Any, d: Any, cap: Any, orig: Any, ts: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any,
+    pn: Any, pts: Any, pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any,
+    o_rtcyc: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+) -> Any:
     """One Ethernet frame of ``cap`` captured bytes at ``d``."""
     st[S_FRAMES] += 1
     if st[S_FRAMES] == 1:
@@ -387,7 +395,7 @@ def _packet(  # type: ignore[no-untyped-def]
         st[S_CUT] += 1
 
 
-def _full(st, cap, pk, sk, wk):  # type: ignore[no-untyped-def]
+def _full(st: Any, cap: Any, pk: Any, sk: Any, wk: Any) -> Any:
     """ST_FLUSH / ST_GROW / -1: whether the driver must act before the next record."""
     lim = cap - MAX_DGRAMS - 2
     if (st[S_N_RT] >= lim or st[S_N_PERIOD] >= lim or st[S_N_BURST] >= lim
@@ -398,11 +406,12 @@ def _full(st, cap, pk, sk, wk):  # type: ignore[no-untyped-def]
     return -1
 
 
-def scan(  # type: ignore[no-untyped-def]
-    buf, pos, end, eof, fmt, big, ns_res, ifs, n_if, st, cmd_counts, dg,
-    pk, pn, pts, pmeta, sk, sc, wk, wv,
-    o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc,
-):
+def scan(
+    buf: Any, pos: Any, end: Any, eof: Any, fmt: Any, big: Any, ns_res: Any, ifs: Any,
+    n_if: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pts: Any, pmeta: Any,
+    sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtcyc: Any, o_period: Any,
+    o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+) -> Any:
     """Walk records from ``pos`` until the buffer ends or the driver must act.
 
     ``fmt`` 0 = classic pcap (``ns_res`` 1 for nanosecond files), 1 = pcapng. ``ifs`` holds
@@ -458,7 +467,9 @@ def scan(  # type: ignore[no-untyped-def]
     return pos, ST_NEED_MORE
 
 
-def _pcapng_record(buf, pos, total, btype, big, ifs, n_if, st):  # type: ignore[no-untyped-def]
+def _pcapng_record(
+    buf: Any, pos: Any, total: Any, btype: Any, big: Any, ifs: Any, n_if: Any, st: Any,
+) -> Any:
     """``(data offset, captured, original, ts_ns)`` of an EPB/OPB/SPB; data offset -1 when
     the packet is not analysed (counted here as malformed or non-Ethernet)."""
     if btype == 3:
@@ -498,7 +509,10 @@ def _pcapng_record(buf, pos, total, btype, big, ifs, n_if, st):  # type: ignore[
     return start, incl, orig, ts
 
 
-def rehash(ok, on, ots, ometa, nk, nn, nts, nmeta, keep_empty):  # type: ignore[no-untyped-def]
+def rehash(
+    ok: Any, on: Any, ots: Any, ometa: Any, nk: Any, nn: Any, nts: Any, nmeta: Any,
+    keep_empty: Any,
+) -> Any:
     """Move the entries of one open-addressing table into a new (empty) one.
 
     With ``on`` given (a pairing table), slots whose stack is empty are dropped unless
@@ -523,7 +537,7 @@ def rehash(ok, on, ots, ometa, nk, nn, nts, nmeta, keep_empty):  # type: ignore[
     return used
 
 
-def finish(st, o_burst):  # type: ignore[no-untyped-def]
+def finish(st: Any, o_burst: Any) -> Any:
     """End of file: the last cyclic frame without a return is lost; close the DC burst."""
     if st[S_CYC_N] > 0 and st[S_CYC_MATCHED] == 0:
         st[S_LOST] += 1
@@ -545,7 +559,8 @@ INLINE = frozenset({
 })
 
 KERNELS = (
-    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_addr_key", "_ts_ns", "_push", "_count_stream",
+    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_addr_key", "_ts_ns", "_push",
+    "_count_stream",
     "_check_wkc", "_returned_extras", "_drift", "_ecat", "_packet", "_full", "scan",
     "_pcapng_record", "rehash", "finish",
 )

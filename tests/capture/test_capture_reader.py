@@ -31,7 +31,8 @@ def lrw(idx: int, wkc: int = 0, ret: bool = False) -> bytes:
     return encode_frame(make_frame([d], src=RET_MAC if ret else OUT_MAC), pad=True)
 
 
-def cyclic(n: int, period_ns: int = 500_000, rt_ns: int = 40_000, t0: int = 1_700_000_000_000_000_000):
+def cyclic(n: int, period_ns: int = 500_000, rt_ns: int = 40_000,
+           t0: int = 1_700_000_000_000_000_000):
     """(ts_ns, frame) pairs of n LRW out/return pairs."""
     out = []
     for i in range(n):
