@@ -32,6 +32,10 @@ def emulate_cmd(
         int, typer.Option("--drift-ppb", help="Clock drift step along the line.")
     ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
+    link_down: Annotated[
+        int | None,
+        typer.Option("--link-down", help="Cut the cable after this slave position (0: all)."),
+    ] = None,
     duration_s: Annotated[
         float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")
     ] = 0.0,
@@ -45,7 +49,7 @@ def emulate_cmd(
     from lolacli.files import load_eni
 
     model = load_eni(eni if eni is not None else default_eni())
-    options = EmulateOptions(drop_p, tuple(stuck_safeop or ()), drift_ppb, seed)
+    options = EmulateOptions(drop_p, tuple(stuck_safeop or ()), drift_ppb, seed, link_down)
     chain = make_chain(model, options)
     stop = {"flag": False}
 

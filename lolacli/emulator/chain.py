@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.registers import AlStatusCode
-from lolacli.errors import WireError
+from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
     CABLE_NS_PER_M,
     DEFAULT_CABLE_M,
@@ -147,10 +147,30 @@ class Chain:
         self.faults = faults or Faults()
         self.stats = ChainStats()
         self._deferred_t_ns: int | None = None
+        self.reachable = len(slaves)
+        self._line_changed()
+
+    def _line_changed(self) -> None:
+        """Topology and arrival offsets of the slaves the frames reach."""
+        self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
-        self._port_offsets = self.timing.port_times(0, len(slaves))
-        for i, esc in enumerate(slaves):
-            esc.set_topology(last=i == len(slaves) - 1)
+        self._port_offsets = self.timing.port_times(0, len(self._active))
+        for i, esc in enumerate(self.slaves):
+            esc.set_topology(last=i >= self.reachable - 1)
+
+    def break_link(self, after: int) -> None:
+        """Fault: the cable after 1-based position ``after`` is cut; the slave there closes
+        its port 1 and returns the frames, the slaves behind it see nothing (0: no slave)."""
+        if not 0 <= after <= len(self.slaves):
+            raise UsageError(
+                f"link after slave {after}: the chain has slaves 1..{len(self.slaves)}"
+            )
+        self.reachable = after
+        self._line_changed()
+
+    def restore_link(self) -> None:
+        self.reachable = len(self.slaves)
+        self._line_changed()
 
     def stuck_in_safeop(self, position: int, code: int = AlStatusCode.NO_VALID_OUTPUTS) -> None:
         """Fault: the slave at 1-based ``position`` refuses SAFEOP -> OP with ``code``."""
@@ -178,7 +198,10 @@ class Chain:
         logical = any(s.cmd in LOGICAL for s in slots)
         self._address(slots)
         datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
-        for position, (esc, offsets) in enumerate(zip(self.slaves, times, strict=True)):
+        if not self._active:
+            self.stats.dropped += 1  # the link is down at the master: nothing comes back
+            return None, 0
+        for position, (esc, offsets) in enumerate(zip(self._active, times, strict=True)):
             esc.frame_t_ns = t_ns
             esc.port_offsets = offsets
             t = t_ns + offsets.port0_ns
@@ -191,7 +214,7 @@ class Chain:
                     slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, data, t)[1]
         for slot in slots:
             if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
-                slot.adp = (slot.adp + len(self.slaves)) & 0xFFFF
+                slot.adp = (slot.adp + len(self._active)) & 0xFFFF
             _U16.pack_into(buf, slot.header + 2, slot.adp)
             if slot.wkc_added:
                 (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
@@ -206,15 +229,14 @@ class Chain:
                 self.run_deferred_cycles()
         if logical:
             self.stats.logical_frames += 1
-        if self.slaves:
-            buf[6] |= SOURCE_MAC_LOCAL_BIT
+        buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         lengths = [slot.length for slot in slots]
-        return bytes(buf), self.timing.round_trip_ns(lengths, len(self.slaves))
+        return bytes(buf), self.timing.round_trip_ns(lengths, len(self._active))
 
     def tick(self, t_ns: int) -> None:
         """Let time pass in every slave (process-data watchdogs)."""
-        for esc in self.slaves:
+        for esc in self._active:
             esc.check_watchdog(t_ns)
 
     def run_deferred_cycles(self) -> None:
@@ -223,7 +245,7 @@ class Chain:
         if t_ns is None:
             return
         self._deferred_t_ns = None
-        for esc in self.slaves:
+        for esc in self._active:
             esc.cycle(t_ns)
 
     def _address(self, slots: list[_Slot]) -> None:
@@ -232,7 +254,7 @@ class Chain:
         for slot in slots:
             if slot.cmd in _AUTO_INCREMENT_SINGLE:
                 position = (-slot.adp) & 0xFFFF
-                slot.target = position if position < len(self.slaves) else -1
+                slot.target = position if position < len(self._active) else -1
             elif slot.cmd in _CONFIGURED_SINGLE:
                 if stations is None:
                     stations = self._stations()
@@ -241,7 +263,7 @@ class Chain:
     def _stations(self) -> dict[int, int]:
         """Configured address -> first position answering it (station address or alias)."""
         out: dict[int, int] = {}
-        for i, esc in enumerate(self.slaves):
+        for i, esc in enumerate(self._active):
             out.setdefault(esc.station_address, i)
             if esc.alias_enabled:
                 out.setdefault(esc.station_alias, i)

@@ -19,6 +19,7 @@ class EmulateOptions:
     stuck_safeop: tuple[int, ...] = ()  # 1-based positions that refuse SAFEOP -> OP
     drift_ppb: int = 0
     seed: int = 0
+    link_down_after: int | None = None  # cable cut after this 1-based position
 
 
 def make_chain(eni: Eni, options: EmulateOptions) -> Chain:
@@ -33,6 +34,8 @@ def make_chain(eni: Eni, options: EmulateOptions) -> Chain:
                 f"--stuck-safeop {position}: the chain has slaves 1..{len(chain.slaves)}"
             )
         chain.stuck_in_safeop(position)
+    if options.link_down_after is not None:
+        chain.break_link(options.link_down_after)
     return chain
 
 

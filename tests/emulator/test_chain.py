@@ -137,3 +137,27 @@ def test_any_well_formed_frame_is_answered(dgrams: list[tuple[C, int, int, bytes
     ]
     for d in back:
         assert d.wkc <= 3 * len(chain.slaves)
+
+
+def test_link_down_fault_shortens_the_line() -> None:
+    chain = build_chain(LOLA)
+    bus = Bus(chain)
+    assert bus.one(C.BRD, 0, 0x0000, 1).wkc == 25
+    chain.break_link(10)
+    d = bus.one(C.BRD, 0, 0x0110, 2)
+    assert d.wkc == 10 and d.adp == 10
+    status = struct.unpack("<H", bus.one(C.APRD, (-9) & 0xFFFF, 0x0110, 2).data)[0]
+    assert status & 0x0C00 == 0x0400  # slave 10 closed its port 1
+    assert bus.one(C.APRD, (-10) & 0xFFFF, 0x0000, 1).wkc == 0
+    _, delay = chain.process(_brd(), 0)
+    assert delay == chain.timing.round_trip_ns([2], 10)
+    chain.break_link(0)
+    assert chain.process(_brd(), 0) == (None, 0)
+    chain.restore_link()
+    assert bus.one(C.BRD, 0, 0x0000, 1).wkc == 25
+
+
+def test_link_down_position_is_checked(cli) -> None:
+    code, _out, err = cli("bus", "emulate", "--iface", "lo", "--link-down", "26")
+    assert code == 2
+    assert "the chain has slaves 1..25" in err

@@ -387,3 +387,15 @@ def test_emulate_without_raw_socket_permission_exits_4() -> None:
     assert done.returncode == 4
     assert "no permission for a raw socket" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_pysoem_finds_the_slaves_before_a_cut_cable(veth, pysoem) -> None:
+    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--link-down", "7")
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 7
+        assert master.slaves[-1].name == "Joint01 L Hip Yaw"  # SOEM reuses SII of equal ids
+    finally:
+        master.close()
+        _stop(proc)
