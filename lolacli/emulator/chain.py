@@ -176,6 +176,18 @@ class Chain:
         """Fault: the slave at 1-based ``position`` refuses SAFEOP -> OP with ``code``."""
         self.slaves[position - 1].refuse_op_code = code
 
+    def drive_fault(self, position: int, error_code: int = 0x5530) -> None:
+        """Fault: the CiA 402 drive at 1-based ``position`` faults (statusword bit 3,
+        0x603F) and sends a CoE emergency with ``error_code`` through its mailbox."""
+        esc = self.slaves[position - 1]
+        fault = getattr(getattr(esc.app, "device", None), "fault", None)
+        if fault is None:
+            raise UsageError(f"slave {position} is not a CiA 402 drive")
+        fault(error_code)
+        server = getattr(esc.app, "sdo", None)
+        if server is not None:
+            esc.post_mailbox(server.emergency(error_code, 0x01))
+
     def process(
         self, frame: bytes, t_ns: int, *, defer_cycles: bool = False
     ) -> tuple[bytes | None, int]:

@@ -32,6 +32,7 @@ MAILBOX_TYPE_COE = 0x03
 MAILBOX_ERROR_UNSUPPORTED_PROTOCOL = 0x0002
 MAILBOX_ERROR_INVALID_HEADER = 0x0005
 
+SERVICE_EMERGENCY = 1
 SERVICE_SDO_REQUEST = 2
 SERVICE_SDO_RESPONSE = 3
 SERVICE_SDO_INFORMATION = 8
@@ -74,6 +75,11 @@ class SdoServer:
 
     def _coe(self, service: int, body: bytes) -> bytes:
         return self._mailbox(MAILBOX_TYPE_COE, _U16.pack(service << 12) + body)
+
+    def emergency(self, error_code: int, error_register: int = 0, data: bytes = b"") -> bytes:
+        """A CoE emergency (service 1): error code, error register, 5 bytes of data."""
+        body = struct.pack("<HB", error_code, error_register) + data[:5].ljust(5, b"\0")
+        return self._coe(SERVICE_EMERGENCY, body)
 
     def _mailbox_error(self, detail: int) -> bytes:
         return self._mailbox(MAILBOX_TYPE_ERROR, _U16.pack(0x0001) + _U16.pack(detail))

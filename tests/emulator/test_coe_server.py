@@ -161,3 +161,17 @@ def test_complete_access_download_of_a_pdo_mapping(bus: Bus) -> None:
     )
     assert isinstance(upload, SdoUploadResponse)
     assert upload.data[:10] == payload
+
+
+def test_drive_fault_sends_a_coe_emergency(bus: Bus) -> None:
+    from lolacli.wire.coe import decode_emergency
+
+    bus.chain.drive_fault(1, 0x7305)
+    raw = bus.fprd(STATION, 0x1900, 140)
+    box = decode_mailbox(raw)
+    assert box.mailbox_type == MailboxType.CoE
+    emergency = decode_emergency(box.payload)
+    assert (emergency.error_code, emergency.error_register) == (0x7305, 0x01)
+    drive = bus.chain.slaves[0].app.device  # type: ignore[union-attr]
+    assert drive.od.get_int(0x603F) == 0x7305
+    assert drive.od.get_int(0x6041) & 0x4F in (0x08, 0x0F)  # fault (reaction)
