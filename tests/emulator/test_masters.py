@@ -248,7 +248,7 @@ def test_kickcat_lola_chain(veth) -> None:
     proc = _emulate(veth[1], EXAMPLES / "lola.xml")
     try:
         link = kickcat.create_link(veth[0], "")
-        link.set_timeout(0.02)  # a Python chain answers 25-slave frames in about 1 ms
+        link.set_timeout(0.05)  # a Python chain answers 25-slave frames in about 1 ms; load
         bus = kickcat.Bus(link)
         bus.init(0.1)
         slaves = bus.slaves()
@@ -259,12 +259,12 @@ def test_kickcat_lola_chain(veth) -> None:
             ((sl.inputs_bits + 7) // 8, (sl.outputs_bits + 7) // 8) for sl in eni.slaves
         ]
         bus.request_state(kickcat.State.SAFE_OP)
-        bus.wait_for_state(kickcat.State.SAFE_OP, 2.0)
+        bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
         for s in slaves:
             s.set_output_bytes(bytes(s.output_size))
         bus.process_data_no_check()
         bus.request_state(kickcat.State.OPERATIONAL)
-        bus.wait_for_state(kickcat.State.OPERATIONAL, 2.0, lambda: bus.process_data_no_check())
+        bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, lambda: bus.process_data_no_check())
         errors = 0
         for _ in range(300):
             try:
