@@ -14,6 +14,7 @@ found by a second pass.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,20 +50,47 @@ WKC_DETAIL_ROWS = 200
 Progress = Callable[[int, int], None]
 
 
-def stats_us(values_ns: np.ndarray) -> dict[str, float | int] | None:
-    """``{count, min, mean, median, std, p99, max}`` in µs (population std, linear p99)."""
-    if values_ns.size == 0:
+def stats_us(values_ns: np.ndarray, *, inplace: bool = False) -> dict[str, float | int] | None:
+    """``{count, min, mean, median, std, p99, max}`` in µs of integer nanoseconds.
+
+    Population std; median and p99 by linear interpolation between order statistics (as
+    numpy's default percentile). Memory-frugal for long captures: one partial sort (of
+    ``values_ns`` itself with ``inplace``, else of a copy) and no float copy of the whole
+    array.
+    """
+    n = int(values_ns.size)
+    if n == 0:
         return None
-    x = values_ns.astype(np.float64) / 1000.0
+    a = values_ns if inplace else values_ns.copy()
+    pos = (n - 1) * 0.99
+    p_lo = int(math.floor(pos))
+    p_hi = min(p_lo + 1, n - 1)
+    m_lo, m_hi = (n - 1) // 2, n // 2
+    a.partition(sorted({m_lo, m_hi, p_lo, p_hi}))
+    mean_ns = int(a.sum(dtype=np.int64)) / n
+    squares = 0.0
+    for i in range(0, n, 1 << 20):
+        d = a[i : i + (1 << 20)].astype(np.float64) - mean_ns
+        squares += float(np.dot(d, d))
+    lo, hi = float(a[p_lo]), float(a[p_hi])
     return {
-        "count": int(x.size),
-        "min": float(x.min()),
-        "mean": float(x.mean()),
-        "median": float(np.median(x)),
-        "std": float(x.std()),
-        "p99": float(np.percentile(x, 99)),
-        "max": float(x.max()),
+        "count": n,
+        "min": float(a.min()) / 1000.0,
+        "mean": mean_ns / 1000.0,
+        "median": (float(a[m_lo]) + float(a[m_hi])) / 2.0 / 1000.0,
+        "std": math.sqrt(squares / n) / 1000.0,
+        "p99": (lo + (hi - lo) * (pos - p_lo)) / 1000.0,
+        "max": float(a.max()) / 1000.0,
     }
+
+
+def _jitter(stats: dict[str, float | int] | None) -> dict[str, float] | None:
+    """Cycle jitter: std and the largest deviation from the median (µs)."""
+    if stats is None:
+        return None
+    med = float(stats["median"])
+    deviation = max(abs(float(stats["min"]) - med), abs(float(stats["max"]) - med))
+    return {"std": float(stats["std"]), "max_deviation": deviation}
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,16 +102,20 @@ class CaptureReport:
     engine: str
     counts: dict[str, int]
     datagrams_by_cmd: dict[str, int]
-    round_trip_ns: np.ndarray
-    round_trip_cyclic_ns: np.ndarray
-    cycle_period_ns: np.ndarray
+    round_trip_stats: dict[str, Any] | None
+    round_trip_cyclic_stats: dict[str, Any] | None
+    cycle_period_stats: dict[str, Any] | None
     cyclic_stream: str
     wkc: dict[str, Any]
     dc: dict[str, Any]
     sdo: SdoTracker
     time_span_ns: int
     interfaces: list[Interface] = field(default_factory=list)
-    round_trip_at_ns: np.ndarray | None = None  # return timestamps, with keep_series
+    # the series themselves, with keep_series (for plots): round trips in return order,
+    # their return timestamps, cycle periods
+    round_trip_ns: np.ndarray | None = None
+    round_trip_at_ns: np.ndarray | None = None
+    cycle_period_ns: np.ndarray | None = None
 
     @property
     def lost_frames(self) -> int:
@@ -95,7 +127,6 @@ class CaptureReport:
 
     def to_dict(self) -> dict[str, Any]:
         c = self.counts
-        periods = self.cycle_period_ns
         aborts = self.sdo.aborts()
         return {
             "schema": SCHEMA,
@@ -113,12 +144,14 @@ class CaptureReport:
             "pairs": c["pairs"],
             "unmatched_outgoing": c["outgoing_frames"] - c["pairs"],
             "unmatched_returned": c["unmatched_returned"],
-            "round_trip_us": stats_us(self.round_trip_ns),
-            "round_trip_cyclic_us": stats_us(self.round_trip_cyclic_ns),
+            "round_trip_us": self.round_trip_stats,
+            "round_trip_cyclic_us": self.round_trip_cyclic_stats,
             "cyclic_stream": self.cyclic_stream,
             "cyclic_frames": c["cyclic_frames"],
-            "cycle_period_us": stats_us(periods),
-            "cycle_jitter_us": _jitter(periods),
+            # cyclic frames never answered at all (lost_frames also counts late answers)
+            "cyclic_unmatched": c["cyclic_frames"] - c["cyclic_pairs"],
+            "cycle_period_us": self.cycle_period_stats,
+            "cycle_jitter_us": _jitter(self.cycle_period_stats),
             "wkc_mismatches": self.wkc_mismatches,
             "wkc": self.wkc,
             "lost_frames": c["lost_frames"],
@@ -148,13 +181,6 @@ class CaptureReport:
                 "skipped_blocks": c["skipped_blocks"],
             },
         }
-
-
-def _jitter(periods_ns: np.ndarray) -> dict[str, float] | None:
-    if periods_ns.size == 0:
-        return None
-    x = periods_ns.astype(np.float64) / 1000.0
-    return {"std": float(x.std()), "max_deviation": float(np.abs(x - np.median(x)).max())}
 
 
 def _mailbox_dict(tracker: SdoTracker) -> dict[str, Any]:
@@ -416,13 +442,13 @@ class _Pass:
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
-            self.rt.append(np.array(self.o_rt[:n], np.int64))
+            self.rt.append(_compact(np.array(self.o_rt[:n], np.int64)))
             self.rt_cyc.append(np.array(self.o_rtcyc[:n], np.uint8))
             if self.keep_series:
                 self.rt_ts.append(np.array(self.o_rtts[:n], np.int64))
         n = int(st[S.S_N_PERIOD])
         if n:
-            self.periods.append(np.array(self.o_period[:n], np.int64))
+            self.periods.append(_compact(np.array(self.o_period[:n], np.int64)))
         n = int(st[S.S_N_BURST])
         if n:
             counts = np.bincount(np.array(self.o_burst[:n], np.int64))
@@ -469,8 +495,15 @@ class _Pass:
             "non_ethernet_packets": st[S.S_NON_ETH],
             "skipped_blocks": st[S.S_SKIPPED],
         }
-        rt = _cat(self.rt, np.int64)
-        cyc = _cat(self.rt_cyc, np.uint8).astype(bool)
+        keep = self.keep_series
+        rt = _take(self.rt)
+        cyc = _take(self.rt_cyc).astype(bool, copy=False) if rt.size else np.zeros(0, bool)
+        counts["cyclic_pairs"] = int(np.count_nonzero(cyc))
+        rt_cyclic_stats = stats_us(rt[cyc], inplace=True)
+        del cyc
+        rt_stats = stats_us(rt, inplace=not keep)
+        periods = _take(self.periods)
+        period_stats = stats_us(periods, inplace=not keep)
         mode = "logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature"
         return CaptureReport(
             path=str(self.reader.path),
@@ -478,16 +511,18 @@ class _Pass:
             engine=self.engine,
             counts=counts,
             datagrams_by_cmd=by_cmd,
-            round_trip_ns=rt,
-            round_trip_cyclic_ns=rt[cyc],
-            cycle_period_ns=_cat(self.periods, np.int64),
+            round_trip_stats=rt_stats,
+            round_trip_cyclic_stats=rt_cyclic_stats,
+            cycle_period_stats=period_stats,
             cyclic_stream=mode,
             wkc=self._wkc_dict(st),
             dc=self._dc_dict(st),
             sdo=self.sdo,
             time_span_ns=st[S.S_END_TS] - st[S.S_FIRST_TS],
             interfaces=list(self.interfaces),
-            round_trip_at_ns=_cat(self.rt_ts, np.int64) if self.keep_series else None,
+            round_trip_ns=rt if keep else None,
+            round_trip_at_ns=_take(self.rt_ts) if keep else None,
+            cycle_period_ns=periods if keep else None,
         )
 
     def _wkc_dict(self, st: list[int]) -> dict[str, Any]:
@@ -523,6 +558,23 @@ def _cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:
     if not parts:
         return np.zeros(0, dtype)
     return np.concatenate(parts).astype(dtype, copy=False)
+
+
+def _take(parts: list[np.ndarray]) -> np.ndarray:
+    """Concatenate drained chunks (numpy promotes mixed int32/int64 chunks to int64) and
+    empty the list, so that the chunks are freed as soon as the whole is built."""
+    if not parts:
+        return np.zeros(0, np.int64)
+    whole = np.concatenate(parts)
+    parts.clear()
+    return whole
+
+
+def _compact(values: np.ndarray) -> np.ndarray:
+    """int32 when the nanosecond values fit (±2.1 s), halving the memory of long series."""
+    if values.size and -(2**31) < values.min() and values.max() < 2**31:
+        return values.astype(np.int32)
+    return values
 
 
 def _fill(f: Any, buf: np.ndarray, start: int) -> tuple[int, bool]:

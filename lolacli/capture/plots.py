@@ -21,8 +21,9 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(report.path).stem
     written: list[Path] = []
-    periods = report.cycle_period_ns / 1000.0
-    rt = report.round_trip_ns / 1000.0
+    empty = np.zeros(0, np.int64)
+    periods = (report.cycle_period_ns if report.cycle_period_ns is not None else empty) / 1000.0
+    rt = (report.round_trip_ns if report.round_trip_ns is not None else empty) / 1000.0
     if periods.size:
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.hist(periods, bins=min(200, max(10, periods.size // 20)))

@@ -284,3 +284,26 @@ def test_random_bytes_without_header_exit_3(cli, tmp_path):
     path.write_bytes(bytes(range(256)) * 8)
     code, _, _ = _run(cli, path)
     assert code == 3
+
+
+def test_engine_choice(monkeypatch):
+    from lolacli.capture.fast import SMALL_FILE_BYTES, choose_engine
+
+    monkeypatch.delenv("LOLACLI_ENGINE", raising=False)
+    assert choose_engine("auto", SMALL_FILE_BYTES - 1) == "python"
+    assert choose_engine("auto", SMALL_FILE_BYTES) == FAST
+    assert choose_engine("python", 10**9) == "python"
+    monkeypatch.setenv("LOLACLI_ENGINE", "python")
+    assert choose_engine("auto", 10**9) == "python"
+    with pytest.raises(ValueError):
+        choose_engine("fortran")
+
+
+def test_progress_is_called_up_to_the_file_size(tmp_path):
+    path = write_pcapng(tmp_path / "p.pcapng", cyclic(3000))
+    calls = []
+    analyze_file(path, engine="python", chunk_bytes=1 << 16,
+                 progress=lambda d, t: calls.append((d, t)))
+    size = path.stat().st_size
+    assert len(calls) > 3 and calls[-1] == (size, size)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
