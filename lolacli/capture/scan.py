@@ -83,6 +83,7 @@ MODE_SIGNATURE = 1
 
 DEPTH = 16
 MAX_DGRAMS = 128
+CHECK_EVERY = 64
 MBX_COLS = 8
 WKC_COLS = 5
 MAX_RECORD = 16 * 1024 * 1024
@@ -140,6 +141,8 @@ def _addr_key(cmd: Any, addr: Any) -> Any:
 
 def _ts_ns(units: Any, mode: Any, a: Any, b: Any, off: Any) -> Any:
     if mode == 0:
+        if b == 1:
+            return units * a + off
         return units * a // b + off
     sec = units >> a
     frac = units & ((1 << a) - 1)
@@ -418,11 +421,15 @@ def scan(
     5 integers per pcapng interface: ts mode, a, b, offset_ns, is_ethernet.
     Returns ``(pos, status)``.
     """
-    cap = len(o_rt)
+    # outputs and tables are checked every CHECK_EVERY records: leave room for that many
+    cap = len(o_rt) - CHECK_EVERY * (MAX_DGRAMS + 2)
+    count = 0
     while True:
-        act = _full(st, cap, pk, sk, wk)
-        if act >= 0:
-            return pos, act
+        count += 1
+        if count % CHECK_EVERY == 1:
+            act = _full(st, cap, pk, sk, wk)
+            if act >= 0:
+                return pos, act
         if fmt == 0:
             if pos + 16 > end:
                 break
