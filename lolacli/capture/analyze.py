@@ -14,7 +14,6 @@ found by a second pass.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +32,7 @@ from lolacli.capture.reader import (
     parse_idb,
 )
 from lolacli.capture.sdo import SdoTracker
+from lolacli.capture.stats import summary_us
 from lolacli.errors import CaptureError
 from lolacli.wire.commands import mnemonic
 
@@ -50,38 +50,9 @@ WKC_DETAIL_ROWS = 200
 Progress = Callable[[int, int], None]
 
 
-def stats_us(values_ns: np.ndarray, *, inplace: bool = False) -> dict[str, float | int] | None:
-    """``{count, min, mean, median, std, p99, max}`` in µs of integer nanoseconds.
-
-    Population std; median and p99 by linear interpolation between order statistics (as
-    numpy's default percentile). Memory-frugal for long captures: one partial sort (of
-    ``values_ns`` itself with ``inplace``, else of a copy) and no float copy of the whole
-    array.
-    """
-    n = int(values_ns.size)
-    if n == 0:
-        return None
-    a = values_ns if inplace else values_ns.copy()
-    pos = (n - 1) * 0.99
-    p_lo = int(math.floor(pos))
-    p_hi = min(p_lo + 1, n - 1)
-    m_lo, m_hi = (n - 1) // 2, n // 2
-    a.partition(sorted({m_lo, m_hi, p_lo, p_hi}))
-    mean_ns = int(a.sum(dtype=np.int64)) / n
-    squares = 0.0
-    for i in range(0, n, 1 << 20):
-        d = a[i : i + (1 << 20)].astype(np.float64) - mean_ns
-        squares += float(np.dot(d, d))
-    lo, hi = float(a[p_lo]), float(a[p_hi])
-    return {
-        "count": n,
-        "min": float(a.min()) / 1000.0,
-        "mean": mean_ns / 1000.0,
-        "median": (float(a[m_lo]) + float(a[m_hi])) / 2.0 / 1000.0,
-        "std": math.sqrt(squares / n) / 1000.0,
-        "p99": (lo + (hi - lo) * (pos - p_lo)) / 1000.0,
-        "max": float(a.max()) / 1000.0,
-    }
+def stats_us(values_ns: np.ndarray) -> dict[str, float | int] | None:
+    """``{count, min, mean, median, std, p99, max}`` in µs of integer nanoseconds."""
+    return summary_us([np.asarray(values_ns, np.int64)])
 
 
 def _jitter(stats: dict[str, float | int] | None) -> dict[str, float] | None:
@@ -270,8 +241,9 @@ class _Pass:
         self.n_if = 0
         self.interfaces: list[Interface] = []
         self.big = reader.header.big_endian
-        self.rt: list[np.ndarray] = []
-        self.rt_cyc: list[np.ndarray] = []
+        self.rt_cyclic: list[np.ndarray] = []  # round trips of cyclic frames
+        self.rt_other: list[np.ndarray] = []  # of all other pairs
+        self.rt_series: list[np.ndarray] = []  # all, in order (keep_series)
         self.rt_ts: list[np.ndarray] = []
         self.periods: list[np.ndarray] = []
         self.bursts = np.zeros(0, np.int64)
@@ -442,9 +414,12 @@ class _Pass:
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
-            self.rt.append(_compact(np.array(self.o_rt[:n], np.int64)))
-            self.rt_cyc.append(np.array(self.o_rtcyc[:n], np.uint8))
+            rt = np.array(self.o_rt[:n], np.int64)
+            cyc = np.array(self.o_rtcyc[:n], np.int64) != 0
+            self.rt_cyclic.append(_compact(rt[cyc]))
+            self.rt_other.append(_compact(rt[~cyc]))
             if self.keep_series:
+                self.rt_series.append(rt)
                 self.rt_ts.append(np.array(self.o_rtts[:n], np.int64))
         n = int(st[S.S_N_PERIOD])
         if n:
@@ -496,14 +471,11 @@ class _Pass:
             "skipped_blocks": st[S.S_SKIPPED],
         }
         keep = self.keep_series
-        rt = _take(self.rt)
-        cyc = _take(self.rt_cyc).astype(bool, copy=False) if rt.size else np.zeros(0, bool)
-        counts["cyclic_pairs"] = int(np.count_nonzero(cyc))
-        rt_cyclic_stats = stats_us(rt[cyc], inplace=True)
-        del cyc
-        rt_stats = stats_us(rt, inplace=not keep)
-        periods = _take(self.periods)
-        period_stats = stats_us(periods, inplace=not keep)
+        keep = self.keep_series
+        counts["cyclic_pairs"] = sum(int(c.size) for c in self.rt_cyclic)
+        rt_cyclic_stats = summary_us(self.rt_cyclic)
+        rt_stats = summary_us(self.rt_cyclic + self.rt_other)
+        period_stats = summary_us(self.periods)
         mode = "logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature"
         return CaptureReport(
             path=str(self.reader.path),
@@ -520,9 +492,9 @@ class _Pass:
             sdo=self.sdo,
             time_span_ns=st[S.S_END_TS] - st[S.S_FIRST_TS],
             interfaces=list(self.interfaces),
-            round_trip_ns=rt if keep else None,
+            round_trip_ns=_take(self.rt_series) if keep else None,
             round_trip_at_ns=_take(self.rt_ts) if keep else None,
-            cycle_period_ns=periods if keep else None,
+            cycle_period_ns=_take(self.periods) if keep else None,
         )
 
     def _wkc_dict(self, st: list[int]) -> dict[str, Any]:
