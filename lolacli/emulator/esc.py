@@ -18,7 +18,7 @@ from lolacli.emulator import registers as r
 from lolacli.emulator.registers import AlState, AlStatusCode
 from lolacli.emulator.sii import SiiLayout, sii_layout
 from lolacli.wire.commands import Command
-from lolacli.wire.registers import decode_system_time_difference, encode_system_time_difference
+from lolacli.wire.registers import decode_system_time_difference
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -152,6 +152,10 @@ class Esc:
         self._last_outputs_ns = 0
         self._watchdog_ns: int | None = -1  # -1: to be computed from the registers
         self._last_mailbox_in: bytes | None = None
+        # bumped whenever addressing or mapping may have changed (register writes, AL
+        # states, topology): the chain's frame plans are valid for one value. A chain
+        # shares one cell between its slaves.
+        self.epoch: list[int] = [0]
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -174,6 +178,7 @@ class Esc:
         _U16.pack_into(m, r.EEPROM_CONTROL, status)
         self._mailbox_queue.clear()
         self._cache = None
+        self.epoch[0] += 1
         self.outputs_valid = False
         self.pending_op = False
         self._set_al(AlState.INIT, AlStatusCode.NO_ERROR, error=False)
@@ -182,6 +187,7 @@ class Esc:
     def set_topology(self, *, last: bool) -> None:
         """DL status 0x0110: port 0 link+communication, port 1 too unless last in line."""
         self.last_port = last
+        self.epoch[0] += 1
         status = 0x0001 | 0x0010 | 0x0200  # PDI operational, link port 0, comm port 0
         status |= 0x0400 if last else (0x0020 | 0x0800)  # port 1 closed loop, or open+comm
         status |= 0x1000 | 0x4000  # ports 2 and 3: loop closed
@@ -299,6 +305,7 @@ class Esc:
         if address >= r.PROCESS_RAM:
             self.mem[address:end] = payload
         else:
+            self.epoch[0] += 1
             self._write_registers(address, payload)
         self._after_write(address, end, payload, t_ns)
         return True
@@ -339,6 +346,7 @@ class Esc:
 
     # ------------------------------------------------------------ AL states
     def _set_al(self, state: int, code: int, *, error: bool) -> None:
+        self.epoch[0] += 1
         self.mem[r.AL_STATUS] = (state & r.AL_STATE_MASK) | (r.AL_ERROR_INDICATOR if error else 0)
         _U16.pack_into(self.mem, r.AL_STATUS_CODE, code)
 
@@ -441,6 +449,7 @@ class Esc:
             base = self._sm_address(sm)
             self.mem[base + 7] = (self.mem[base + 7] & 0x02) | (0 if on else r.SM_PDI_DEACTIVATE)
         self._cache = None
+        self.epoch[0] += 1
 
     def _check_mailbox_sms(self) -> int | None:
         layout = self.layout
@@ -722,18 +731,35 @@ class Esc:
         hi = min(end, r.DC_SYSTEM_TIME + 8)
         raw = bytearray(8)
         raw[lo - r.DC_SYSTEM_TIME : hi - r.DC_SYSTEM_TIME] = payload[lo - start : hi - start]
-        width_bits = 8 * (hi - r.DC_SYSTEM_TIME)
-        received = int.from_bytes(raw, "little") + self.u32(r.DC_SYSTEM_TIME_DELAY)
-        own = self.system_time_ns(t_ns)
-        mask = (1 << width_bits) - 1
-        diff = ((own - received + (1 << (width_bits - 1))) & mask) - (1 << (width_bits - 1))
-        clipped = max(-0x7FFFFFFF, min(0x7FFFFFFF, diff))
-        at = r.DC_SYSTEM_TIME_DIFFERENCE
-        self.mem[at : at + 4] = encode_system_time_difference(clipped)
+        self.system_time_received(int.from_bytes(raw, "little"), 8 * (hi - r.DC_SYSTEM_TIME), t_ns)
+
+    def system_time_received(self, value: int, width_bits: int, t_ns: int) -> None:
+        """The time control loop's step for a received system time of ``width_bits``."""
+        mem = self.mem
+        received = value + _U32.unpack_from(mem, r.DC_SYSTEM_TIME_DELAY)[0]
+        clock = self.clock
+        own = (
+            t_ns
+            + (t_ns * clock.drift_ppb) // 1_000_000_000
+            + clock.start_ns
+            + clock.correction_ns
+            + _I64.unpack_from(mem, r.DC_SYSTEM_TIME_OFFSET)[0]
+        )  # = system_time_ns(t_ns), inlined: this runs for every slave in every cycle
+        half = 1 << (width_bits - 1)
+        diff = ((own - received + half) & ((1 << width_bits) - 1)) - half
+        if diff < 0:
+            word = min(-diff, 0x7FFFFFFF) | 0x80000000
+        else:
+            word = min(diff, 0x7FFFFFFF)
+        _U32.pack_into(mem, r.DC_SYSTEM_TIME_DIFFERENCE, word)  # sign and magnitude
         # The ESC corrects drift by speeding up or slowing down its clock, never by jumps:
         # half the error per write, at most MAX_CORRECTION_NS (offsets are the master's job).
-        step = max(-MAX_CORRECTION_NS, min(MAX_CORRECTION_NS, diff // 2))
-        self.clock.correction_ns -= step
+        step = diff // 2
+        if step > MAX_CORRECTION_NS:
+            step = MAX_CORRECTION_NS
+        elif step < -MAX_CORRECTION_NS:
+            step = -MAX_CORRECTION_NS
+        clock.correction_ns -= step
 
     @property
     def system_time_difference_ns(self) -> int:

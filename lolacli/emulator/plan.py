@@ -1,0 +1,353 @@
+"""Frame plans: a repeated frame's work through the chain, worked out once.
+
+A cyclic frame comes every cycle with the same datagrams (command, address, length);
+only its data change. Which slave copies which bytes between the datagram and its memory
+depends on registers that change rarely: FMMUs and sync managers (ETG.1000.4 §6.5, §6.7),
+AL states (which SM buffers the PDI opens), station address and alias, the line itself.
+A :class:`FramePlan` holds that work for one frame layout as slice copies between a
+frame buffer and the slaves' memories, the DC time distribution as a list of slaves and
+the BRD as an OR over memory views, with the WKC increments known in advance. It is valid
+while the chain's epoch (bumped by every ESC on any such change) keeps its value.
+
+Only frames made entirely of plannable datagrams get a plan — logical reads and writes
+whose FMMUs write into process RAM or the digital outputs from 0x0F00 (and read from
+anywhere), BRD of registers other than the DC system time, ARMW/FRMW of the DC system
+time (4 or 8 bytes) — so nothing a plan does can change what a plan assumes, except a
+slave entering OP on its first outputs (which keeps its SM buffers open: SAFEOP and OP
+open the same ones). Everything else takes the general path, which gives the same bytes
+(tests/emulator/test_plan.py compares them).
+
+Datagrams are run one after the other over all slaves (datagram-major), not slave by
+slave as the frame passes (slave-major): slaves only meet through the frame's bytes and
+each datagram has its own, so the two orders give the same result.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+from lolacli.emulator import registers as r
+from lolacli.emulator.esc import Esc, FmmuEntry, PortTimes, SmView, _byte_aligned
+from lolacli.wire.commands import Command
+
+_HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
+_U16 = struct.Struct("<H")
+ECAT_TYPE_COMMANDS = 1
+_MASK64 = (1 << 64) - 1
+_LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
+_DC = frozenset({Command.ARMW, Command.FRMW})
+DIGITAL_OUTPUTS = 0x0F00  # from here on FMMU writes change nothing a plan depends on
+PLANNABLE = _LOGICAL | _DC | {Command.BRD}
+
+Key = tuple[int, ...]
+
+
+def layout_key(frame: bytes) -> Key | None:
+    """The layout of an untagged EtherCAT command frame: its length, the EtherCAT header
+    word and each datagram's command, ADP, ADO and length word. ``None`` when the frame is
+    not one (tagged, other types, malformed): the general path deals with those. Frames
+    with equal keys are decoded alike, so a plan made from one fits the others."""
+    n = len(frame)
+    if n < 16 or frame[12] != 0x88 or frame[13] != 0xA4:
+        return None
+    word = frame[14] | frame[15] << 8
+    end = 16 + (word & 0x7FF)
+    if word >> 12 != ECAT_TYPE_COMMANDS or end > n:
+        return None
+    key = [n, word]
+    pos = 16
+    unpack = _HEAD.unpack_from
+    while True:
+        if pos + 10 > end:
+            return None
+        cmd, _index, adp, ado, lenw = unpack(frame, pos)
+        pos += 12 + (lenw & 0x7FF)
+        if pos > end:
+            return None
+        key += (cmd, adp, ado, lenw)
+        if not lenw & 0x8000:
+            return tuple(key)
+
+
+@dataclass(slots=True)
+class _Datagram:
+    header: int
+    cmd: int
+    adp: int
+    ado: int
+    length: int
+
+    @property
+    def data(self) -> int:
+        return self.header + 10
+
+    @property
+    def wkc(self) -> int:
+        return self.header + 10 + self.length
+
+
+def _datagrams(key: Key) -> list[_Datagram]:
+    out = []
+    pos = 16
+    for i in range(2, len(key), 4):
+        cmd, adp, ado, lenw = key[i : i + 4]
+        out.append(_Datagram(pos, cmd, adp, ado, lenw & 0x7FF))
+        pos += 12 + (lenw & 0x7FF)
+    return out
+
+
+class _NotPlannable(Exception):
+    """This frame takes the general path."""
+
+
+def make_plan(
+    key: Key, slaves: list[Esc], offsets: list[PortTimes], epoch: int, delay_ns: int
+) -> FramePlan | None:
+    """The plan of a frame layout, or ``None`` when the frame takes the general path."""
+    if not slaves or any(key[i] not in PLANNABLE for i in range(2, len(key), 4)):
+        return None
+    try:
+        return FramePlan(key, slaves, offsets, epoch, delay_ns)
+    except _NotPlannable:
+        return None
+
+
+class FramePlan:
+    """The precomputed work of one frame layout for one chain epoch."""
+
+    def __init__(
+        self, key: Key, slaves: list[Esc], offsets: list[PortTimes], epoch: int, delay_ns: int
+    ) -> None:
+        self.epoch = epoch
+        self.delay_ns = delay_ns
+        self.buf = bytearray(key[0])
+        view = memoryview(self.buf)
+        self.slaves = [(esc, o, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]
+        datagrams = _datagrams(key)
+        self.datagrams_per_slave = len(datagrams)
+        self.logical = any(d.cmd in _LOGICAL for d in datagrams)
+        self.ops: list[_Op] = [_op(d, view, self.slaves) for d in datagrams]
+        n = len(slaves)
+        self.adp_fixes = [  # every slave incremented the ADP of these
+            (d.header + 2, (d.adp + n) & 0xFFFF)
+            for d in datagrams
+            if d.cmd in (Command.BRD, Command.ARMW)
+        ]
+
+    def run(self, frame: bytes, t_ns: int) -> bytes:
+        buf = self.buf
+        buf[:] = frame
+        k = self.datagrams_per_slave
+        for esc, offsets, port0_ns in self.slaves:
+            esc.frame_t_ns = t_ns
+            esc.port_offsets = offsets
+            esc._now_ns = t_ns + port0_ns
+            esc.counters.datagrams += k
+        for op in self.ops:
+            added = op.run(t_ns)
+            if added:
+                at = op.wkc_offset
+                _U16.pack_into(buf, at, (_U16.unpack_from(buf, at)[0] + added) & 0xFFFF)
+        for at, adp in self.adp_fixes:
+            _U16.pack_into(buf, at, adp)
+        buf[6] |= 0x02  # SOURCE_MAC_LOCAL_BIT
+        return bytes(buf)
+
+
+class _Op:
+    wkc_offset: int
+
+    def run(self, t_ns: int) -> int:
+        raise NotImplementedError
+
+
+def _op(d: _Datagram, view: memoryview, slaves: list[tuple[Esc, PortTimes, int]]) -> _Op:
+    data = view[d.data : d.data + d.length]
+    if d.cmd in _LOGICAL:
+        return _Logical(d, data, slaves)
+    if d.cmd == Command.BRD:
+        return _Brd(d, data, [esc for esc, _, _ in slaves])
+    if d.cmd in _DC and d.ado == r.DC_SYSTEM_TIME and d.length in (4, 8):
+        return _DcDistribution(d, data, slaves)
+    raise _NotPlannable
+
+
+class _Brd(_Op):
+    """BRD of registers: the OR of every slave's bytes into the datagram, WKC +1 each."""
+
+    def __init__(self, d: _Datagram, data: memoryview, slaves: list[Esc]) -> None:
+        lo, hi = d.ado, d.ado + d.length
+        if hi > r.PROCESS_RAM or (lo < r.DC_SYSTEM_TIME + 8 and r.DC_SYSTEM_TIME < hi):
+            raise _NotPlannable  # SM buffers, or a read that latches the system time
+        self.wkc_offset = d.wkc
+        self.data = data
+        self.length = d.length
+        self.sources = [memoryview(esc.mem)[lo:hi] for esc in slaves]
+
+    def run(self, t_ns: int) -> int:
+        value = int.from_bytes(self.data, "little")
+        for source in self.sources:
+            value |= int.from_bytes(source, "little")
+        self.data[:] = value.to_bytes(self.length, "little")
+        return len(self.sources)
+
+
+class _DcDistribution(_Op):
+    """ARMW/FRMW of the system time: the reference puts its time in, the others take it
+    into their time control loop; WKC +1 from every slave."""
+
+    def __init__(
+        self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, PortTimes, int]]
+    ) -> None:
+        self.wkc_offset = d.wkc
+        self.data = data
+        self.length = d.length
+        rows = []
+        for position, (esc, _, port0_ns) in enumerate(slaves):
+            if d.cmd == Command.ARMW:
+                hit = (d.adp + position) & 0xFFFF == 0
+            else:
+                hit = esc.addressed_configured(d.adp)
+            rows.append((esc, port0_ns, hit))
+        self.rows = rows
+
+    def run(self, t_ns: int) -> int:
+        data, n = self.data, self.length
+        width_bits = 8 * n
+        value = int.from_bytes(data, "little")
+        for esc, port0_ns, hit in self.rows:
+            if hit:
+                data[:] = (esc.system_time_ns(t_ns + port0_ns) & _MASK64).to_bytes(8, "little")[:n]
+                value = int.from_bytes(data, "little")
+            else:
+                esc.system_time_received(value, width_bits, t_ns + port0_ns)
+        return len(self.rows)
+
+
+@dataclass(slots=True)
+class _SlaveStep:
+    """One slave's part of a logical datagram: ``generic`` set -> the ESC's own code."""
+
+    esc: Esc
+    generic: bool = False
+    writes: list[tuple[memoryview, memoryview, int, int]] | None = None  # target, source, a, b
+    events: int = 0  # output SM buffers completed: _outputs_written calls
+    reads: list[tuple[memoryview, memoryview, int, int]] | None = None
+    wkc: int = 0
+
+
+class _Logical(_Op):
+    """LRD/LWR/LRW: slice copies through every slave's FMMUs (ETG.1000.4 §6.5).
+
+    Slaves whose FMMUs are not plain byte copies (bit-wise mappings, mailbox buffers) run
+    the ESC's own logical processing; then, and when a slave's read lands where a later
+    slave's write takes from, the slaves run in line order. Otherwise all writes run
+    first, then the outputs events, then all reads."""
+
+    def __init__(
+        self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, PortTimes, int]]
+    ) -> None:
+        self.wkc_offset = d.wkc
+        self.data = data
+        self.cmd = d.cmd
+        self.address = d.adp | d.ado << 16
+        self.steps = [self._slave(esc, d) for esc, _, _ in slaves]
+        plain = [s for s in self.steps if not s.generic]
+        self.fixed_wkc = sum(s.wkc for s in plain)
+        self.ordered = len(plain) < len(self.steps) or _reads_feed_writes(self.steps)
+        self.writes = [(t, src) for s in plain for t, src, _, _ in s.writes or ()]
+        self.events = [(s.esc, s.events) for s in plain if s.events]
+        self.reads = [(t, src) for s in plain for t, src, _, _ in s.reads or ()]
+
+    def _slave(self, esc: Esc, d: _Datagram) -> _SlaveStep:
+        config = esc._config()
+        lo, hi = self.address, self.address + d.length
+        mem = memoryview(esc.mem)
+        step = _SlaveStep(esc, writes=[], reads=[])
+        assert step.writes is not None and step.reads is not None
+        if d.cmd != Command.LRD:
+            hits = [f for f in config.write_fmmus if _fmmu_hits(f, lo, hi)]
+            for f in hits:
+                if f.physical_start < DIGITAL_OUTPUTS:
+                    raise _NotPlannable  # writes into registers a plan depends on
+                p, q, a, b = _copy_range(f, lo, hi)
+                kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_WRITE)
+                if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
+                    return _SlaveStep(esc, generic=True)
+                step.writes.append((mem[p:q], self.data[a:b], a, b))
+                step.events += len(kinds)
+            if hits:
+                step.wkc += 2 if d.cmd == Command.LRW else 1
+        if d.cmd != Command.LWR:
+            hits = [f for f in config.read_fmmus if _fmmu_hits(f, lo, hi)]
+            for f in hits:
+                p, q, a, b = _copy_range(f, lo, hi)
+                kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_READ)
+                if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
+                    return _SlaveStep(esc, generic=True)
+                step.reads.append((self.data[a:b], mem[p:q], a, b))
+            if hits:
+                step.wkc += 1
+        return step
+
+    def run(self, t_ns: int) -> int:
+        if self.ordered:
+            return self._run_ordered()
+        for target, source in self.writes:
+            target[:] = source
+        for esc, n in self.events:
+            for _ in range(n):
+                esc._outputs_written()
+        for target, source in self.reads:
+            target[:] = source
+        return self.fixed_wkc
+
+    def _run_ordered(self) -> int:
+        added = 0
+        for step in self.steps:
+            esc = step.esc
+            if step.generic:
+                added += esc._logical(self.cmd, self.address, self.data, esc._now_ns)
+                continue
+            for target, source, _, _ in step.writes or ():
+                target[:] = source
+            for _ in range(step.events):
+                esc._outputs_written()
+            for target, source, _, _ in step.reads or ():
+                target[:] = source
+            added += step.wkc
+        return added
+
+
+def _fmmu_hits(f: FmmuEntry, lo: int, hi: int) -> bool:
+    return f.logical_start < hi and lo < f.logical_start + f.length_bytes
+
+
+def _copy_range(f: FmmuEntry, lo: int, hi: int) -> tuple[int, int, int, int]:
+    """(memory start, memory end, data start, data end) of a byte-aligned FMMU's copy."""
+    a = max(lo, f.logical_start)
+    b = min(hi, f.logical_start + f.length_bytes)
+    p = f.physical_start + (a - f.logical_start)
+    return p, p + b - a, a - lo, b - lo
+
+
+def _sm_last_byte_in(active: list[SmView], p: int, q: int, direction: int) -> list[int]:
+    """Modes of the SMs of ``direction`` whose last byte lies in [p, q): the buffer events
+    of the ESC's ``_sm_written`` (writes) and ``_after_read`` (reads, only past 0x1000)."""
+    if direction == r.SM_DIRECTION_READ and q <= r.PROCESS_RAM:
+        return []
+    return [
+        sm.mode for sm in active if sm.direction == direction and p <= sm.start + sm.length - 1 < q
+    ]
+
+
+def _reads_feed_writes(steps: list[_SlaveStep]) -> bool:
+    """True when a slave's read lands in bytes a later slave's write takes from."""
+    for i, step in enumerate(steps):
+        for _, _, a, b in step.reads or ():
+            for later in steps[i + 1 :]:
+                for _, _, c, e in later.writes or ():
+                    if a < e and c < b:
+                        return True
+    return False

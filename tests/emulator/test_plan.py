@@ -1,0 +1,165 @@
+"""Frame plans give the same bytes as the general path: replies, ESC memories, clocks.
+
+Two chains of the same ENI get the same frames at the same times: one answers through
+frame plans wherever it can (``plan_after = 1``), the other never (``plan_after = 0``).
+Bring-up through the ENI's InitCmds, cyclic frames with changing outputs, SDO traffic,
+a drive fault with its emergency, and random frames built from the plannable commands
+(random logical windows, registers, DC addressing) mixed with others.
+"""
+
+from __future__ import annotations
+
+import random
+import struct
+
+import pytest
+
+from lolacli.emulator.chain import Chain
+from lolacli.emulator.plan import layout_key
+from lolacli.emulator.slave import build_chain
+from lolacli.eni.model import Eni
+from lolacli.files import load_eni
+from lolacli.wire.commands import Command as C
+from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
+from tests.emulator.bus import EXAMPLES, Bus
+
+
+class Twin:
+    """Looks like a chain to :class:`Bus`; runs every frame through both chains."""
+
+    def __init__(self, eni: Eni) -> None:
+        self.fast = build_chain(eni, drift_ppb=20)
+        self.fast.plan_after = 1
+        self.slow = build_chain(eni, drift_ppb=20)
+        self.slow.plan_after = 0
+        self.slaves = self.fast.slaves
+        self.timing = self.fast.timing
+        self.frames = 0
+
+    def process(self, frame: bytes, t_ns: int, *, defer_cycles: bool = False):  # type: ignore[no-untyped-def]
+        fast = self.fast.process(frame, t_ns, defer_cycles=defer_cycles)
+        slow = self.slow.process(frame, t_ns, defer_cycles=defer_cycles)
+        assert fast == slow, f"frame {self.frames}: {frame.hex()}"
+        self.frames += 1
+        if self.frames % 50 == 0:
+            self.same_state()
+        return fast
+
+    def same_state(self) -> None:
+        for i, (a, b) in enumerate(zip(self.fast.slaves, self.slow.slaves, strict=True)):
+            assert a.mem == b.mem, f"slave {i}: memories differ"
+            assert a.clock == b.clock, f"slave {i}"
+            assert a.counters == b.counters, f"slave {i}"
+            assert (a.outputs_valid, a.pending_op, a._last_outputs_ns, a._now_ns) == (
+                b.outputs_valid,
+                b.pending_op,
+                b._last_outputs_ns,
+                b._now_ns,
+            ), f"slave {i}"
+        assert self.fast.stats.replies == self.slow.stats.replies
+
+
+def _cyclic(bus: Bus, eni: Eni, rng: random.Random, n: int) -> None:
+    size = eni.cyclic_frames[0].commands[0].data_length_bytes
+    image = bytearray(size)
+    for k in range(n):
+        for drive in range(0, min(size - 6, 21 * 13), 13):  # controlword, mode, target
+            cw = (0x06, 0x07, 0x0F)[min(k, 2)]
+            struct.pack_into("<Hbi", image, drive, cw, 8, rng.randrange(-5000, 5000))
+        bus.cycle(eni, bytes(image[:size]))
+
+
+def _random_frame(rng: random.Random, slaves: int, logical_bytes: int) -> bytes:
+    datagrams = []
+    for _ in range(rng.randrange(1, 5)):
+        kind = rng.randrange(6)
+        if kind <= 1:
+            cmd = rng.choice([C.LRD, C.LWR, C.LRW])
+            start = 0x10000 + rng.randrange(-16, logical_bytes)
+            datagrams.append(Datagram.logical(cmd, start, rng.randbytes(rng.randrange(1, 64))))
+        elif kind == 2:
+            ado = rng.choice([0x0130, 0x0110, 0x0000, 0x0900, 0x0910, 0x092C, 0x0F00, 0x0FFE])
+            datagrams.append(Datagram.physical(C.BRD, 0, ado, rng.randrange(1, 9)))
+        elif kind == 3:
+            adp = (-rng.randrange(0, slaves + 2)) & 0xFFFF
+            datagrams.append(Datagram.physical(C.ARMW, adp, 0x0910, rng.choice([4, 8])))
+        elif kind == 4:
+            station = 0x03E9 + rng.randrange(0, slaves + 1)
+            datagrams.append(
+                Datagram.physical(C.FRMW, station, 0x0910, rng.randbytes(rng.choice([4, 8, 2])))
+            )
+        else:  # reads only: writes may take the slaves out of OP, which is tested above
+            ado = rng.choice([0x0130, 0x0910, 0x1000, 0x0F00])
+            datagrams.append(Datagram.physical(C.APRD, (-rng.randrange(slaves)) & 0xFFFF, ado, 4))
+    return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
+
+
+@pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml", "ek1100_io.xml"])
+def test_plans_answer_like_the_general_path(name: str) -> None:
+    eni = load_eni(EXAMPLES / name)
+    twin = Twin(eni)
+    bus = Bus(twin)  # type: ignore[arg-type]
+    rng = random.Random(name)
+    bus.bring_up(eni)
+    _cyclic(bus, eni, rng, 60)
+    mb = eni.slaves[0].mailbox
+    if mb is not None:
+        mbx = ((mb.out_start, mb.out_length_bytes), (mb.in_start, mb.in_length_bytes))
+        station = eni.slaves[0].station_address
+        assert bus.sdo_upload(station, 0x1008, 0, mbx)
+        _cyclic(bus, eni, rng, 5)
+        if name != "ek1100_io.xml":
+            twin.fast.drive_fault(1)
+            twin.slow.drive_fault(1)
+            _cyclic(bus, eni, rng, 5)
+            assert bus.fprd(station, mb.in_start, mb.in_length_bytes)  # the emergency
+            assert bus.sdo_upload(station, 0x603F, 0, mbx) == b"\x30\x55"
+    logical = eni.cyclic_frames[0].commands[0].data_length_bytes
+    for _ in range(400):
+        bus.t_ns += rng.randrange(1, 300_000)
+        twin.process(_random_frame(rng, len(eni.slaves), logical), bus.t_ns)
+        if rng.random() < 0.3:
+            _cyclic(bus, eni, rng, 1)
+    twin.same_state()
+    assert twin.fast.stats.planned_frames > 150
+    assert twin.slow.stats.planned_frames == 0
+
+
+def test_a_cyclic_frame_is_planned_from_its_second_time_on() -> None:
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    planned = chain.stats.planned_frames
+    for _ in range(10):
+        bus.cycle(eni)
+    assert chain.stats.planned_frames == planned + 10  # the plan survived all ten cycles
+    chain.stuck_in_safeop(3)
+    replies, _ = bus.cycle(eni)
+    expected = [c.expected_wkc for c in eni.cyclic_frames[0].commands]
+    assert [d.wkc for d in replies] == expected
+
+
+def test_a_register_write_makes_the_next_frame_replan() -> None:
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    bus.cycle(eni)
+    bus.cycle(eni)
+    station = eni.slaves[0].station_address
+    assert bus.fpwr(station, 0x0120, b"\x02\x00") == 1  # back to PREOP: SM buffers close
+    replies, _ = bus.cycle(eni)
+    assert replies[0].wkc == 0
+
+
+def test_layout_key_rejects_what_the_general_path_rejects() -> None:
+    good = encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, 2)]), pad=True)
+    assert layout_key(good) is not None
+    assert layout_key(good[:20]) is None
+    assert layout_key(good[:12] + b"\x81\x00" + good[12:]) is None  # VLAN: general path
+    bad_length = bytearray(good)
+    bad_length[14] = 0xFF
+    assert layout_key(bytes(bad_length)) is None
+    chain: Chain = build_chain(load_eni(EXAMPLES / "single_drive.xml"))
+    assert decode_frame(chain.process(good, 0)[0] or b"").datagrams[0].wkc == 1
