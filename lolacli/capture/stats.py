@@ -66,8 +66,8 @@ def _population_std(
     if hi - lo >= 1 << 43:
         squares = 0.0
         for c in chunks:
-            d = c.astype(np.float64) - mean
-            squares += float(np.dot(d, d))
+            f = c.astype(np.float64) - mean
+            squares += float(np.dot(f, f))
         return math.sqrt(squares / n)
     s1 = s2 = 0
     for c in chunks:
