@@ -34,9 +34,13 @@ def _gather(chunks: Sequence[np.ndarray], lo: int, hi: int) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
-def order_statistic(chunks: Sequence[np.ndarray], rank: int, lo: int, hi: int) -> int:
+def order_statistic(
+    chunks: Sequence[np.ndarray], rank: int, lo: int, hi: int,
+    cache: dict[tuple[int, int], np.ndarray] | None = None,
+) -> int:
     """The value of 0-based ``rank`` in the sorted union of ``chunks`` (all within
-    ``[lo, hi]``)."""
+    ``[lo, hi]``). ``cache`` shares window histograms between ranks."""
+    cache = {} if cache is None else cache
     below = 0  # values smaller than the window
     population = sum(int(c.size) for c in chunks)
     while True:
@@ -49,7 +53,9 @@ def order_statistic(chunks: Sequence[np.ndarray], rank: int, lo: int, hi: int) -
             v.partition(k)
             return int(v[k])
         bins = min(span, BINS)
-        counts = _window_counts(chunks, lo, hi, bins)
+        counts = cache.get((lo, hi))
+        if counts is None:
+            counts = cache[(lo, hi)] = _window_counts(chunks, lo, hi, bins)
         cum = np.cumsum(counts)
         b = int(np.searchsorted(cum, rank - below, side="right"))
         before = int(cum[b - 1]) if b > 0 else 0
@@ -95,10 +101,11 @@ def summary_us(chunks: Sequence[np.ndarray]) -> dict[str, float | int] | None:
     mean = total / n
     std = _population_std(chunks, n, lo, hi, mean)
     memo: dict[int, int] = {}
+    histograms: dict[tuple[int, int], np.ndarray] = {}
 
     def rank(k: int) -> float:
         if k not in memo:
-            memo[k] = order_statistic(chunks, k, lo, hi)
+            memo[k] = order_statistic(chunks, k, lo, hi, histograms)
         return float(memo[k])
 
     pos = (n - 1) * 0.99
