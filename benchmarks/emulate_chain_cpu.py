@@ -42,24 +42,45 @@ def cyclic_frame(eni, outputs: bytes) -> bytes:  # type: ignore[no-untyped-def]
     return encode_frame(make_frame(datagrams), pad=True)
 
 
+def images(eni, size: int, still: bool) -> list[bytes]:  # type: ignore[no-untyped-def]
+    """Output images: every drive enabled in CSP (controlword 0x0F, mode 8), its target
+    moving every cycle (a different one in each of 64 frames) unless ``still``."""
+
+    def offsets(suffix: str) -> list[int]:
+        return [
+            v.bit_offset // 8
+            for v in eni.process_image.variables
+            if v.direction.value == "output" and v.name.endswith(suffix)
+        ]
+
+    out = []
+    for k in range(1 if still else 64):
+        image = bytearray(size)
+        for at in offsets(".Controlword"):
+            struct.pack_into("<H", image, at, 0x0F)
+        for at in offsets(".Modes of operation"):
+            image[at] = 8
+        for j, at in enumerate(offsets(".Target position")):
+            struct.pack_into("<i", image, at, 1000 * j + 37 * k)
+        out.append(bytes(image))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
     parser.add_argument("--frames", type=int, default=20_000)
     parser.add_argument("--rate", type=float, default=2000.0, help="cycles per second (budget)")
+    parser.add_argument(
+        "--still", action="store_true", help="drives enabled but standing (same outputs)"
+    )
     args = parser.parse_args()
     eni = load_eni(args.eni)
     chain = build_chain(eni)
     bus = Bus(chain)
     bus.bring_up(eni)
     lengths = [c.data_length_bytes for c in eni.cyclic_frames[0].commands]
-    out_len = lengths[0]
-    image = bytearray(out_len)
-    # every drive enabled and moving: controlword 0x0F, CSP, a changing target
-    frames = []
-    for k in range(64):
-        struct.pack_into("<HbI", image, 0, 0x0F if k > 3 else (0x06, 0x07, 0x0F, 0x0F)[k], 8, k)
-        frames.append(cyclic_frame(eni, bytes(image)))
+    frames = [cyclic_frame(eni, image) for image in images(eni, lengths[0], args.still)]
     period_ns = int(1e9 / args.rate)
     t_ns = bus.t_ns
     answer_ns = cycles_ns = 0
@@ -67,7 +88,7 @@ def main() -> None:
     for i in range(args.frames):
         t_ns += period_ns
         t0 = time.perf_counter_ns()
-        reply, _ = chain.process(frames[i % 64], t_ns, defer_cycles=True)
+        reply, _ = chain.process(frames[i % len(frames)], t_ns, defer_cycles=True)
         t1 = time.perf_counter_ns()
         chain.run_deferred_cycles()
         t2 = time.perf_counter_ns()

@@ -188,28 +188,44 @@ class Cia402Drive(Device):
 
     def step(self, t_ns: int) -> None:
         e = self._entries()
-        cw = _get(e[CONTROLWORD])
-        command = decode_controlword(cw, self._previous_cw)
+        cw = int.from_bytes(e[CONTROLWORD].value, "little")
+        previous = self._previous_cw
         self._previous_cw = cw
-        self.power = next_state(self.power, command)
-        if self.power == Cia402State.SWITCH_ON_DISABLED and _get(e[ERROR_CODE]):
-            e[ERROR_CODE].value = bytes(2)
+        power = self.power = next_state(self.power, decode_controlword(cw, previous))
+        if power == S.SWITCH_ON_DISABLED and e[ERROR_CODE].value != _ZERO2:
+            e[ERROR_CODE].value = _ZERO2
         e[MODES_DISPLAY].value = e[MODES].value
         dt_ns = t_ns - self.t_ns if self.t_ns else 0
-        self._move(e, _get(e[MODES], signed=True), dt_ns)
+        self._move(e, int.from_bytes(e[MODES].value, "little", signed=True), dt_ns)
         self._update_status(e)
 
+    def at_rest(self) -> bool:
+        """Standing still in a state the same controlword keeps: nothing would change."""
+        e = self._entries()
+        if self.power in _TRANSIENT:
+            return False
+        cw = self._previous_cw
+        if next_state(self.power, decode_controlword(cw, cw)) != self.power:
+            return False
+        if e[VELOCITY_ACTUAL].value != _ZERO4:
+            return False
+        if self.power != S.OPERATION_ENABLED:
+            return True
+        if int.from_bytes(e[MODES].value, "little", signed=True) == MODE_CSV:
+            return e[TARGET_VELOCITY].value == _ZERO4
+        return e[POSITION_ACTUAL].value == e[TARGET_POSITION].value
+
     def _move(self, e: dict[int, Entry], mode: int, dt_ns: int) -> None:
-        actual = _get(e[POSITION_ACTUAL], signed=True)
-        if self.power != Cia402State.OPERATION_ENABLED:
-            e[VELOCITY_ACTUAL].value = bytes(4)
+        if self.power != S.OPERATION_ENABLED:
+            e[VELOCITY_ACTUAL].value = _ZERO4
             return
+        actual = int.from_bytes(e[POSITION_ACTUAL].value, "little", signed=True)
         if mode == MODE_CSV:
-            velocity = _get(e[TARGET_VELOCITY], signed=True)
+            velocity = int.from_bytes(e[TARGET_VELOCITY].value, "little", signed=True)
             new = actual + (velocity * dt_ns) // 1_000_000_000
         else:
-            new = _get(e[TARGET_POSITION], signed=True)
-            limit = _get(e[MAX_VELOCITY])
+            new = int.from_bytes(e[TARGET_POSITION].value, "little", signed=True)
+            limit = int.from_bytes(e[MAX_VELOCITY].value, "little")
             if limit and dt_ns:
                 step = max(1, (limit * dt_ns) // 1_000_000_000)
                 new = actual + max(-step, min(step, new - actual))
@@ -219,18 +235,10 @@ class Cia402Drive(Device):
 
     def _update_status(self, e: dict[int, Entry] | None = None) -> None:
         e = e or self._entries()
-        status = int(self.power) | STATUS_REMOTE
-        if self.power in (
-            S.READY_TO_SWITCH_ON,
-            S.SWITCHED_ON,
-            S.OPERATION_ENABLED,
-            S.QUICK_STOP_ACTIVE,
-        ):
-            status |= STATUS_VOLTAGE_ENABLED
-        if self.power == S.OPERATION_ENABLED:
-            status |= STATUS_FOLLOWING
-            if e[POSITION_ACTUAL].value == e[TARGET_POSITION].value:
-                status |= STATUS_TARGET_REACHED
+        power = self.power
+        status = _STATUS_BITS[power]
+        if power == S.OPERATION_ENABLED and e[POSITION_ACTUAL].value == e[TARGET_POSITION].value:
+            status |= STATUS_TARGET_REACHED
         e[STATUSWORD].value = status.to_bytes(2, "little")
 
 
@@ -239,6 +247,22 @@ def _get(entry: Entry, *, signed: bool = False) -> int:
 
 
 _I32 = struct.Struct("<i")
+_ZERO2 = bytes(2)
+_ZERO4 = bytes(4)
+# states that move on by themselves, whatever the controlword
+_TRANSIENT = frozenset({S.NOT_READY_TO_SWITCH_ON, S.FAULT_REACTION_ACTIVE})
+
+
+def _status_bits(state: Cia402State) -> int:
+    status = int(state) | STATUS_REMOTE
+    if state in (S.READY_TO_SWITCH_ON, S.SWITCHED_ON, S.OPERATION_ENABLED, S.QUICK_STOP_ACTIVE):
+        status |= STATUS_VOLTAGE_ENABLED
+    if state == S.OPERATION_ENABLED:
+        status |= STATUS_FOLLOWING
+    return status
+
+
+_STATUS_BITS = {state: _status_bits(state) for state in S}
 
 
 def _int32(value: int) -> int:

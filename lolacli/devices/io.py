@@ -11,9 +11,11 @@
 from __future__ import annotations
 
 import math
+import struct
+from collections.abc import Callable
 
 from lolacli.devices.base import Device
-from lolacli.devices.od import DataType, decode_value, encode_value
+from lolacli.devices.od import DataType, Entry, decode_value, encode_value
 from lolacli.eni.model import Direction
 
 
@@ -25,16 +27,31 @@ class DigitalIo(Device):
     device_type = 0x00000000
 
     def step(self, t_ns: int) -> None:
-        outputs = [m for m in self.mapping(Direction.OUTPUT) if m[0]]
         pattern = 1 << ((t_ns // 10_000_000) % 8)
-        for i, (index, sub, bits) in enumerate(_inputs(self)):
-            if i < len(outputs):
-                o_index, o_sub, _ = outputs[i]
-                value = int.from_bytes(self.od.entry(o_index, o_sub).value, "little")
+        for i, entry, source, bits in self._channels():
+            if source is not None:
+                value = int.from_bytes(source.value, "little")
             else:
                 value = (pattern >> (i % 8)) & 1 if bits == 1 else pattern
-            raw = (value & ((1 << bits) - 1)).to_bytes(max(1, (bits + 7) // 8), "little")
-            self.od.entry(index, sub).value = raw
+            entry.value = (value & ((1 << bits) - 1)).to_bytes(max(1, (bits + 7) // 8), "little")
+
+    def at_rest(self) -> bool:
+        """Inputs that only echo outputs stand still with them; the walking bits do not."""
+        return all(source is not None for _, _, source, _ in self._channels())
+
+    def _channels(self) -> list[tuple[int, Entry, Entry | None, int]]:
+        """(position, input entry, output entry it echoes or None, bits), once per mapping."""
+        key = self.od.version
+        cached = getattr(self, "_channel_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        outputs = [m for m in self.mapping(Direction.OUTPUT) if m[0]]
+        out = []
+        for i, (index, sub, bits) in enumerate(_inputs(self)):
+            source = self.od.entry(*outputs[i][:2]) if i < len(outputs) else None
+            out.append((i, self.od.entry(index, sub), source, bits))
+        self._channel_cache = (key, out)
+        return out
 
 
 def _sine_value(data_type: int, bits: int, phase: float, t_ns: int, scale: float) -> bytes:
@@ -61,9 +78,44 @@ class AnalogInput(Device):
         if sample == getattr(self, "_last_sample", None):
             return
         self._last_sample = sample
+        angle = 2 * math.pi * (t_ns / 1e9)
+        sin = math.sin
+        for entry, phase, pack, full, offset, mask, size in self._channels():
+            s = sin(angle + phase)
+            if pack is not None:
+                entry.value = pack(s * self.scale)
+            else:
+                entry.value = ((int(round(s * full * 0.5)) + offset) & mask).to_bytes(
+                    size, "little"
+                )
+
+    def _channels(
+        self,
+    ) -> list[tuple[Entry, float, Callable[[float], bytes] | None, int, int, int, int]]:
+        """Per input entry what :func:`_sine_value` needs, worked out once per mapping."""
+        key = self.od.version
+        cached = getattr(self, "_channel_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        out = []
         for i, (index, sub, bits) in enumerate(_inputs(self)):
             entry = self.od.entry(index, sub)
-            entry.value = _sine_value(entry.data_type, bits, 0.7 * i, t_ns, self.scale)
+            dtype = entry.data_type
+            pack = _FLOAT_PACK.get(dtype)
+            full = (1 << (bits - 1)) - 1 if bits > 1 else 1
+            offset = full if dtype in _UNSIGNED else 0
+            out.append(
+                (entry, 0.7 * i, pack, full, offset, (1 << bits) - 1, max(1, (bits + 7) // 8))
+            )
+        self._channel_cache = (key, out)
+        return out
+
+
+_FLOAT_PACK: dict[int, Callable[[float], bytes]] = {
+    DataType.REAL32: struct.Struct("<f").pack,
+    DataType.REAL64: struct.Struct("<d").pack,
+}
+_UNSIGNED = frozenset({DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32})
 
 
 class CanGateway(AnalogInput):

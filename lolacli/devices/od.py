@@ -195,6 +195,7 @@ class ObjectDictionary:
     def __init__(self) -> None:
         self.objects: dict[int, OdObject] = {}
         self.version = 0  # bumped by every checked write: caches of mappings key on it
+        self.writes = 0  # bumped by every write, checked or not: devices' rest states key on it
 
     def __iter__(self) -> Iterator[OdObject]:
         return iter(sorted(self.objects.values(), key=lambda o: o.index))
@@ -292,6 +293,7 @@ class ObjectDictionary:
                 raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_LOW)
         entry.value = bytes(data)
         self.version += 1
+        self.writes += 1
 
     def get(self, index: int, subindex: int = 0) -> int | float | str | bytes:
         entry = self.entry(index, subindex)
@@ -305,3 +307,4 @@ class ObjectDictionary:
         """Device-side write: no access check."""
         entry = self.entry(index, subindex)
         entry.value = encode_value(entry.data_type, value)
+        self.writes += 1

@@ -31,6 +31,8 @@ MAX_CORRECTION_NS = 1000
 _MASK64 = (1 << 64) - 1
 _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
+_SAFEOP = int(AlState.SAFEOP)
+_OP = int(AlState.OP)
 # requested state -> states it may be reached from (ETG.1000.6 Figure 10)
 _ALLOWED_FROM: dict[int, frozenset[int]] = {
     AlState.INIT: frozenset(_KNOWN_STATES),
@@ -148,6 +150,8 @@ class Esc:
         self.port_offsets: PortTimes | None = None  # its arrival at port 0 / port 1, relative
         self._readonly = _readonly_mask()
         self._cache: _Config | None = None
+        self._pd_starts: tuple[_Config, SiiLayout, int, int] | None = None
+        self._view = memoryview(self.mem)
         self._now_ns = 0
         self._last_outputs_ns = 0
         self._watchdog_ns: int | None = -1  # -1: to be computed from the registers
@@ -671,19 +675,30 @@ class Esc:
     # ----------------------------------------------------- process data
     def cycle(self, t_ns: int) -> None:
         """One application cycle: outputs from the output SM to the device, inputs back."""
-        if self.app is None or self.al_state not in (AlState.SAFEOP, AlState.OP):
+        app = self.app
+        state = self.mem[r.AL_STATUS] & r.AL_STATE_MASK
+        if app is None or (state != _SAFEOP and state != _OP):
             return
         self.counters.cycles += 1
-        sms = self._config().sms
-        outputs_bytes, inputs_bytes = self._process_sizes()
+        outputs_bytes, inputs_bytes = app.process_data_bytes()
+        outputs_start, inputs_start = self._process_data_starts()
         outputs = b""
-        if outputs_bytes and self.al_state == AlState.OP:
-            start = sms[self.layout.outputs_sm].start
-            outputs = bytes(self.mem[start : start + outputs_bytes])
-        inputs = self.app.cycle(outputs, t_ns)
+        if outputs_bytes and state == _OP:
+            outputs = bytes(self._view[outputs_start : outputs_start + outputs_bytes])
+        inputs = app.cycle(outputs, t_ns)
         if inputs_bytes:
-            start = sms[self.layout.inputs_sm].start
-            self.mem[start : start + len(inputs)] = inputs
+            self.mem[inputs_start : inputs_start + len(inputs)] = inputs
+
+    def _process_data_starts(self) -> tuple[int, int]:
+        """Where the output and input SM buffers start (cached with the SM configuration)."""
+        config = self._cache or self._config()
+        cached = self._pd_starts
+        if cached is not None and cached[0] is config and cached[1] is self.layout:
+            return cached[2], cached[3]
+        layout = self.layout
+        starts = (config.sms[layout.outputs_sm].start, config.sms[layout.inputs_sm].start)
+        self._pd_starts = (config, layout, *starts)
+        return starts
 
     # --------------------------------------------------------------- SII
     def _eeprom_command(self) -> None:
