@@ -298,7 +298,8 @@ class Chain:
             self.stats.dropped += 1
             return None, 0
         reply = plan.run(frame, t_ns)
-        self.tick(t_ns)
+        for esc in plan.watchdog_slaves:
+            esc.check_watchdog(t_ns)
         if plan.logical:
             self._deferred_t_ns = t_ns
             if not defer_cycles:

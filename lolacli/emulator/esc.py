@@ -29,6 +29,13 @@ _SM = struct.Struct("<HHBBBB")
 
 MAX_CORRECTION_NS = 1000
 _MASK64 = (1 << 64) - 1
+_HALF64 = 1 << 63
+_DELAY = r.DC_SYSTEM_TIME_DELAY
+_OFFSET = r.DC_SYSTEM_TIME_OFFSET
+_DIFFERENCE = r.DC_SYSTEM_TIME_DIFFERENCE
+_unpack_u32 = _U32.unpack_from
+_unpack_i64 = _I64.unpack_from
+_pack_u32 = _U32.pack_into
 _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
 _SAFEOP = int(AlState.SAFEOP)
@@ -751,25 +758,27 @@ class Esc:
     def system_time_received(self, value: int, width_bits: int, t_ns: int) -> None:
         """The time control loop's step for a received system time of ``width_bits``."""
         mem = self.mem
-        received = value + _U32.unpack_from(mem, r.DC_SYSTEM_TIME_DELAY)[0]
+        received = value + _unpack_u32(mem, _DELAY)[0]
         clock = self.clock
         own = (
             t_ns
             + (t_ns * clock.drift_ppb) // 1_000_000_000
             + clock.start_ns
             + clock.correction_ns
-            + _I64.unpack_from(mem, r.DC_SYSTEM_TIME_OFFSET)[0]
+            + _unpack_i64(mem, _OFFSET)[0]
         )  # = system_time_ns(t_ns), inlined: this runs for every slave in every cycle
-        half = 1 << (width_bits - 1)
-        diff = ((own - received + half) & ((1 << width_bits) - 1)) - half
-        if diff < 0:
-            word = min(-diff, 0x7FFFFFFF) | 0x80000000
+        if width_bits == 64:
+            diff = ((own - received + _HALF64) & _MASK64) - _HALF64
         else:
-            word = min(diff, 0x7FFFFFFF)
-        _U32.pack_into(mem, r.DC_SYSTEM_TIME_DIFFERENCE, word)  # sign and magnitude
+            half = 1 << (width_bits - 1)
+            diff = ((own - received + half) & ((1 << width_bits) - 1)) - half
+        if diff < 0:
+            _pack_u32(mem, _DIFFERENCE, (-diff if diff > -0x7FFFFFFF else 0x7FFFFFFF) | 0x80000000)
+        else:
+            _pack_u32(mem, _DIFFERENCE, diff if diff < 0x7FFFFFFF else 0x7FFFFFFF)
         # The ESC corrects drift by speeding up or slowing down its clock, never by jumps:
         # half the error per write, at most MAX_CORRECTION_NS (offsets are the master's job).
-        step = diff // 2
+        step = diff >> 1
         if step > MAX_CORRECTION_NS:
             step = MAX_CORRECTION_NS
         elif step < -MAX_CORRECTION_NS:

@@ -128,6 +128,11 @@ class FramePlan:
         self.datagrams_per_slave = len(datagrams)
         self.logical = any(d.cmd in _LOGICAL for d in datagrams)
         self.ops: list[_Op] = [_op(d, view, self.slaves) for d in datagrams]
+        written = {
+            id(s.esc) for op in self.ops if isinstance(op, _Logical) for s in op.steps if s.events
+        }
+        # a slave that takes outputs in this frame cannot time out in it: no watchdog check
+        self.watchdog_slaves = [esc for esc in slaves if id(esc) not in written]
         n = len(slaves)
         self.adp_fixes = [  # every slave incremented the ADP of these
             (d.header + 2, (d.adp + n) & 0xFFFF)
