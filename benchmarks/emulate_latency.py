@@ -96,7 +96,8 @@ def run(master, cycles: int, period_ns: int, timeout_us: int) -> dict[str, objec
         "over_budget_cycles": sum(1 for x in latencies if x > period_ns),
         "budget_us": period_ns / 1000,
         "latency_us": {
-            "p50": pct(0.50), "p99": pct(0.99), "max": latencies[-1] / 1000,
+            "p50": pct(0.50), "p90": pct(0.90), "p99": pct(0.99), "p99.9": pct(0.999),
+            "max": latencies[-1] / 1000,
             "mean": statistics.fmean(latencies) / 1000,
         } if latencies else None,
         "expected_wkc": master.expected_wkc,

@@ -29,11 +29,11 @@ _SM = struct.Struct("<HHBBBB")
 
 MAX_CORRECTION_NS = 1000
 _MASK64 = (1 << 64) - 1
-_HALF64 = 1 << 63
 _DELAY = r.DC_SYSTEM_TIME_DELAY
 _OFFSET = r.DC_SYSTEM_TIME_OFFSET
 _DIFFERENCE = r.DC_SYSTEM_TIME_DIFFERENCE
 _unpack_u32 = _U32.unpack_from
+PLAN_FREE_REGISTERS = 0x0F00  # digital outputs and user RAM: no frame plan depends on them
 _unpack_i64 = _I64.unpack_from
 _pack_u32 = _U32.pack_into
 _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
@@ -653,6 +653,8 @@ class Esc:
         return wkc
 
     def _fmmu_write(self, f: FmmuEntry, address: int, incoming: memoryview) -> None:
+        if f.physical_start < PLAN_FREE_REGISTERS:
+            self.epoch[0] += 1  # a write into registers, bypassing their side effects
         if _byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(incoming), f.logical_start + f.length_bytes)
@@ -757,33 +759,14 @@ class Esc:
 
     def system_time_received(self, value: int, width_bits: int, t_ns: int) -> None:
         """The time control loop's step for a received system time of ``width_bits``."""
-        mem = self.mem
-        received = value + _unpack_u32(mem, _DELAY)[0]
-        clock = self.clock
-        own = (
-            t_ns
-            + (t_ns * clock.drift_ppb) // 1_000_000_000
-            + clock.start_ns
-            + clock.correction_ns
-            + _unpack_i64(mem, _OFFSET)[0]
-        )  # = system_time_ns(t_ns), inlined: this runs for every slave in every cycle
-        if width_bits == 64:
-            diff = ((own - received + _HALF64) & _MASK64) - _HALF64
-        else:
-            half = 1 << (width_bits - 1)
-            diff = ((own - received + half) & ((1 << width_bits) - 1)) - half
-        if diff < 0:
-            _pack_u32(mem, _DIFFERENCE, (-diff if diff > -0x7FFFFFFF else 0x7FFFFFFF) | 0x80000000)
-        else:
-            _pack_u32(mem, _DIFFERENCE, diff if diff < 0x7FFFFFFF else 0x7FFFFFFF)
-        # The ESC corrects drift by speeding up or slowing down its clock, never by jumps:
-        # half the error per write, at most MAX_CORRECTION_NS (offsets are the master's job).
-        step = diff >> 1
-        if step > MAX_CORRECTION_NS:
-            step = MAX_CORRECTION_NS
-        elif step < -MAX_CORRECTION_NS:
-            step = -MAX_CORRECTION_NS
-        clock.correction_ns -= step
+        system_time_loop(
+            [(self.mem, self.clock, 0, self.dc_offset_minus_delay_ns())], value, width_bits, t_ns
+        )
+
+    def dc_offset_minus_delay_ns(self) -> int:
+        """System time offset (0x0920) minus system time delay (0x0928): what the time
+        control loop adds to the local time before comparing with a received time."""
+        return int(_unpack_i64(self.mem, _OFFSET)[0]) - int(_unpack_u32(self.mem, _DELAY)[0])
 
     @property
     def system_time_difference_ns(self) -> int:
@@ -797,6 +780,38 @@ class Esc:
     def count_processing_error(self) -> None:
         address = r.PROCESSING_UNIT_ERROR
         self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+
+def system_time_loop(
+    slaves: list[tuple[bytearray, DcClock, int, int]], value: int, width_bits: int, t_ns: int
+) -> None:
+    """One step of the time control loop (ETG.1000.4 §6.8, ET1100 §9.2) in every slave
+    ``(memory, clock, time offset, offset minus delay registers)`` that receives the
+    system time ``value`` at ``t_ns + time offset``: the difference of its own system time
+    to the received one plus the delay goes to 0x092C, and the clock runs a little faster
+    or slower. One loop for a whole line: the DC time distribution runs it for every
+    slave in every cycle."""
+    half = 1 << (width_bits - 1)
+    mask = (1 << width_bits) - 1
+    for mem, clock, offset_ns, registers_ns in slaves:
+        t = t_ns + offset_ns
+        own = (  # Esc.system_time_ns(t) - delay, inlined
+            t
+            + (t * clock.drift_ppb) // 1_000_000_000
+            + clock.start_ns
+            + clock.correction_ns
+            + registers_ns
+        )
+        diff = ((own - value + half) & mask) - half
+        if diff < 0:
+            _pack_u32(mem, _DIFFERENCE, (-diff if diff > -0x7FFFFFFF else 0x7FFFFFFF) | 0x80000000)
+            # never by jumps: half the error per write, at most MAX_CORRECTION_NS
+            clock.correction_ns -= (
+                diff >> 1 if diff > -2 * MAX_CORRECTION_NS else -MAX_CORRECTION_NS
+            )
+        else:
+            _pack_u32(mem, _DIFFERENCE, diff if diff < 0x7FFFFFFF else 0x7FFFFFFF)
+            clock.correction_ns -= diff >> 1 if diff < 2 * MAX_CORRECTION_NS else MAX_CORRECTION_NS
 
 
 @dataclass(frozen=True, slots=True)

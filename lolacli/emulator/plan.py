@@ -28,7 +28,16 @@ import struct
 from dataclasses import dataclass
 
 from lolacli.emulator import registers as r
-from lolacli.emulator.esc import Esc, FmmuEntry, PortTimes, SmView, _byte_aligned
+from lolacli.emulator.esc import (
+    PLAN_FREE_REGISTERS,
+    DcClock,
+    Esc,
+    FmmuEntry,
+    PortTimes,
+    SmView,
+    _byte_aligned,
+    system_time_loop,
+)
 from lolacli.wire.commands import Command
 
 _HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
@@ -37,7 +46,6 @@ ECAT_TYPE_COMMANDS = 1
 _MASK64 = (1 << 64) - 1
 _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
 _DC = frozenset({Command.ARMW, Command.FRMW})
-DIGITAL_OUTPUTS = 0x0F00  # from here on FMMU writes change nothing a plan depends on
 PLANNABLE = _LOGICAL | _DC | {Command.BRD}
 
 Key = tuple[int, ...]
@@ -123,7 +131,7 @@ class FramePlan:
         self.delay_ns = delay_ns
         self.buf = bytearray(key[0])
         view = memoryview(self.buf)
-        self.slaves = [(esc, o, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]
+        self.slaves = [(esc, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]
         datagrams = _datagrams(key)
         self.datagrams_per_slave = len(datagrams)
         self.logical = any(d.cmd in _LOGICAL for d in datagrams)
@@ -144,10 +152,8 @@ class FramePlan:
         buf = self.buf
         buf[:] = frame
         k = self.datagrams_per_slave
-        for esc, offsets, port0_ns in self.slaves:
-            esc.frame_t_ns = t_ns
-            esc.port_offsets = offsets
-            esc._now_ns = t_ns + port0_ns
+        for esc, port0_ns in self.slaves:  # (frame_t_ns and port_offsets only serve the
+            esc._now_ns = t_ns + port0_ns  # receive-time latch: general path, set there)
             esc.counters.datagrams += k
         for op in self.ops:
             added = op.run(t_ns)
@@ -167,12 +173,12 @@ class _Op:
         raise NotImplementedError
 
 
-def _op(d: _Datagram, view: memoryview, slaves: list[tuple[Esc, PortTimes, int]]) -> _Op:
+def _op(d: _Datagram, view: memoryview, slaves: list[tuple[Esc, int]]) -> _Op:
     data = view[d.data : d.data + d.length]
     if d.cmd in _LOGICAL:
         return _Logical(d, data, slaves)
     if d.cmd == Command.BRD:
-        return _Brd(d, data, [esc for esc, _, _ in slaves])
+        return _Brd(d, data, [esc for esc, _ in slaves])
     if d.cmd in _DC and d.ado == r.DC_SYSTEM_TIME and d.length in (4, 8):
         return _DcDistribution(d, data, slaves)
     raise _NotPlannable
@@ -200,34 +206,43 @@ class _Brd(_Op):
 
 class _DcDistribution(_Op):
     """ARMW/FRMW of the system time: the reference puts its time in, the others take it
-    into their time control loop; WKC +1 from every slave."""
+    into their time control loop; WKC +1 from every slave. Runs of slaves between
+    references go through :func:`system_time_loop` in one call."""
 
-    def __init__(
-        self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, PortTimes, int]]
-    ) -> None:
+    def __init__(self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, int]]) -> None:
         self.wkc_offset = d.wkc
         self.data = data
         self.length = d.length
-        rows = []
-        for position, (esc, _, port0_ns) in enumerate(slaves):
+        self.count = len(slaves)
+        # (reference or None, its time offset, the slaves after it up to the next one)
+        segments: list[tuple[Esc | None, int, list[tuple[bytearray, DcClock, int, int]]]] = [
+            (None, 0, [])
+        ]
+        for position, (esc, port0_ns) in enumerate(slaves):
             if d.cmd == Command.ARMW:
                 hit = (d.adp + position) & 0xFFFF == 0
             else:
                 hit = esc.addressed_configured(d.adp)
-            rows.append((esc, port0_ns, hit))
-        self.rows = rows
+            if hit:
+                segments.append((esc, port0_ns, []))
+            else:
+                segments[-1][2].append(
+                    (esc.mem, esc.clock, port0_ns, esc.dc_offset_minus_delay_ns())
+                )
+        self.segments = segments
 
     def run(self, t_ns: int) -> int:
         data, n = self.data, self.length
         width_bits = 8 * n
         value = int.from_bytes(data, "little")
-        for esc, port0_ns, hit in self.rows:
-            if hit:
-                data[:] = (esc.system_time_ns(t_ns + port0_ns) & _MASK64).to_bytes(8, "little")[:n]
+        for reference, port0_ns, others in self.segments:
+            if reference is not None:
+                time_ns = reference.system_time_ns(t_ns + port0_ns)
+                data[:] = (time_ns & _MASK64).to_bytes(8, "little")[:n]
                 value = int.from_bytes(data, "little")
-            else:
-                esc.system_time_received(value, width_bits, t_ns + port0_ns)
-        return len(self.rows)
+            if others:
+                system_time_loop(others, value, width_bits, t_ns)
+        return self.count
 
 
 @dataclass(slots=True)
@@ -250,14 +265,12 @@ class _Logical(_Op):
     slave's write takes from, the slaves run in line order. Otherwise all writes run
     first, then the outputs events, then all reads."""
 
-    def __init__(
-        self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, PortTimes, int]]
-    ) -> None:
+    def __init__(self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, int]]) -> None:
         self.wkc_offset = d.wkc
         self.data = data
         self.cmd = d.cmd
         self.address = d.adp | d.ado << 16
-        self.steps = [self._slave(esc, d) for esc, _, _ in slaves]
+        self.steps = [self._slave(esc, d) for esc, _ in slaves]
         plain = [s for s in self.steps if not s.generic]
         self.fixed_wkc = sum(s.wkc for s in plain)
         self.ordered = len(plain) < len(self.steps) or _reads_feed_writes(self.steps)
@@ -274,7 +287,7 @@ class _Logical(_Op):
         if d.cmd != Command.LRD:
             hits = [f for f in config.write_fmmus if _fmmu_hits(f, lo, hi)]
             for f in hits:
-                if f.physical_start < DIGITAL_OUTPUTS:
+                if f.physical_start < PLAN_FREE_REGISTERS:
                     raise _NotPlannable  # writes into registers a plan depends on
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_WRITE)
@@ -302,8 +315,12 @@ class _Logical(_Op):
         for target, source in self.writes:
             target[:] = source
         for esc, n in self.events:
-            for _ in range(n):
-                esc._outputs_written()
+            if esc.pending_op:
+                for _ in range(n):
+                    esc._outputs_written()
+            else:  # what _outputs_written does for a slave not waiting for OP
+                esc.outputs_valid = True
+                esc._last_outputs_ns = esc._now_ns
         for target, source in self.reads:
             target[:] = source
         return self.fixed_wkc
