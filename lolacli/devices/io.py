@@ -23,8 +23,13 @@ def _inputs(device: Device) -> list[tuple[int, int, int]]:
     return [m for m in device.mapping(Direction.INPUT) if m[0]]
 
 
+_Echo = tuple[int, Entry, Entry | None, int]
+_Channel = tuple[Entry, float, Callable[[float], bytes] | None, int, int, int, int]
+
+
 class DigitalIo(Device):
     device_type = 0x00000000
+    _channel_cache: tuple[int, list[_Echo]] | None = None
 
     def step(self, t_ns: int) -> None:
         pattern = 1 << ((t_ns // 10_000_000) % 8)
@@ -39,10 +44,10 @@ class DigitalIo(Device):
         """Inputs that only echo outputs stand still with them; the walking bits do not."""
         return all(source is not None for _, _, source, _ in self._channels())
 
-    def _channels(self) -> list[tuple[int, Entry, Entry | None, int]]:
+    def _channels(self) -> list[_Echo]:
         """(position, input entry, output entry it echoes or None, bits), once per mapping."""
         key = self.od.version
-        cached = getattr(self, "_channel_cache", None)
+        cached = self._channel_cache
         if cached is not None and cached[0] == key:
             return cached[1]
         outputs = [m for m in self.mapping(Direction.OUTPUT) if m[0]]
@@ -72,6 +77,7 @@ class AnalogInput(Device):
     device_type = 0x00000000
     scale = 10.0
     sample_period_ns = 1_000_000
+    _channel_cache: tuple[int, list[_Channel]] | None = None
 
     def step(self, t_ns: int) -> None:
         sample = t_ns // self.sample_period_ns
@@ -89,12 +95,10 @@ class AnalogInput(Device):
                     size, "little"
                 )
 
-    def _channels(
-        self,
-    ) -> list[tuple[Entry, float, Callable[[float], bytes] | None, int, int, int, int]]:
+    def _channels(self) -> list[_Channel]:
         """Per input entry what :func:`_sine_value` needs, worked out once per mapping."""
         key = self.od.version
-        cached = getattr(self, "_channel_cache", None)
+        cached = self._channel_cache
         if cached is not None and cached[0] == key:
             return cached[1]
         out = []
