@@ -28,6 +28,7 @@ _FMMU = struct.Struct("<IHBBHBBB3x")
 _SM = struct.Struct("<HHBBBB")
 
 MAX_CORRECTION_NS = 1000
+_TWICE_MAX_CORRECTION_NS = 2 * MAX_CORRECTION_NS
 _MASK64 = (1 << 64) - 1
 _DELAY = r.DC_SYSTEM_TIME_DELAY
 _OFFSET = r.DC_SYSTEM_TIME_OFFSET
@@ -793,25 +794,25 @@ def system_time_loop(
     slave in every cycle."""
     half = 1 << (width_bits - 1)
     mask = (1 << width_bits) - 1
+    base = t_ns - value + half
     for mem, clock, offset_ns, registers_ns in slaves:
-        t = t_ns + offset_ns
-        own = (  # Esc.system_time_ns(t) - delay, inlined
-            t
-            + (t * clock.drift_ppb) // 1_000_000_000
-            + clock.start_ns
-            + clock.correction_ns
-            + registers_ns
-        )
-        diff = ((own - value + half) & mask) - half
+        # own system time - delay - received, as in Esc.system_time_ns, inlined
+        x = base + offset_ns + clock.start_ns + clock.correction_ns + registers_ns
+        if clock.drift_ppb:
+            x += ((t_ns + offset_ns) * clock.drift_ppb) // 1_000_000_000
+        diff = (x & mask) - half
+        # 0x092C in sign and magnitude; the clock never jumps: half the error per write,
+        # at most MAX_CORRECTION_NS (offsets are the master's job)
         if diff < 0:
             _pack_u32(mem, _DIFFERENCE, (-diff if diff > -0x7FFFFFFF else 0x7FFFFFFF) | 0x80000000)
-            # never by jumps: half the error per write, at most MAX_CORRECTION_NS
             clock.correction_ns -= (
-                diff >> 1 if diff > -2 * MAX_CORRECTION_NS else -MAX_CORRECTION_NS
+                diff >> 1 if diff > -_TWICE_MAX_CORRECTION_NS else -MAX_CORRECTION_NS
             )
         else:
             _pack_u32(mem, _DIFFERENCE, diff if diff < 0x7FFFFFFF else 0x7FFFFFFF)
-            clock.correction_ns -= diff >> 1 if diff < 2 * MAX_CORRECTION_NS else MAX_CORRECTION_NS
+            clock.correction_ns -= (
+                diff >> 1 if diff < _TWICE_MAX_CORRECTION_NS else MAX_CORRECTION_NS
+            )
 
 
 @dataclass(frozen=True, slots=True)

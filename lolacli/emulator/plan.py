@@ -132,6 +132,7 @@ class FramePlan:
         self.buf = bytearray(key[0])
         view = memoryview(self.buf)
         self.slaves = [(esc, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]
+        self.escs = list(slaves)
         datagrams = _datagrams(key)
         self.datagrams_per_slave = len(datagrams)
         self.logical = any(d.cmd in _LOGICAL for d in datagrams)
@@ -152,8 +153,10 @@ class FramePlan:
         buf = self.buf
         buf[:] = frame
         k = self.datagrams_per_slave
-        for esc, port0_ns in self.slaves:  # (frame_t_ns and port_offsets only serve the
-            esc._now_ns = t_ns + port0_ns  # receive-time latch: general path, set there)
+        # The general path also sets each ESC's frame time, port offsets and "now": the
+        # first two serve only the receive-time latch, "now" only outputs events (set
+        # there, below), so all three are left to the code that reads them.
+        for esc in self.escs:
             esc.counters.datagrams += k
         for op in self.ops:
             added = op.run(t_ns)
@@ -250,6 +253,7 @@ class _SlaveStep:
     """One slave's part of a logical datagram: ``generic`` set -> the ESC's own code."""
 
     esc: Esc
+    port0_ns: int = 0  # when the frame reaches it, relative to the frame's start
     generic: bool = False
     writes: list[tuple[memoryview, memoryview, int, int]] | None = None  # target, source, a, b
     events: int = 0  # output SM buffers completed: _outputs_written calls
@@ -270,19 +274,19 @@ class _Logical(_Op):
         self.data = data
         self.cmd = d.cmd
         self.address = d.adp | d.ado << 16
-        self.steps = [self._slave(esc, d) for esc, _ in slaves]
+        self.steps = [self._slave(esc, port0_ns, d) for esc, port0_ns in slaves]
         plain = [s for s in self.steps if not s.generic]
         self.fixed_wkc = sum(s.wkc for s in plain)
         self.ordered = len(plain) < len(self.steps) or _reads_feed_writes(self.steps)
         self.writes = [(t, src) for s in plain for t, src, _, _ in s.writes or ()]
-        self.events = [(s.esc, s.events) for s in plain if s.events]
+        self.events = [(s.esc, s.port0_ns, s.events) for s in plain if s.events]
         self.reads = [(t, src) for s in plain for t, src, _, _ in s.reads or ()]
 
-    def _slave(self, esc: Esc, d: _Datagram) -> _SlaveStep:
+    def _slave(self, esc: Esc, port0_ns: int, d: _Datagram) -> _SlaveStep:
         config = esc._config()
         lo, hi = self.address, self.address + d.length
         mem = memoryview(esc.mem)
-        step = _SlaveStep(esc, writes=[], reads=[])
+        step = _SlaveStep(esc, port0_ns, writes=[], reads=[])
         assert step.writes is not None and step.reads is not None
         if d.cmd != Command.LRD:
             hits = [f for f in config.write_fmmus if _fmmu_hits(f, lo, hi)]
@@ -292,7 +296,7 @@ class _Logical(_Op):
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_WRITE)
                 if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
-                    return _SlaveStep(esc, generic=True)
+                    return _SlaveStep(esc, port0_ns, generic=True)
                 step.writes.append((mem[p:q], self.data[a:b], a, b))
                 step.events += len(kinds)
             if hits:
@@ -303,7 +307,7 @@ class _Logical(_Op):
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_READ)
                 if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
-                    return _SlaveStep(esc, generic=True)
+                    return _SlaveStep(esc, port0_ns, generic=True)
                 step.reads.append((self.data[a:b], mem[p:q], a, b))
             if hits:
                 step.wkc += 1
@@ -311,24 +315,26 @@ class _Logical(_Op):
 
     def run(self, t_ns: int) -> int:
         if self.ordered:
-            return self._run_ordered()
+            return self._run_ordered(t_ns)
         for target, source in self.writes:
             target[:] = source
-        for esc, n in self.events:
+        for esc, port0_ns, n in self.events:
+            esc._now_ns = t_ns + port0_ns
             if esc.pending_op:
                 for _ in range(n):
                     esc._outputs_written()
             else:  # what _outputs_written does for a slave not waiting for OP
                 esc.outputs_valid = True
-                esc._last_outputs_ns = esc._now_ns
+                esc._last_outputs_ns = t_ns + port0_ns
         for target, source in self.reads:
             target[:] = source
         return self.fixed_wkc
 
-    def _run_ordered(self) -> int:
+    def _run_ordered(self, t_ns: int) -> int:
         added = 0
         for step in self.steps:
             esc = step.esc
+            esc._now_ns = t_ns + step.port0_ns
             if step.generic:
                 added += esc._logical(self.cmd, self.address, self.data, esc._now_ns)
                 continue
