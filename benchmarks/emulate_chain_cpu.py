@@ -13,6 +13,7 @@ frame's wire time (DESIGN.md frame bytes at 100 Mbit/s).
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import struct
 import sys
@@ -66,6 +67,11 @@ def images(eni, size: int, still: bool) -> list[bytes]:  # type: ignore[no-untyp
     return out
 
 
+def pct(values: list[int], q: float) -> int:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
@@ -81,10 +87,13 @@ def main() -> None:
     bus.bring_up(eni)
     lengths = [c.data_length_bytes for c in eni.cyclic_frames[0].commands]
     frames = [cyclic_frame(eni, image) for image in images(eni, lengths[0], args.still)]
+    gc.collect()
+    gc.freeze()  # as the raw-socket server does
     period_ns = int(1e9 / args.rate)
     t_ns = bus.t_ns
     answer_ns = cycles_ns = 0
     worst_ns = 0
+    per_frame: list[int] = []
     for i in range(args.frames):
         t_ns += period_ns
         t0 = time.perf_counter_ns()
@@ -94,6 +103,7 @@ def main() -> None:
         t2 = time.perf_counter_ns()
         assert reply is not None
         answer_ns += t1 - t0
+        per_frame.append(t1 - t0)
         cycles_ns += t2 - t1
         worst_ns = max(worst_ns, t2 - t0)
     n = args.frames
@@ -106,6 +116,7 @@ def main() -> None:
                 "slaves": len(chain.slaves),
                 "frames": n,
                 "process_us_per_frame": round(answer_ns / n / 1000, 1),
+                "process_us_p50_p99": [round(pct(per_frame, q) / 1000, 1) for q in (0.5, 0.99)],
                 "device_cycles_us_per_frame": round(cycles_ns / n / 1000, 1),
                 "total_us_per_frame": round(total / 1000, 1),
                 "worst_total_us": round(worst_ns / 1000, 1),

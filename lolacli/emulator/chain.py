@@ -13,8 +13,8 @@ import random
 import struct
 from dataclasses import dataclass, field
 
-from lolacli.emulator.esc import Esc, PortTimes
-from lolacli.emulator.plan import FramePlan, Key, layout_key, make_plan
+from lolacli.emulator.esc import Esc, PortTimes, system_time_loop
+from lolacli.emulator.plan import DeferredDc, FramePlan, Key, layout_key, make_plan
 from lolacli.emulator.registers import AlStatusCode
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
@@ -165,6 +165,7 @@ class Chain:
         self._plans: dict[Key, FramePlan | None] = {}
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
+        self._deferred_dc: DeferredDc = []  # DC loops a plan left for after the answer
         self._line_changed()
 
     def _line_changed(self) -> None:
@@ -216,6 +217,8 @@ class Chain:
         that to :meth:`run_deferred_cycles`, so a real-time transport can answer first.
         """
         self.stats.frames += 1
+        if self._deferred_dc:
+            self._run_deferred_dc()
         plan = self._plan(frame) if self.plan_after else None
         if plan is not None:
             return self._run_plan(plan, frame, t_ns, defer_cycles)
@@ -287,7 +290,9 @@ class Chain:
             self._plans.clear()
         lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
         delay_ns = self.timing.round_trip_ns(lengths, len(self._active))
-        plan = make_plan(key, self._active, self._port_offsets, self._epoch[0], delay_ns)
+        plan = make_plan(
+            key, self._active, self._port_offsets, self._epoch[0], delay_ns, self._deferred_dc
+        )
         self._plans[key] = plan
         return plan
 
@@ -302,26 +307,38 @@ class Chain:
             esc.check_watchdog(t_ns)
         if plan.logical:
             self._deferred_t_ns = t_ns
+            self.stats.logical_frames += 1
             if not defer_cycles:
                 self.run_deferred_cycles()
-            self.stats.logical_frames += 1
+        elif not defer_cycles and self._deferred_dc:
+            self._run_deferred_dc()
         self.stats.replies += 1
         self.stats.planned_frames += 1
         return reply, plan.delay_ns
 
     def tick(self, t_ns: int) -> None:
         """Let time pass in every slave (process-data watchdogs)."""
+        if self._deferred_dc:
+            self._run_deferred_dc()
         for esc in self._active:
             esc.check_watchdog(t_ns)
 
     def run_deferred_cycles(self) -> None:
-        """Run the application cycle the last logical frame asked for, if not done yet."""
+        """Run the work left for after the answer: the DC time control loops of the last
+        frame and the application cycle the last logical frame asked for."""
+        if self._deferred_dc:
+            self._run_deferred_dc()
         t_ns = self._deferred_t_ns
         if t_ns is None:
             return
         self._deferred_t_ns = None
         for esc in self._active:
             esc.cycle(t_ns)
+
+    def _run_deferred_dc(self) -> None:
+        for rows, value, width_bits, t_ns in self._deferred_dc:
+            system_time_loop(rows, value, width_bits, t_ns)
+        self._deferred_dc.clear()
 
     def _address(self, slots: list[_Slot]) -> None:
         """Resolve single-slave datagrams to their position once per frame."""

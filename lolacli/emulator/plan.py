@@ -25,7 +25,7 @@ each datagram has its own, so the two orders give the same result.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.esc import (
@@ -109,14 +109,28 @@ class _NotPlannable(Exception):
     """This frame takes the general path."""
 
 
+DeferredDc = list[tuple[list["DcRow"], int, int, int]]  # rows, value, width, t_ns
+DcRow = tuple[bytearray, DcClock, int, int]
+
+
 def make_plan(
-    key: Key, slaves: list[Esc], offsets: list[PortTimes], epoch: int, delay_ns: int
+    key: Key,
+    slaves: list[Esc],
+    offsets: list[PortTimes],
+    epoch: int,
+    delay_ns: int,
+    deferred: DeferredDc | None = None,
 ) -> FramePlan | None:
-    """The plan of a frame layout, or ``None`` when the frame takes the general path."""
+    """The plan of a frame layout, or ``None`` when the frame takes the general path.
+
+    With ``deferred``, the DC time control loops of the slaves that only take the
+    reference time (which change nothing in the frame) are appended there instead of
+    run, when nothing later in the frame reads DC state; the chain runs them after the
+    answer is sent and before anything else touches the slaves."""
     if not slaves or any(key[i] not in PLANNABLE for i in range(2, len(key), 4)):
         return None
     try:
-        return FramePlan(key, slaves, offsets, epoch, delay_ns)
+        return FramePlan(key, slaves, offsets, epoch, delay_ns, deferred)
     except _NotPlannable:
         return None
 
@@ -125,7 +139,13 @@ class FramePlan:
     """The precomputed work of one frame layout for one chain epoch."""
 
     def __init__(
-        self, key: Key, slaves: list[Esc], offsets: list[PortTimes], epoch: int, delay_ns: int
+        self,
+        key: Key,
+        slaves: list[Esc],
+        offsets: list[PortTimes],
+        epoch: int,
+        delay_ns: int,
+        deferred: DeferredDc | None = None,
     ) -> None:
         self.epoch = epoch
         self.delay_ns = delay_ns
@@ -137,6 +157,11 @@ class FramePlan:
         self.datagrams_per_slave = len(datagrams)
         self.logical = any(d.cmd in _LOGICAL for d in datagrams)
         self.ops: list[_Op] = [_op(d, view, self.slaves) for d in datagrams]
+        if deferred is not None:
+            for k, op in enumerate(self.ops):
+                if isinstance(op, _DcDistribution) and op.references <= 1:
+                    if not any(_reads_dc(later) for later in self.ops[k + 1 :]):
+                        op.deferred = deferred
         written = {
             id(s.esc) for op in self.ops if isinstance(op, _Logical) for s in op.steps if s.events
         }
@@ -197,6 +222,7 @@ class _Brd(_Op):
         self.wkc_offset = d.wkc
         self.data = data
         self.length = d.length
+        self.lo, self.hi = lo, hi
         self.sources = [memoryview(esc.mem)[lo:hi] for esc in slaves]
 
     def run(self, t_ns: int) -> int:
@@ -233,17 +259,24 @@ class _DcDistribution(_Op):
                     (esc.mem, esc.clock, port0_ns, esc.dc_offset_minus_delay_ns())
                 )
         self.segments = segments
+        self.references = len(segments) - 1
+        self.deferred: DeferredDc | None = None  # set: the loops run after the answer
 
     def run(self, t_ns: int) -> int:
         data, n = self.data, self.length
         width_bits = 8 * n
         value = int.from_bytes(data, "little")
+        deferred = self.deferred
         for reference, port0_ns, others in self.segments:
             if reference is not None:
                 time_ns = reference.system_time_ns(t_ns + port0_ns)
                 data[:] = (time_ns & _MASK64).to_bytes(8, "little")[:n]
                 value = int.from_bytes(data, "little")
-            if others:
+            if not others:
+                continue
+            if deferred is not None:
+                deferred.append((others, value, width_bits, t_ns))
+            else:
                 system_time_loop(others, value, width_bits, t_ns)
         return self.count
 
@@ -258,6 +291,7 @@ class _SlaveStep:
     writes: list[tuple[memoryview, memoryview, int, int]] | None = None  # target, source, a, b
     events: int = 0  # output SM buffers completed: _outputs_written calls
     reads: list[tuple[memoryview, memoryview, int, int]] | None = None
+    read_memory: list[tuple[int, int]] = field(default_factory=list)  # ranges the reads copy
     wkc: int = 0
 
 
@@ -309,6 +343,7 @@ class _Logical(_Op):
                 if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
                     return _SlaveStep(esc, port0_ns, generic=True)
                 step.reads.append((self.data[a:b], mem[p:q], a, b))
+                step.read_memory.append((p, q))
             if hits:
                 step.wkc += 1
         return step
@@ -346,6 +381,21 @@ class _Logical(_Op):
                 target[:] = source
             added += step.wkc
         return added
+
+
+_DC_REGISTERS = (r.DC_RECEIVE_TIME_PORT0, r.DC_END)
+
+
+def _reads_dc(op: _Op) -> bool:
+    """True when ``op`` may read DC registers or clocks (so the loops before it must run)."""
+    lo, hi = _DC_REGISTERS
+    if isinstance(op, _DcDistribution):
+        return True
+    if isinstance(op, _Brd):
+        return op.lo < hi and lo < op.hi
+    if isinstance(op, _Logical):
+        return any(s.generic or any(p < hi and lo < q for p, q in s.read_memory) for s in op.steps)
+    return True
 
 
 def _fmmu_hits(f: FmmuEntry, lo: int, hi: int) -> bool:
