@@ -13,8 +13,8 @@ import random
 import struct
 from dataclasses import dataclass, field
 
-from lolacli.emulator.esc import Esc, PortTimes, system_time_loop
-from lolacli.emulator.plan import DeferredDc, FramePlan, Key, layout_key, make_plan
+from lolacli.emulator.esc import Esc, PortTimes
+from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
 from lolacli.emulator.registers import AlStatusCode
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
@@ -165,7 +165,7 @@ class Chain:
         self._plans: dict[Key, FramePlan | None] = {}
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
-        self._deferred_dc: DeferredDc = []  # DC loops a plan left for after the answer
+        self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._line_changed()
 
     def _line_changed(self) -> None:
@@ -336,8 +336,8 @@ class Chain:
             esc.cycle(t_ns)
 
     def _run_deferred_dc(self) -> None:
-        for rows, value, width_bits, t_ns in self._deferred_dc:
-            system_time_loop(rows, value, width_bits, t_ns)
+        for work, args in self._deferred_dc:
+            work(*args)
         self._deferred_dc.clear()
 
     def _address(self, slots: list[_Slot]) -> None:

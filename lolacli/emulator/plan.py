@@ -25,7 +25,9 @@ each datagram has its own, so the two orders give the same result.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.esc import (
@@ -109,8 +111,8 @@ class _NotPlannable(Exception):
     """This frame takes the general path."""
 
 
-DeferredDc = list[tuple[list["DcRow"], int, int, int]]  # rows, value, width, t_ns
 DcRow = tuple[bytearray, DcClock, int, int]
+Deferred = list[tuple[Callable[..., None], tuple[Any, ...]]]  # work left for after the answer
 
 
 def make_plan(
@@ -119,14 +121,15 @@ def make_plan(
     offsets: list[PortTimes],
     epoch: int,
     delay_ns: int,
-    deferred: DeferredDc | None = None,
+    deferred: Deferred | None = None,
 ) -> FramePlan | None:
     """The plan of a frame layout, or ``None`` when the frame takes the general path.
 
-    With ``deferred``, the DC time control loops of the slaves that only take the
-    reference time (which change nothing in the frame) are appended there instead of
-    run, when nothing later in the frame reads DC state; the chain runs them after the
-    answer is sent and before anything else touches the slaves."""
+    With ``deferred``, work that changes nothing in the returning frame is appended
+    there instead of run, when nothing later in the frame reads what it changes: the DC
+    time control loops of the slaves that only take the reference time, and a logical
+    datagram's writes into the slaves' memories with their outputs events. The chain
+    runs it after the answer is sent, and before anything else touches the slaves."""
     if not slaves or any(key[i] not in PLANNABLE for i in range(2, len(key), 4)):
         return None
     try:
@@ -145,7 +148,7 @@ class FramePlan:
         offsets: list[PortTimes],
         epoch: int,
         delay_ns: int,
-        deferred: DeferredDc | None = None,
+        deferred: Deferred | None = None,
     ) -> None:
         self.epoch = epoch
         self.delay_ns = delay_ns
@@ -159,9 +162,12 @@ class FramePlan:
         self.ops: list[_Op] = [_op(d, view, self.slaves) for d in datagrams]
         if deferred is not None:
             for k, op in enumerate(self.ops):
+                later = self.ops[k + 1 :]
                 if isinstance(op, _DcDistribution) and op.references <= 1:
-                    if not any(_reads_dc(later) for later in self.ops[k + 1 :]):
+                    if not any(_reads_dc(o) for o in later):
                         op.deferred = deferred
+                elif isinstance(op, _Logical) and op.writes_deferrable(later):
+                    op.deferred = deferred
         written = {
             id(s.esc) for op in self.ops if isinstance(op, _Logical) for s in op.steps if s.events
         }
@@ -260,7 +266,7 @@ class _DcDistribution(_Op):
                 )
         self.segments = segments
         self.references = len(segments) - 1
-        self.deferred: DeferredDc | None = None  # set: the loops run after the answer
+        self.deferred: Deferred | None = None  # set: the loops run after the answer
 
     def run(self, t_ns: int) -> int:
         data, n = self.data, self.length
@@ -275,7 +281,7 @@ class _DcDistribution(_Op):
             if not others:
                 continue
             if deferred is not None:
-                deferred.append((others, value, width_bits, t_ns))
+                deferred.append((system_time_loop, (others, value, width_bits, t_ns)))
             else:
                 system_time_loop(others, value, width_bits, t_ns)
         return self.count
@@ -292,6 +298,7 @@ class _SlaveStep:
     events: int = 0  # output SM buffers completed: _outputs_written calls
     reads: list[tuple[memoryview, memoryview, int, int]] | None = None
     read_memory: list[tuple[int, int]] = field(default_factory=list)  # ranges the reads copy
+    write_memory: list[tuple[int, int]] = field(default_factory=list)  # and the writes
     wkc: int = 0
 
 
@@ -311,6 +318,7 @@ class _Logical(_Op):
         self.steps = [self._slave(esc, port0_ns, d) for esc, port0_ns in slaves]
         plain = [s for s in self.steps if not s.generic]
         self.fixed_wkc = sum(s.wkc for s in plain)
+        self.deferred: Deferred | None = None  # set: writes and events run after the answer
         self.ordered = len(plain) < len(self.steps) or _reads_feed_writes(self.steps)
         self.writes = [(t, src) for s in plain for t, src, _, _ in s.writes or ()]
         self.events = [(s.esc, s.port0_ns, s.events) for s in plain if s.events]
@@ -332,6 +340,7 @@ class _Logical(_Op):
                 if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
                     return _SlaveStep(esc, port0_ns, generic=True)
                 step.writes.append((mem[p:q], self.data[a:b], a, b))
+                step.write_memory.append((p, q))
                 step.events += len(kinds)
             if hits:
                 step.wkc += 2 if d.cmd == Command.LRW else 1
@@ -348,9 +357,48 @@ class _Logical(_Op):
                 step.wkc += 1
         return step
 
+    def writes_deferrable(self, later: list[_Op]) -> bool:
+        """Whether the writes and outputs events may wait until after the answer: no
+        read in the frame takes from memory they write, no later write writes it again,
+        no read lands where they take from, and no outputs event can change the AL state
+        (no slave waits for OP)."""
+        if self.ordered or not self.writes:
+            return False
+        if any(esc.pending_op for esc, _, _ in self.events):
+            return False
+        written = {(id(s.esc), p, q) for s in self.steps for p, q in s.write_memory}
+        sources = [(a, b) for s in self.steps for _, _, a, b in s.writes or ()]
+        for s in self.steps:
+            for _, _, a, b in s.reads or ():
+                if any(a < e and c < b for c, e in sources):
+                    return False
+        for op in [self, *later]:
+            if not isinstance(op, _Logical):
+                if isinstance(op, _Brd) and op.hi > PLAN_FREE_REGISTERS:
+                    return False
+                continue
+            for s in op.steps:
+                if s.generic:
+                    return False
+                later_writes = s.write_memory if op is not self else []
+                for p, q in [*s.read_memory, *later_writes]:
+                    if any(i == id(s.esc) and p < wq and wp < q for i, wp, wq in written):
+                        return False
+        return True
+
     def run(self, t_ns: int) -> int:
         if self.ordered:
             return self._run_ordered(t_ns)
+        if self.deferred is not None:
+            self.deferred.append((self.write, (t_ns,)))
+        else:
+            self.write(t_ns)
+        for target, source in self.reads:
+            target[:] = source
+        return self.fixed_wkc
+
+    def write(self, t_ns: int) -> None:
+        """The writes into the slaves' memories and their outputs events."""
         for target, source in self.writes:
             target[:] = source
         for esc, port0_ns, n in self.events:
@@ -361,9 +409,6 @@ class _Logical(_Op):
             else:  # what _outputs_written does for a slave not waiting for OP
                 esc.outputs_valid = True
                 esc._last_outputs_ns = t_ns + port0_ns
-        for target, source in self.reads:
-            target[:] = source
-        return self.fixed_wkc
 
     def _run_ordered(self, t_ns: int) -> int:
         added = 0

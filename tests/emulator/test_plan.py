@@ -124,7 +124,7 @@ def test_plans_answer_like_the_general_path(name: str) -> None:
             assert bus.fprd(station, mb.in_start, mb.in_length_bytes)  # the emergency
             assert bus.sdo_upload(station, 0x603F, 0, mbx) == b"\x30\x55"
     logical = eni.cyclic_frames[0].commands[0].data_length_bytes
-    for _ in range(400):
+    for _ in range(800):
         bus.t_ns += rng.randrange(1, 300_000)
         twin.process(_random_frame(rng, len(eni.slaves), logical), bus.t_ns)
         if rng.random() < 0.3:
