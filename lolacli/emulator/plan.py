@@ -152,6 +152,7 @@ class FramePlan:
     ) -> None:
         self.epoch = epoch
         self.delay_ns = delay_ns
+        self.deferred = deferred
         self.buf = bytearray(key[0])
         view = memoryview(self.buf)
         self.slaves = [(esc, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]
@@ -183,12 +184,13 @@ class FramePlan:
     def run(self, frame: bytes, t_ns: int) -> bytes:
         buf = self.buf
         buf[:] = frame
-        k = self.datagrams_per_slave
         # The general path also sets each ESC's frame time, port offsets and "now": the
         # first two serve only the receive-time latch, "now" only outputs events (set
-        # there, below), so all three are left to the code that reads them.
-        for esc in self.escs:
-            esc.counters.datagrams += k
+        # there), so all three are left to the code that reads them.
+        if self.deferred is not None:
+            self.deferred.append((self.count, ()))
+        else:
+            self.count()
         for op in self.ops:
             added = op.run(t_ns)
             if added:
@@ -198,6 +200,11 @@ class FramePlan:
             _U16.pack_into(buf, at, adp)
         buf[6] |= 0x02  # SOURCE_MAC_LOCAL_BIT
         return bytes(buf)
+
+    def count(self) -> None:
+        k = self.datagrams_per_slave
+        for esc in self.escs:
+            esc.counters.datagrams += k
 
 
 class _Op:
@@ -230,11 +237,21 @@ class _Brd(_Op):
         self.length = d.length
         self.lo, self.hi = lo, hi
         self.sources = [memoryview(esc.mem)[lo:hi] for esc in slaves]
+        # registers that only change with the epoch: their OR holds while it does
+        self.epoch_cell = slaves[0].epoch if _within(lo, hi, EPOCH_REGISTERS) else None
+        self.cached: tuple[int, int] | None = None  # (epoch, OR of all slaves)
 
     def run(self, t_ns: int) -> int:
-        value = int.from_bytes(self.data, "little")
-        for source in self.sources:
-            value |= int.from_bytes(source, "little")
+        cell, cached = self.epoch_cell, self.cached
+        if cell is not None and cached is not None and cached[0] == cell[0]:
+            merged = cached[1]
+        else:
+            merged = 0
+            for source in self.sources:
+                merged |= int.from_bytes(source, "little")
+            if cell is not None:
+                self.cached = (cell[0], merged)
+        value = int.from_bytes(self.data, "little") | merged
         self.data[:] = value.to_bytes(self.length, "little")
         return len(self.sources)
 
@@ -319,6 +336,9 @@ class _Logical(_Op):
         plain = [s for s in self.steps if not s.generic]
         self.fixed_wkc = sum(s.wkc for s in plain)
         self.deferred: Deferred | None = None  # set: writes and events run after the answer
+        self.snapshot = bytearray(d.length)
+        view = memoryview(self.snapshot)
+        self.snapshot_writes = [(t, view[a:b]) for s in plain for t, _, a, b in s.writes or ()]
         self.ordered = len(plain) < len(self.steps) or _reads_feed_writes(self.steps)
         self.writes = [(t, src) for s in plain for t, src, _, _ in s.writes or ()]
         self.events = [(s.esc, s.port0_ns, s.events) for s in plain if s.events]
@@ -358,20 +378,15 @@ class _Logical(_Op):
         return step
 
     def writes_deferrable(self, later: list[_Op]) -> bool:
-        """Whether the writes and outputs events may wait until after the answer: no
-        read in the frame takes from memory they write, no later write writes it again,
-        no read lands where they take from, and no outputs event can change the AL state
-        (no slave waits for OP)."""
+        """Whether the writes and outputs events may wait until after the answer (taking
+        the outputs from a copy of the datagram made before the reads): no read in the
+        frame takes from memory they write, no later write writes it again, and no
+        outputs event can change the AL state (no slave waits for OP)."""
         if self.ordered or not self.writes:
             return False
         if any(esc.pending_op for esc, _, _ in self.events):
             return False
         written = {(id(s.esc), p, q) for s in self.steps for p, q in s.write_memory}
-        sources = [(a, b) for s in self.steps for _, _, a, b in s.writes or ()]
-        for s in self.steps:
-            for _, _, a, b in s.reads or ():
-                if any(a < e and c < b for c, e in sources):
-                    return False
         for op in [self, *later]:
             if not isinstance(op, _Logical):
                 if isinstance(op, _Brd) and op.hi > PLAN_FREE_REGISTERS:
@@ -390,7 +405,8 @@ class _Logical(_Op):
         if self.ordered:
             return self._run_ordered(t_ns)
         if self.deferred is not None:
-            self.deferred.append((self.write, (t_ns,)))
+            self.snapshot[:] = self.data  # what the writes take, before the reads change it
+            self.deferred.append((self.write_later, (t_ns,)))
         else:
             self.write(t_ns)
         for target, source in self.reads:
@@ -401,6 +417,15 @@ class _Logical(_Op):
         """The writes into the slaves' memories and their outputs events."""
         for target, source in self.writes:
             target[:] = source
+        self._events(t_ns)
+
+    def write_later(self, t_ns: int) -> None:
+        """:meth:`write` from the copy of the datagram taken before the reads."""
+        for target, source in self.snapshot_writes:
+            target[:] = source
+        self._events(t_ns)
+
+    def _events(self, t_ns: int) -> None:
         for esc, port0_ns, n in self.events:
             esc._now_ns = t_ns + port0_ns
             if esc.pending_op:
@@ -441,6 +466,16 @@ def _reads_dc(op: _Op) -> bool:
     if isinstance(op, _Logical):
         return any(s.generic or any(p < hi and lo < q for p, q in s.read_memory) for s in op.steps)
     return True
+
+
+# Register ranges every change of which bumps the epoch (DL status: topology; AL status
+# and status code: Esc._set_al); other writes to them go through register writes, which
+# bump it too.
+EPOCH_REGISTERS = ((r.DL_STATUS, r.DL_STATUS + 2), (r.AL_STATUS, r.AL_STATUS_CODE + 2))
+
+
+def _within(lo: int, hi: int, ranges: tuple[tuple[int, int], ...]) -> bool:
+    return any(a <= lo and hi <= b for a, b in ranges)
 
 
 def _fmmu_hits(f: FmmuEntry, lo: int, hi: int) -> bool:
