@@ -3,7 +3,9 @@
 Creates a veth pair, serves the chain (default: the embedded LOLA chain) on one end, drives
 it to OP with pysoem on the other, then runs N process-data cycles at the given rate and
 reports the round trip send_processdata -> receive_processdata: p50/p99/max, lost cycles
-(timeout or WKC mismatch) and cycles over the real-time budget (the cycle period).
+(timeout or WKC mismatch) and cycles over the real-time budget (the cycle period). With
+``--moving`` every drive is enabled in CSP and gets a new target every cycle, so every
+device model steps every cycle (the default leaves the outputs at zero: drives at rest).
 
 Needs root. Both processes are pinned to the same core with taskset by default, the worst
 case for a host that runs master and emulator together.
@@ -19,6 +21,7 @@ import argparse
 import json
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import time
@@ -69,11 +72,41 @@ def to_op(master, pysoem, timeout_us: int) -> None:
     raise SystemExit("OP not reached")
 
 
-def run(master, cycles: int, period_ns: int, timeout_us: int) -> dict[str, object]:
+DRIVE_OUTPUT_BYTES = 11  # controlword, mode of operation, target position, target velocity
+CSP = 8
+
+
+def drives_of(master) -> list:
+    """The CiA 402 drives, by the size of their outputs."""
+    return [s for s in master.slaves if len(s.output) == DRIVE_OUTPUT_BYTES]
+
+
+def enable(master, timeout_us: int) -> None:
+    """Shutdown, switch on, enable operation in CSP on every drive (a few cycles each)."""
+    for cw in (0x06, 0x07, 0x0F):
+        for drive in drives_of(master):
+            drive.output = struct.pack("<Hbi", cw, CSP, 0) + bytes(DRIVE_OUTPUT_BYTES - 7)
+        for _ in range(20):
+            master.send_processdata()
+            master.receive_processdata(timeout_us)
+            time.sleep(0.001)
+
+
+def set_targets(drives: list, k: int) -> None:
+    for j, drive in enumerate(drives):
+        target = 1000 * j + 37 * k
+        drive.output = struct.pack("<Hbi", 0x0F, CSP, target) + bytes(DRIVE_OUTPUT_BYTES - 7)
+
+
+def run(master, cycles: int, period_ns: int, timeout_us: int,
+        moving: bool = False) -> dict[str, object]:
     latencies: list[int] = []
     lost = 0
+    drives = drives_of(master) if moving else []
     next_t = time.perf_counter_ns()
-    for _ in range(cycles):
+    for k in range(cycles):
+        if drives:
+            set_targets(drives, k)  # every drive gets a new target every cycle
         t0 = time.perf_counter_ns()
         master.send_processdata()
         wkc = master.receive_processdata(timeout_us)
@@ -112,6 +145,8 @@ def main() -> None:
     parser.add_argument("--core", type=int, default=0, help="CPU for both processes; -1: none")
     parser.add_argument("--timeout-us", type=int, default=5000,
                         help="receive timeout; later replies count as lost")
+    parser.add_argument("--moving", action="store_true",
+                        help="enable every drive (CSP) and give each a new target every cycle")
     args = parser.parse_args()
     if os.geteuid() != 0:
         raise SystemExit("needs root (veth pair, raw sockets)")
@@ -125,9 +160,12 @@ def main() -> None:
     try:
         master.open(master_if)
         to_op(master, pysoem, args.timeout_us)
-        result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us)
+        if args.moving:
+            enable(master, args.timeout_us)
+        result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us, args.moving)
         result.update(eni=str(args.eni.name), slaves=len(master.slaves), rate_hz=args.rate,
-                      pinned_core=args.core)
+                      pinned_core=args.core, drives_moving=len(drives_of(master))
+                      if args.moving else 0)
         print(json.dumps(result, indent=2))
     finally:
         master.close()

@@ -5,10 +5,12 @@ the chain, and sends the returned frame back on the same interface at once (the 
 bus delay is not waited for: the host is the bottleneck). Frames the socket itself sent
 are skipped (``PACKET_OUTGOING``), so on a veth pair only the master's frames are served.
 
-The answer goes first; the device cycles the frame asked for run afterwards, once the
-master had ``grace_s`` to take the answer (the server sleeps that long, or until the next
-frame comes, which is then answered first). On a host where master and emulator share a
-core this is what lets the master see the answer before the devices' work is done.
+The answer goes first; the work the frame left (device cycles, DC control loops, writes
+into the slaves' memories) runs afterwards, once the master had ``grace_s`` to take the
+answer (the server sleeps that long, or until the master's next frame comes), and always
+before the next frame is read, so every frame's outputs reach the devices. On a host where
+master and emulator share a core the sleep is what lets the master see the answer before
+that work is done.
 """
 
 from __future__ import annotations
@@ -133,9 +135,9 @@ class RawSocketServer:
             raise TransportError(f"{self.iface}: send failed: {exc.strerror or exc}") from None
         self.stats.answered += 1
         self.stats.max_service_ns = max(self.stats.max_service_ns, time.monotonic_ns() - t_ns)
-        if self.grace_s > 0 and select.select([sock], [], [], self.grace_s)[0]:
-            return  # the next frame is here: it is answered first, the devices run after it
-        self.chain.run_deferred_cycles()  # device updates after the answer is on its way
+        if self.grace_s > 0:
+            select.select([sock], [], [], self.grace_s)  # or until the master's next frame
+        self.chain.run_deferred_cycles()  # device updates, before the next frame is read
 
 
 def _tight_timers() -> None:
