@@ -8,7 +8,9 @@ reports the round trip send_processdata -> receive_processdata: p50/p99/max, los
 device model steps every cycle (the default leaves the outputs at zero: drives at rest).
 
 Needs root. Both processes are pinned to the same core with taskset by default, the worst
-case for a host that runs master and emulator together.
+case for a host that runs master and emulator together. ``--emulator-priority N`` runs the
+emulator SCHED_FIFO (chrt -f N), as the stand-in for slave hardware that does not wait for
+the master's process to yield the core.
 
     sudo python benchmarks/emulate_latency.py                     # LOLA, 2 kHz, 20 000 cycles
     sudo python benchmarks/emulate_latency.py --eni lolacli/eni_examples/single_drive.xml \
@@ -41,11 +43,13 @@ def veth(tag: str) -> tuple[str, str]:
     return master, emulator
 
 
-def start_emulator(iface: str, eni: Path, core: int) -> subprocess.Popen[str]:
+def start_emulator(iface: str, eni: Path, core: int, priority: int = 0) -> subprocess.Popen[str]:
     cmd = [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", iface,
            "--eni", str(eni), "--quiet"]
     if core >= 0:
         cmd = ["taskset", "-c", str(core), *cmd]
+    if priority > 0:
+        cmd = ["chrt", "-f", str(priority), *cmd]  # the emulator stands in for hardware
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     assert proc.stderr is not None
     line = proc.stderr.readline()
@@ -145,6 +149,8 @@ def main() -> None:
     parser.add_argument("--core", type=int, default=0, help="CPU for both processes; -1: none")
     parser.add_argument("--timeout-us", type=int, default=5000,
                         help="receive timeout; later replies count as lost")
+    parser.add_argument("--emulator-priority", type=int, default=0,
+                        help="run the emulator SCHED_FIFO at this priority (chrt -f); 0: normal")
     parser.add_argument("--moving", action="store_true",
                         help="enable every drive (CSP) and give each a new target every cycle")
     args = parser.parse_args()
@@ -155,7 +161,7 @@ def main() -> None:
     if args.core >= 0:
         os.sched_setaffinity(0, {args.core})
     master_if, emulator_if = veth(f"{os.getpid() % 100000:05d}")
-    proc = start_emulator(emulator_if, args.eni, args.core)
+    proc = start_emulator(emulator_if, args.eni, args.core, args.emulator_priority)
     master = pysoem.Master()
     try:
         master.open(master_if)
@@ -164,7 +170,8 @@ def main() -> None:
             enable(master, args.timeout_us)
         result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us, args.moving)
         result.update(eni=str(args.eni.name), slaves=len(master.slaves), rate_hz=args.rate,
-                      pinned_core=args.core, drives_moving=len(drives_of(master))
+                      pinned_core=args.core, emulator_priority=args.emulator_priority,
+                      drives_moving=len(drives_of(master))
                       if args.moving else 0)
         print(json.dumps(result, indent=2))
     finally:

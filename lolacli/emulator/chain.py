@@ -166,6 +166,7 @@ class Chain:
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
+        self._held: int | None = None  # a late application cycle's time
         self._line_changed()
 
     def _line_changed(self) -> None:
@@ -217,9 +218,11 @@ class Chain:
         that to :meth:`run_deferred_cycles`, so a real-time transport can answer first.
         """
         self.stats.frames += 1
+        plan = self._plan(frame) if self.plan_after else None
+        if self._held is not None and (plan is None or not plan.defers_writes):
+            self._run_held()  # this frame's outputs would reach memory before it ran
         if self._deferred_dc:
             self._run_deferred_dc()
-        plan = self._plan(frame) if self.plan_after else None
         if plan is not None:
             return self._run_plan(plan, frame, t_ns, defer_cycles)
         slots = self._parse(frame)
@@ -324,8 +327,12 @@ class Chain:
             esc.check_watchdog(t_ns)
 
     def run_deferred_cycles(self) -> None:
-        """Run the work left for after the answer: the DC time control loops of the last
-        frame and the application cycle the last logical frame asked for."""
+        """Run the work left for after the answer, in order: the application cycle held
+        back by :meth:`hold_deferred_cycle`, what the frame plans left (DC time control
+        loops, writes into the slaves' memories), the cycle the last logical frame asked
+        for."""
+        if self._held is not None:
+            self._run_held()
         if self._deferred_dc:
             self._run_deferred_dc()
         t_ns = self._deferred_t_ns
@@ -334,6 +341,24 @@ class Chain:
         self._deferred_t_ns = None
         for esc in self._active:
             esc.cycle(t_ns)
+
+    def hold_deferred_cycle(self) -> None:
+        """The master's next frame is already here: let it be answered before the pending
+        application cycle runs. The cycle still runs before that frame's outputs reach the
+        slaves' memories (a plan leaves them for after the answer; any other frame runs
+        the held cycle first), so every frame's outputs reach the devices, in order; the
+        answer shows the inputs as they are, as a slave whose application is late would."""
+        if self._held is not None:
+            self._run_held()  # one held at a time: the older one runs now
+        if self._deferred_dc:
+            self._run_deferred_dc()
+        self._held, self._deferred_t_ns = self._deferred_t_ns, None
+
+    def _run_held(self) -> None:
+        t_ns, self._held = self._held, None
+        if t_ns is not None:
+            for esc in self._active:
+                esc.cycle(t_ns)
 
     def _run_deferred_dc(self) -> None:
         for work, args in self._deferred_dc:

@@ -169,9 +169,10 @@ class FramePlan:
                         op.deferred = deferred
                 elif isinstance(op, _Logical) and op.writes_deferrable(later):
                     op.deferred = deferred
-        written = {
-            id(s.esc) for op in self.ops if isinstance(op, _Logical) for s in op.steps if s.events
-        }
+        logical = [op for op in self.ops if isinstance(op, _Logical)]
+        # no write into the slaves' memories before the answer is sent
+        self.defers_writes = all(op.deferred is not None or not op.steps_write for op in logical)
+        written = {id(s.esc) for op in logical for s in op.steps if s.events}
         # a slave that takes outputs in this frame cannot time out in it: no watchdog check
         self.watchdog_slaves = [esc for esc in slaves if id(esc) not in written]
         n = len(slaves)
@@ -335,6 +336,7 @@ class _Logical(_Op):
         self.steps = [self._slave(esc, port0_ns, d) for esc, port0_ns in slaves]
         plain = [s for s in self.steps if not s.generic]
         self.fixed_wkc = sum(s.wkc for s in plain)
+        self.steps_write = any(s.generic or s.writes for s in self.steps)
         self.deferred: Deferred | None = None  # set: writes and events run after the answer
         self.snapshot = bytearray(d.length)
         view = memoryview(self.snapshot)

@@ -7,10 +7,10 @@ are skipped (``PACKET_OUTGOING``), so on a veth pair only the master's frames ar
 
 The answer goes first; the work the frame left (device cycles, DC control loops, writes
 into the slaves' memories) runs afterwards, once the master had ``grace_s`` to take the
-answer (the server sleeps that long, or until the master's next frame comes), and always
-before the next frame is read, so every frame's outputs reach the devices. On a host where
-master and emulator share a core the sleep is what lets the master see the answer before
-that work is done.
+answer (the server sleeps that long, or until the master's next frame comes). On a host
+where master and emulator share a core the sleep is what lets the master see the answer
+before that work is done. When the next frame comes first, it is answered first and the
+device cycle waits with the outputs it was due (:meth:`Chain.hold_deferred_cycle`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from lolacli.errors import TransportError
 ETH_P_ECAT = 0x88A4
 PACKET_OUTGOING = 4
 MAX_FRAME_BYTES = 1600
-DEFAULT_GRACE_S = 200e-6
+DEFAULT_GRACE_S = 100e-6
 PR_SET_TIMERSLACK = 29
 TIMER_SLACK_NS = 1000
 
@@ -135,9 +135,10 @@ class RawSocketServer:
             raise TransportError(f"{self.iface}: send failed: {exc.strerror or exc}") from None
         self.stats.answered += 1
         self.stats.max_service_ns = max(self.stats.max_service_ns, time.monotonic_ns() - t_ns)
-        if self.grace_s > 0:
-            select.select([sock], [], [], self.grace_s)  # or until the master's next frame
-        self.chain.run_deferred_cycles()  # device updates, before the next frame is read
+        if self.grace_s > 0 and select.select([sock], [], [], self.grace_s)[0]:
+            self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
+            return
+        self.chain.run_deferred_cycles()  # device updates after the answer is on its way
 
 
 def _tight_timers() -> None:

@@ -172,3 +172,41 @@ def test_layout_key_rejects_what_the_general_path_rejects() -> None:
     assert layout_key(bytes(bad_length)) is None
     chain: Chain = build_chain(load_eni(EXAMPLES / "single_drive.xml"))
     assert decode_frame(chain.process(good, 0)[0] or b"").datagrams[0].wkc == 1
+
+
+def test_held_cycles_let_frames_answer_first_and_lose_no_outputs() -> None:
+    """A server that answers back-to-back frames first holds each device cycle; every
+    frame's outputs still reach the drive, in order, one cycle late."""
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    for _ in range(3):
+        bus.cycle(eni)  # the cyclic frame gets its plan
+    size = eni.cyclic_frames[0].commands[0].data_length_bytes
+    statuses = []
+    for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F):
+        image = struct.pack("<Hbi", cw, 8, 4242).ljust(size, b"\0")
+        frame = encode_frame(
+            make_frame(
+                [
+                    Datagram.logical(c.cmd, c.logical_address, image)
+                    if c.logical_address is not None
+                    else Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, c.data_length_bytes)
+                    for c in eni.cyclic_frames[0].commands
+                ]
+            ),
+            pad=True,
+        )
+        bus.t_ns += 100_000
+        planned = chain.stats.planned_frames
+        reply, _ = chain.process(frame, bus.t_ns, defer_cycles=True)
+        assert reply is not None and chain.stats.planned_frames == planned + 1
+        statuses.append(struct.unpack_from("<H", decode_frame(reply).datagrams[0].data)[0])
+        chain.hold_deferred_cycle()  # the next frame is already here
+    chain.run_deferred_cycles()
+    # each answer shows the drive before the previous frame's cycle: one cycle late
+    assert [s & 0x6F for s in statuses] == [0x40, 0x40, 0x21, 0x23, 0x27]
+    replies, inputs = bus.cycle(eni, struct.pack("<Hbi", 0x0F, 8, 4242).ljust(size, b"\0"))
+    status, _mode, actual = struct.unpack_from("<Hbi", inputs, 0)
+    assert status & 0x6F == 0x27 and actual == 4242
