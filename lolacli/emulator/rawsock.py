@@ -18,6 +18,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import gc
+import os
 import select
 import socket
 import sys
@@ -70,16 +71,26 @@ def open_socket(iface: str) -> socket.socket:
 class RawSocketServer:
     """Answers a real master on ``iface`` with the emulated chain."""
 
-    def __init__(self, iface: str, chain: Chain, *, grace_s: float = DEFAULT_GRACE_S) -> None:
+    def __init__(
+        self,
+        iface: str,
+        chain: Chain,
+        *,
+        grace_s: float = DEFAULT_GRACE_S,
+        realtime_priority: int = 0,
+    ) -> None:
         self.iface = iface
         self.chain = chain
         self.grace_s = grace_s
+        self.realtime_priority = realtime_priority
         self.stats = ServerStats()
         self._sock: socket.socket | None = None
 
     def __enter__(self) -> RawSocketServer:
         self._sock = open_socket(self.iface)
         _tight_timers()
+        if self.realtime_priority > 0:
+            _realtime(self.realtime_priority)
         gc.collect()
         gc.freeze()  # the chain lives as long as the server: no collector passes over it
         return self
@@ -139,6 +150,17 @@ class RawSocketServer:
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
             return
         self.chain.run_deferred_cycles()  # device updates after the answer is on its way
+
+
+def _realtime(priority: int) -> None:
+    """SCHED_FIFO at ``priority``: the emulator stands in for slave hardware, which does not
+    wait for a master process to yield the core. TransportError when not permitted."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        raise TransportError(
+            f"cannot run SCHED_FIFO at priority {priority}: {getattr(exc, 'strerror', exc)}"
+        ) from None
 
 
 def _tight_timers() -> None:

@@ -59,10 +59,14 @@ def serve(
     on_status: Callable[[ServerStats], None] | None = None,
     status_interval_s: float = 1.0,
     on_ready: Callable[[], None] | None = None,
+    realtime_priority: int = 0,
 ) -> ServerStats:
     """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
-    ``on_ready`` is called once the socket is open (frames are answered from then on)."""
-    with RawSocketServer(iface, chain) as server:
+    ``on_ready`` is called once the socket is open (frames are answered from then on).
+    ``realtime_priority`` > 0 runs the server SCHED_FIFO at that priority (root or
+    CAP_SYS_NICE): with master and emulator on one core, the device work then runs
+    while the master waits for its next cycle instead of when it waits for an answer."""
+    with RawSocketServer(iface, chain, realtime_priority=realtime_priority) as server:
         if on_ready is not None:
             on_ready()
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)
