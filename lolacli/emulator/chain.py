@@ -5,6 +5,12 @@ transport: the master's frame in, the frame as it returns to the master out, wit
 time it spent on the wire and in the slaves. Each ESC processes every datagram of the
 frame in the order the frame reaches it (slave-major, as on the wire), and the first ESC
 sets the locally administered bit of the source MAC (DESIGN.md "Direction").
+
+A frame layout that repeats (the cyclic frame) is answered through a frame plan
+(:mod:`lolacli.emulator.plan`): the same bytes, a fraction of the work. With
+``defer_cycles`` the work that does not shape the answer (device cycles, the DC control
+loops of the non-reference slaves, a plan's writes into the slaves' memories) waits for
+:meth:`Chain.run_deferred_cycles`; it always runs before anything else touches the slaves.
 """
 
 from __future__ import annotations
