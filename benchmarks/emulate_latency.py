@@ -102,8 +102,11 @@ def set_targets(drives: list, k: int) -> None:
         drive.output = struct.pack("<Hbi", 0x0F, CSP, target) + bytes(DRIVE_OUTPUT_BYTES - 7)
 
 
+SLEEP_MARGIN_NS = 150_000  # a sleeping master wakes this long before its next cycle
+
+
 def run(master, cycles: int, period_ns: int, timeout_us: int,
-        moving: bool = False) -> dict[str, object]:
+        moving: bool = False, sleeps: bool = False) -> dict[str, object]:
     latencies: list[int] = []
     lost = 0
     drives = drives_of(master) if moving else []
@@ -120,6 +123,8 @@ def run(master, cycles: int, period_ns: int, timeout_us: int,
         else:
             latencies.append(t1 - t0)
         next_t += period_ns
+        if sleeps and next_t - time.perf_counter_ns() > SLEEP_MARGIN_NS:
+            time.sleep((next_t - time.perf_counter_ns() - SLEEP_MARGIN_NS) / 1e9)
         while time.perf_counter_ns() < next_t:
             pass  # busy-wait: sleep() granularity would dominate at 2 kHz
     latencies.sort()
@@ -151,6 +156,9 @@ def main() -> None:
                         help="receive timeout; later replies count as lost")
     parser.add_argument("--emulator-priority", type=int, default=0,
                         help="run the emulator SCHED_FIFO at this priority (chrt -f); 0: normal")
+    parser.add_argument("--master-sleeps", action="store_true",
+                        help="the master sleeps between cycles (busy-waits only the last "
+                        "150 µs), as a real-time master does; default: busy-waits throughout")
     parser.add_argument("--moving", action="store_true",
                         help="enable every drive (CSP) and give each a new target every cycle")
     args = parser.parse_args()
@@ -168,9 +176,11 @@ def main() -> None:
         to_op(master, pysoem, args.timeout_us)
         if args.moving:
             enable(master, args.timeout_us)
-        result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us, args.moving)
+        result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us, args.moving,
+                     args.master_sleeps)
         result.update(eni=str(args.eni.name), slaves=len(master.slaves), rate_hz=args.rate,
                       pinned_core=args.core, emulator_priority=args.emulator_priority,
+                      master_sleeps=args.master_sleeps,
                       drives_moving=len(drives_of(master))
                       if args.moving else 0)
         print(json.dumps(result, indent=2))
