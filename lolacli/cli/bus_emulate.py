@@ -40,6 +40,14 @@ def emulate_cmd(
         float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")
     ] = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
+    realtime_priority: Annotated[
+        int,
+        typer.Option(
+            "--realtime-priority",
+            help="Run SCHED_FIFO at this priority (1-99; needs root or CAP_SYS_NICE). "
+            "Use when master and emulator share a core.",
+        ),
+    ] = 0,
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
     drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
@@ -78,6 +86,8 @@ def emulate_cmd(
             highlight=False,
         )
 
-    stats = serve(iface, chain, should_stop, status, on_ready=ready)
+    stats = serve(
+        iface, chain, should_stop, status, on_ready=ready, realtime_priority=realtime_priority
+    )
     status(stats)
     console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")
