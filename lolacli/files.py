@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from lolacli.errors import EniError
 
 if TYPE_CHECKING:
+    from lolacli.eni.esi import EsiFile
     from lolacli.eni.model import Eni
 
 #: Refuse absurdly large "ENI" files before reading them (the largest real exports are ~1 MB).
@@ -40,4 +41,11 @@ def load_eni(path: str | Path) -> Eni:
     return parse_eni(read_eni_bytes(path), source=str(path))
 
 
-__all__ = ["MAX_ENI_BYTES", "load_eni", "read_eni_bytes"]
+def load_esi(path: str | Path) -> EsiFile:
+    """Read and parse an ESI file. Every failure is an :class:`EniError` naming the file."""
+    from lolacli.eni.esi import parse_esi
+
+    return parse_esi(read_eni_bytes(path), source=str(path))
+
+
+__all__ = ["MAX_ENI_BYTES", "load_eni", "load_esi", "read_eni_bytes"]

@@ -90,6 +90,10 @@ def _safe_tree(raw: bytes, source: str) -> _El:
     return _lxml_root(raw, source)
 
 
+#: Public name of the hardened loader, for the other readers of the ``eni`` layer (ESI).
+safe_tree = _safe_tree
+
+
 def _refuse_doctype_prolog(raw: bytes, source: str) -> None:
     """Fast path for ASCII-compatible encodings: a DOCTYPE before the root element."""
     first = _FIRST_ELEMENT.search(raw)
