@@ -17,9 +17,10 @@ RXPDO (51), DC (60). Pure: values in, bytes out.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum, IntFlag
 
+from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import Direction, Pdo, Slave, SyncManager
 
 _U16 = struct.Struct("<H")
@@ -185,6 +186,8 @@ class SiiSpec:
     dc: bool = True
     group: str = "lolacli emulated"
     eeprom_kibit: int = 32
+    dc_assign_activate: int = 0x0300
+    config_data: bytes = b""  # ESI <ConfigData>: header words 0..6 (PDI control, ...)
 
 
 def _category(kind: int, data: bytes) -> bytes:
@@ -226,7 +229,10 @@ def build_sii(spec: SiiSpec) -> bytes:
     """The EEPROM image of ``spec``: 64-word header and categories up to 0xFFFF."""
     head = bytearray(2 * HEADER_WORDS)
     _U16.pack_into(head, 0, 0x0C05)  # PDI control: SPI, enhanced link detection
-    _U16.pack_into(head, 8, spec.station_alias)
+    config = spec.config_data[:14]
+    head[: len(config)] = config
+    if spec.station_alias or not config:
+        _U16.pack_into(head, 8, spec.station_alias)
     _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
     for word, value in (
         (0x08, spec.vendor_id),
@@ -271,18 +277,19 @@ def build_sii(spec: SiiSpec) -> bytes:
     if rx:
         body += _category(SiiCategory.RXPDO, _pdo_category(rx, sm_of))
     if spec.dc:
-        body += _category(SiiCategory.DC, _dc_category())
+        body += _category(SiiCategory.DC, _dc_category(spec.dc_assign_activate))
     body += _U16.pack(CATEGORY_END)
     image = bytes(head) + bytes(body)
     size = max(len(image), spec.eeprom_kibit * 128)
     return image + b"\xff" * (size - len(image))
 
 
-def _dc_category() -> bytes:
-    """One DC operation mode "DC-Synchron" (ETG.2010 Table 16): assign-activate 0x0300."""
+def _dc_category(assign_activate: int = 0x0300) -> bytes:
+    """One DC operation mode "DC-Synchron" (ETG.2010 Table 16), default assign-activate
+    0x0300 (SYNC0 + cyclic operation)."""
     out = bytearray(24)
     _U32.pack_into(out, 0, 0)  # cycle time 0: set by the master
-    _U16.pack_into(out, 20, 0x0300)
+    _U16.pack_into(out, 20, assign_activate)
     return bytes(out)
 
 
@@ -386,6 +393,100 @@ def _pdo_sm_defaults(sms: tuple[SiiSyncManager, ...]) -> dict[Direction, int]:
 
 def sii_from_slave(slave: Slave, *, complete_access: bool = False) -> bytes:
     return build_sii(sii_spec_from_slave(slave, complete_access=complete_access))
+
+
+# ------------------------------------------------------------ from an ESI device
+_ESI_SM_TYPES = {
+    "mboxout": SmType.MAILBOX_OUT,
+    "mboxin": SmType.MAILBOX_IN,
+    "outputs": SmType.OUTPUTS,
+    "inputs": SmType.INPUTS,
+}
+
+#: FMMU category bytes of ESI ``<Fmmu>`` texts (ETG.2010 Table 10); others are 0 (unused).
+_ESI_FMMU_TYPES = {"outputs": 1, "inputs": 2, "mboxstate": 3}
+
+
+def _esi_sync_managers(device: EsiDevice) -> tuple[SiiSyncManager, ...]:
+    return tuple(
+        SiiSyncManager(
+            sm.start_address,
+            sm.default_size_bytes,
+            sm.control,
+            1 if sm.enable else 0,
+            _ESI_SM_TYPES.get(sm.kind.lower(), SmType.UNUSED),
+        )
+        for sm in device.sync_managers
+    )
+
+
+def _esi_coe_details(device: EsiDevice) -> int:
+    coe = device.coe
+    if coe is None:
+        return 0
+    flags = CoeDetails.SDO
+    for on, flag in (
+        (coe.sdo_info, CoeDetails.SDO_INFO),
+        (coe.pdo_assign, CoeDetails.PDO_ASSIGN),
+        (coe.pdo_config, CoeDetails.PDO_CONFIG),
+        (coe.pdo_upload, CoeDetails.UPLOAD_AT_STARTUP),
+        (coe.complete_access, CoeDetails.SDO_COMPLETE_ACCESS),
+    ):
+        flags |= flag if on else 0
+    return int(flags)
+
+
+def _esi_mailbox(device: EsiDevice) -> tuple[int, int, int, int] | None:
+    out, inn = device.sync_manager("MBoxOut"), device.sync_manager("MBoxIn")
+    if out is None or inn is None:
+        return None
+    return (out.start_address, out.default_size_bytes, inn.start_address, inn.default_size_bytes)
+
+
+def sii_spec_from_esi_device(
+    device: EsiDevice, *, serial: int = 0, station_alias: int = 0
+) -> SiiSpec:
+    """An SII description of an ESI device: identity, names, mailbox SMs and protocols, CoE
+    details, FMMUs, SMs (default sizes), the default-assigned PDOs, DC and ConfigData."""
+    ident = device.identity
+    mailbox = _esi_mailbox(device)
+    protocols = sum(_PROTOCOL_NAMES.get(p, 0) for p in device.mailbox_protocols)
+    sms = _esi_sync_managers(device)
+    sm_of = _pdo_sm_defaults(sms)
+    pdos = device.assigned_pdos
+    assign = next((m.assign_activate for m in device.dc_op_modes if m.assign_activate), 0)
+    byte_size = device.eeprom.byte_size if device.eeprom is not None else None
+    return SiiSpec(
+        name=device.name or device.type_name,
+        vendor_id=ident.vendor_id,
+        product_code=ident.product_code,
+        revision=ident.revision,
+        serial=serial,
+        station_alias=station_alias,
+        mailbox=mailbox,
+        protocols=protocols if mailbox is not None else 0,
+        coe_details=_esi_coe_details(device),
+        ds402_channels=1 if device.profile_no == 402 else 0,
+        sync_managers=sms,
+        fmmus=tuple(_ESI_FMMU_TYPES.get(f.lower(), 0) for f in device.fmmus),
+        pdos=pdos,
+        pdo_sync_manager={p.index: sm_of[p.direction] for p in pdos if p.direction in sm_of},
+        dc=bool(device.dc_op_modes),
+        group=device.group or device.type_name,
+        eeprom_kibit=max(1, (byte_size or 4096) * 8 // 1024),
+        dc_assign_activate=assign,
+        config_data=device.eeprom.config_data if device.eeprom is not None else b"",
+    )
+
+
+def sii_from_esi_device(device: EsiDevice, *, serial: int = 0, station_alias: int = 0) -> bytes:
+    """The EEPROM image of an ESI device; the stated size grows if the ESI's is too small."""
+    spec = sii_spec_from_esi_device(device, serial=serial, station_alias=station_alias)
+    image = build_sii(spec)
+    needed_kibit = (len(image) + 127) // 128
+    if needed_kibit > spec.eeprom_kibit:
+        image = build_sii(replace(spec, eeprom_kibit=needed_kibit))
+    return image
 
 
 # ------------------------------------------------------------------ reading
