@@ -21,6 +21,13 @@ def emulate_cmd(
         Path | None,
         typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain."),
     ] = None,
+    esi: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--esi",
+            help="ESI file; slaves whose identity it describes take their SII from it. Repeatable.",
+        ),
+    ] = None,
     drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
     stuck_safeop: Annotated[
         list[int] | None,
@@ -53,12 +60,19 @@ def emulate_cmd(
     drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
     import signal
 
-    from lolacli.emulator.run import EmulateOptions, make_chain, serve, state_summary
-    from lolacli.files import load_eni
+    from lolacli.emulator.run import (
+        EmulateOptions,
+        esi_matches,
+        make_chain,
+        serve,
+        state_summary,
+    )
+    from lolacli.files import load_eni, load_esi
 
     model = load_eni(eni if eni is not None else default_eni())
+    esi_files = [load_esi(p) for p in esi or ()]
     options = EmulateOptions(drop_p, tuple(stuck_safeop or ()), drift_ppb, seed, link_down)
-    chain = make_chain(model, options)
+    chain = make_chain(model, options, esi=esi_files)
     stop = {"flag": False}
 
     def _stop(_signum: int, _frame: object) -> None:
@@ -68,6 +82,14 @@ def emulate_cmd(
     signal.signal(signal.SIGTERM, _stop)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     console = stderr_console()
+    if esi_files:
+        matched = esi_matches(model, esi_files)
+        exact = sum(1 for m in matched if m.exact_revision)
+        console.print(
+            f"ESI SII: {len(matched)} of {len(chain.slaves)} slaves "
+            f"({exact} with the exact revision)",
+            highlight=False,
+        )
 
     def ready() -> None:
         console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
 from lolacli.emulator.registers import AlStatusCode
+from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
     CABLE_NS_PER_M,
@@ -174,6 +175,14 @@ class Chain:
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
         self._line_changed()
+
+    def use_sii(self, position: int, image: bytes) -> None:
+        """Give the slave at 1-based ``position`` another SII image, then power it on again
+        (so the ESC's alias and layout come from the new image)."""
+        esc = self.slaves[position - 1]
+        esc.sii = bytearray(image)
+        esc.layout = sii_layout(bytes(image))
+        esc.reset()
 
     def _line_changed(self) -> None:
         """Topology and arrival offsets of the slaves the frames reach."""

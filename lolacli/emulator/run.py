@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from lolacli.emulator.chain import Chain, Faults
 from lolacli.emulator.rawsock import RawSocketServer, ServerStats
 from lolacli.emulator.registers import AlState
+from lolacli.emulator.sii import sii_from_esi_device
 from lolacli.emulator.slave import build_chain
-from lolacli.eni.model import Eni
+from lolacli.eni.esi import EsiDevice, EsiFile
+from lolacli.eni.model import Eni, Slave
 from lolacli.errors import UsageError
 
 
@@ -22,12 +24,53 @@ class EmulateOptions:
     link_down_after: int | None = None  # cable cut after this 1-based position
 
 
-def make_chain(eni: Eni, options: EmulateOptions) -> Chain:
-    """The chain of ``eni`` with the faults of ``options``; UsageError for bad positions."""
+@dataclass(frozen=True, slots=True)
+class EsiMatch:
+    """An ENI slave (1-based ``position``) and the ESI device that describes it."""
+
+    position: int
+    slave: str
+    device: EsiDevice
+    source: str
+    exact_revision: bool
+
+
+def esi_matches(eni: Eni, esi: Sequence[EsiFile]) -> tuple[EsiMatch, ...]:
+    """For each ENI slave, the ESI device of its vendor and product code: one with the same
+    revision in any of the files first, else the first file's closest product match."""
+    out: list[EsiMatch] = []
+    for position, slave in enumerate(eni.slaves, start=1):
+        match = _esi_match(slave, esi)
+        if match is not None:
+            device, source = match
+            exact = device.identity.revision == slave.identity.revision
+            out.append(EsiMatch(position, slave.name, device, source, exact))
+    return tuple(out)
+
+
+def _esi_match(slave: Slave, esi: Sequence[EsiFile]) -> tuple[EsiDevice, str] | None:
+    ident = slave.identity
+    found = [(f.find(ident.vendor_id, ident.product_code, ident.revision), f.source) for f in esi]
+    candidates = [(d, src) for d, src in found if d is not None]
+    exact = [(d, src) for d, src in candidates if d.identity.revision == ident.revision]
+    best = exact or candidates
+    return best[0] if best else None
+
+
+def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()) -> Chain:
+    """The chain of ``eni`` with the faults of ``options``; UsageError for bad positions.
+    Slaves that an ``esi`` device describes (see :func:`esi_matches`) take their SII from
+    it; a product matched with another revision keeps the ENI's revision."""
     if not 0.0 <= options.drop_probability <= 1.0:
         raise UsageError(f"drop probability {options.drop_probability} is not in [0, 1]")
     faults = Faults(drop_probability=options.drop_probability, seed=options.seed)
     chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
+    for m in esi_matches(eni, esi):
+        ident = eni.slaves[m.position - 1].identity
+        revision = None if m.exact_revision else ident.revision
+        chain.use_sii(
+            m.position, sii_from_esi_device(m.device, serial=ident.serial, revision=revision)
+        )
     for position in options.stuck_safeop:
         if not 1 <= position <= len(chain.slaves):
             raise UsageError(

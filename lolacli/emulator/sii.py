@@ -479,9 +479,14 @@ def sii_spec_from_esi_device(
     )
 
 
-def sii_from_esi_device(device: EsiDevice, *, serial: int = 0, station_alias: int = 0) -> bytes:
-    """The EEPROM image of an ESI device; the stated size grows if the ESI's is too small."""
+def sii_from_esi_device(
+    device: EsiDevice, *, serial: int = 0, station_alias: int = 0, revision: int | None = None
+) -> bytes:
+    """The EEPROM image of an ESI device; the stated size grows if the ESI's is too small.
+    ``revision`` overrides the ESI's (a device matched by product code only)."""
     spec = sii_spec_from_esi_device(device, serial=serial, station_alias=station_alias)
+    if revision is not None:
+        spec = replace(spec, revision=revision)
     image = build_sii(spec)
     needed_kibit = (len(image) + 127) // 128
     if needed_kibit > spec.eeprom_kibit:

@@ -122,7 +122,11 @@ class EsiFile:
 def parse_esi(data: bytes | str, source: str = "<string>") -> EsiFile:
     """Parse an ESI document. Raises :class:`EniError` (path ``source``, line) on any defect."""
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
-    root = safe_tree(raw, source)
+    try:
+        root = safe_tree(raw, source)
+    except EniError as exc:  # the shared loader speaks of ENIs
+        message = exc.message.replace("an ENI", "an ESI")
+        raise EniError(message, path=exc.path, line=exc.line) from exc
     return _EsiReader(source).esi(root)
 
 
