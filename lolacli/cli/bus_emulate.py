@@ -82,17 +82,19 @@ def emulate_cmd(
     signal.signal(signal.SIGTERM, _stop)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     console = stderr_console()
+    esi_note = ""
     if esi_files:
         matched = esi_matches(model, esi_files)
         exact = sum(1 for m in matched if m.exact_revision)
-        console.print(
+        esi_note = (
             f"ESI SII: {len(matched)} of {len(chain.slaves)} slaves "
-            f"({exact} with the exact revision)",
-            highlight=False,
+            f"({exact} with the exact revision)"
         )
 
     def ready() -> None:
         console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
+        if esi_note:
+            console.print(esi_note, highlight=False)
 
     def should_stop() -> bool:
         return stop["flag"] or (deadline is not None and time.monotonic() >= deadline)

@@ -23,6 +23,7 @@ from lolacli.files import load_eni, load_esi
 from lolacli.wire.commands import Command
 from tests.conftest import CORPUS, corpus_files
 from tests.emulator.bus import EXAMPLES, Bus
+from tests.emulator.test_masters import _emulate, _stop, pysoem, veth  # noqa: F401 (fixtures)
 
 ESI_FILES = corpus_files("esi", "*.xml")
 ELMO = CORPUS / "esi" / "elmo_ethercat_sdk__Elmo_ECAT_00010420_V11.xml"
@@ -197,3 +198,35 @@ def test_bus_emulate_missing_esi_is_exit_3(cli, tmp_path: Path) -> None:
         "bus", "emulate", "--iface", "lolacli-none0", "--esi", str(tmp_path / "no.xml")
     )
     assert code == 3 and "no such file" in err
+
+
+@pytest.mark.root
+@pytest.mark.slow
+def test_pysoem_config_init_reads_the_esi_identity(veth, pysoem) -> None:  # noqa: F811
+    """SOEM over a veth pair: the single-drive example served with the Elmo ESI."""
+    _need(ELMO)
+    device = load_esi(ELMO).find(0x9A, 0x30924, 0x10420)
+    assert device is not None
+    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--esi", str(ELMO))
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 1
+        slave = master.slaves[0]
+        ident = device.identity
+        assert (slave.man, slave.id, slave.rev) == (
+            ident.vendor_id,
+            ident.product_code,
+            ident.revision,
+        )
+        assert slave.name == device.name  # STRINGS/GENERAL of the ESI image, not the ENI name
+        assert slave.name != load_eni(EXAMPLES / "single_drive.xml").slaves[0].name
+        assert master.config_map() > 0
+        assert struct.unpack("<I", slave.sdo_read(0x1000, 0))[0] == 0x00020192
+        assert master.state_check(pysoem.SAFEOP_STATE, 5_000_000) == pysoem.SAFEOP_STATE
+        master.state = pysoem.INIT_STATE
+        master.write_state()
+    finally:
+        master.close()
+        err = _stop(proc)
+    assert "ESI SII: 1 of 1 slaves (1 with the exact revision)" in err
