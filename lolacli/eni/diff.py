@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from lolacli.eni.model import CyclicCommand, Eni, Slave, Variable
-from lolacli.wire.commands import mnemonic
+from lolacli.eni.model import Eni, Slave, Variable
+from lolacli.eni.report import datagram_dict
 
 DIFF_SCHEMA = "lolacli.eni-diff/1"
 
@@ -45,17 +45,6 @@ def _slave_fields(s: Slave) -> dict[str, Any]:
         "auto_inc_address": s.auto_inc_address,
         "inputs_bits": s.inputs_bits,
         "outputs_bits": s.outputs_bits,
-    }
-
-
-def _cmd_fields(c: CyclicCommand) -> dict[str, Any]:
-    return {
-        "cmd": mnemonic(c.cmd),
-        "adp": c.adp,
-        "ado": c.ado,
-        "logical_address": c.logical_address,
-        "length_bytes": c.data_length_bytes,
-        "expected_wkc": c.expected_wkc,
     }
 
 
@@ -98,7 +87,7 @@ def _slaves(eni: Eni) -> dict[str, dict[str, Any]]:
 
 def _cyclic(eni: Eni) -> dict[str, dict[str, Any]]:
     return {
-        f"frame {i + 1} cmd {j + 1}": _cmd_fields(c)
+        f"frame {i + 1} cmd {j + 1}": datagram_dict(c)
         for i, frame in enumerate(eni.cyclic_frames)
         for j, c in enumerate(frame.commands)
     }
