@@ -29,6 +29,13 @@ def emulate_cmd(
         ),
     ] = None,
     drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
+    corrupt_p: Annotated[
+        float,
+        typer.Option(
+            "--corrupt-p",
+            help="Probability to damage a frame inside the line (RX error counters, lower WKC).",
+        ),
+    ] = 0.0,
     stuck_safeop: Annotated[
         list[int] | None,
         typer.Option(
@@ -40,8 +47,13 @@ def emulate_cmd(
     ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
     link_down: Annotated[
-        int | None,
-        typer.Option("--link-down", help="Cut the cable after this slave position (0: all)."),
+        str | None,
+        typer.Option(
+            "--link-down",
+            metavar="K[@SECONDS]",
+            help="Cut the cable after slave position K (0: all), from the start or SECONDS "
+            "after serving starts.",
+        ),
     ] = None,
     duration_s: Annotated[
         float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")
@@ -62,16 +74,33 @@ def emulate_cmd(
 
     from lolacli.emulator.run import (
         EmulateOptions,
+        arm_link_loss,
         esi_matches,
         make_chain,
+        parse_link_down,
         serve,
         state_summary,
     )
+    from lolacli.errors import UsageError
     from lolacli.files import load_eni, load_esi
 
+    if not 0.0 <= corrupt_p <= 1.0:
+        raise typer.BadParameter(f"{corrupt_p} is not in [0, 1]", param_hint="--corrupt-p")
+    try:
+        cut = parse_link_down(link_down) if link_down is not None else None
+    except UsageError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--link-down") from None
     model = load_eni(eni if eni is not None else default_eni())
     esi_files = [load_esi(p) for p in esi or ()]
-    options = EmulateOptions(drop_p, tuple(stuck_safeop or ()), drift_ppb, seed, link_down)
+    options = EmulateOptions(
+        drop_p,
+        tuple(stuck_safeop or ()),
+        drift_ppb,
+        seed,
+        cut[0] if cut else None,
+        cut[1] if cut else 0.0,
+        corrupt_p,
+    )
     chain = make_chain(model, options, esi=esi_files)
     stop = {"flag": False}
 
@@ -92,6 +121,7 @@ def emulate_cmd(
         )
 
     def ready() -> None:
+        arm_link_loss(chain, options, time.monotonic_ns())  # the server's time base
         console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
         if esi_note:
             console.print(esi_note, highlight=False)
@@ -106,7 +136,7 @@ def emulate_cmd(
         elapsed = max(1e-9, (time.monotonic_ns() - getattr(stats, "started_ns", 0)) / 1e9)
         console.print(
             f"frames {s.frames} ({s.frames / elapsed:.0f}/s) cycles {s.logical_frames} "
-            f"lost {s.dropped} | {state_summary(chain)}",
+            f"lost {s.dropped} damaged {s.corrupted} | {state_summary(chain)}",
             highlight=False,
         )
 

@@ -90,11 +90,27 @@ class ChainTiming:
 
 @dataclass(slots=True)
 class Faults:
-    """Faults injected at the chain: lost frames, slaves that refuse OP."""
+    """Faults injected at the chain, drawn per frame from one seeded generator.
+
+    ``drop_probability``: the frame is destroyed on the cable between the master and the
+    first slave; nothing comes back, and the first slave counts it on port 0 as hardware
+    would for a frame hit by noise (ESC datasheets, register 0x0300: the invalid frame
+    counter for the failed FCS, 0x0301 RX error counter for the PHY's symbol errors).
+
+    ``corrupt_probability``: the frame is damaged as it leaves the slave at 1-based
+    position ``corrupt_at_slave`` (``None``: a cable segment drawn at random, 0 the
+    master's own cable). The next slave sees a bad FCS on port 0 (invalid frame counter
+    0x0300), marks the frame and does not process it; every slave further along counts
+    the marked frame as a forwarded RX error (0x0308 + port: port 0 on the way out,
+    port 1 on the way back). The master still gets the frame back, with the working
+    counters of the slaves before the damage only.
+    """
 
     drop_probability: float = 0.0
     seed: int = 0
     rng: random.Random = field(default_factory=random.Random)
+    corrupt_probability: float = 0.0
+    corrupt_at_slave: int | None = None
 
     def __post_init__(self) -> None:
         self.rng.seed(self.seed)
@@ -102,12 +118,22 @@ class Faults:
     def drop(self) -> bool:
         return self.drop_probability > 0 and self.rng.random() < self.drop_probability
 
+    def corrupt(self, slaves: int) -> int | None:
+        """How many of ``slaves`` process the frame before it is damaged; ``None``: intact."""
+        if self.corrupt_probability <= 0 or self.rng.random() >= self.corrupt_probability:
+            return None
+        if self.corrupt_at_slave is not None:
+            return min(self.corrupt_at_slave, slaves)
+        return self.rng.randrange(slaves) if slaves else 0
+
 
 @dataclass(slots=True)
 class ChainStats:
     frames: int = 0
     replies: int = 0
     dropped: int = 0
+    corrupted: int = 0
+    links_lost: int = 0
     malformed: int = 0
     logical_frames: int = 0
     planned_frames: int = 0  # answered through a frame plan
@@ -174,6 +200,7 @@ class Chain:
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
+        self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
 
     def use_sii(self, position: int, image: bytes) -> None:
@@ -202,6 +229,29 @@ class Chain:
             )
         self.reachable = after
         self._line_changed()
+
+    def schedule_link_loss(self, after: int, at_ns: int) -> None:
+        """Fault: the cable after 1-based position ``after`` is cut at ``at_ns`` (the time
+        base of :meth:`process`). From the first frame at or after ``at_ns`` on, the slave
+        there shows port 1 closed without link in DL status 0x0110 and its lost link
+        counter 0x0311 (port 1) has counted one; the slave behind it (out of reach)
+        counts one on port 0 (0x0310)."""
+        if not 0 <= after <= len(self.slaves):
+            raise UsageError(
+                f"link after slave {after}: the chain has slaves 1..{len(self.slaves)}"
+            )
+        self._link_loss = (after, at_ns)
+
+    def _due_link_loss(self, t_ns: int) -> None:
+        if self._link_loss is None or t_ns < self._link_loss[1]:
+            return
+        after, self._link_loss = self._link_loss[0], None
+        if after < self.reachable:
+            if after > 0:
+                self.slaves[after - 1].count_lost_link(1)
+            self.slaves[after].count_lost_link(0)
+            self.stats.links_lost += 1
+        self.break_link(min(after, self.reachable))
 
     def restore_link(self) -> None:
         self.reachable = len(self.slaves)
@@ -233,7 +283,9 @@ class Chain:
         that to :meth:`run_deferred_cycles`, so a real-time transport can answer first.
         """
         self.stats.frames += 1
-        plan = self._plan(frame) if self.plan_after else None
+        self._due_link_loss(t_ns)
+        damaged = self.faults.corrupt(len(self._active))  # a damaged frame never takes a plan
+        plan = self._plan(frame) if self.plan_after and damaged is None else None
         if self._held is not None and (plan is None or not plan.defers_writes):
             self._run_held()  # this frame's outputs would reach memory before it ran
         if self._deferred_dc:
@@ -244,7 +296,7 @@ class Chain:
         if slots is None:
             return None, 0
         if self.faults.drop():
-            self.stats.dropped += 1
+            self._lost_on_cable()
             return None, 0
         buf = bytearray(frame)
         view = memoryview(buf)
@@ -255,7 +307,8 @@ class Chain:
         if not self._active:
             self.stats.dropped += 1  # the link is down at the master: nothing comes back
             return None, 0
-        for position, (esc, offsets) in enumerate(zip(self._active, times, strict=True)):
+        processing = self._active if damaged is None else self._active[:damaged]
+        for position, (esc, offsets) in enumerate(zip(processing, times, strict=False)):
             esc.frame_t_ns = t_ns
             esc.port_offsets = offsets
             t = t_ns + offsets.port0_ns
@@ -268,7 +321,7 @@ class Chain:
                     slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, data, t)[1]
         for slot in slots:
             if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
-                slot.adp = (slot.adp + len(self._active)) & 0xFFFF
+                slot.adp = (slot.adp + len(processing)) & 0xFFFF
             _U16.pack_into(buf, slot.header + 2, slot.adp)
             if slot.wkc_added:
                 (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
@@ -276,6 +329,8 @@ class Chain:
         for data in datas:
             data.release()
         view.release()
+        if damaged is not None:
+            self._count_damaged(damaged)
         self.tick(t_ns)
         if logical:
             self._deferred_t_ns = t_ns
@@ -318,7 +373,7 @@ class Chain:
         self, plan: FramePlan, frame: bytes, t_ns: int, defer_cycles: bool
     ) -> tuple[bytes | None, int]:
         if self.faults.drop():
-            self.stats.dropped += 1
+            self._lost_on_cable()
             return None, 0
         reply = plan.run(frame, t_ns)
         for esc in plan.watchdog_slaves:
@@ -333,6 +388,29 @@ class Chain:
         self.stats.replies += 1
         self.stats.planned_frames += 1
         return reply, plan.delay_ns
+
+    def _lost_on_cable(self) -> None:
+        """A dropped frame: destroyed between the master and the first slave (see Faults)."""
+        self.stats.dropped += 1
+        if self._active:
+            self._active[0].count_invalid_frame(0)
+            self._active[0].count_rx_error(0)
+
+    def _count_damaged(self, processed: int) -> None:
+        """Counters of a frame damaged after ``processed`` slaves (see Faults)."""
+        self.stats.corrupted += 1
+        active = self._active
+        if processed >= len(active):  # damaged in the last slave's loop back
+            if len(active) >= 2:
+                active[-2].count_invalid_frame(1)
+            for esc in active[:-2]:
+                esc.count_forwarded_error(1)
+            return
+        active[processed].count_invalid_frame(0)
+        for esc in active[processed + 1 :]:
+            esc.count_forwarded_error(0)
+        for esc in active[:-1]:  # the marked frame passes every open port 1 on the way back
+            esc.count_forwarded_error(1)
 
     def tick(self, t_ns: int) -> None:
         """Let time pass in every slave (process-data watchdogs)."""

@@ -778,6 +778,21 @@ class Esc:
         address = r.RX_ERROR_COUNTER + 2 * port
         self.mem[address] = min(0xFF, self.mem[address] + 1)
 
+    def count_rx_error(self, port: int = 0) -> None:
+        """0x0301 + 2·port: physical layer (symbol) errors inside a frame on ``port``."""
+        address = r.RX_ERROR_COUNTER + 2 * port + 1
+        self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+    def count_forwarded_error(self, port: int = 0) -> None:
+        """0x0308 + port: a frame arrived on ``port`` marked bad by an earlier ESC."""
+        address = r.FORWARDED_RX_ERROR + port
+        self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+    def count_lost_link(self, port: int) -> None:
+        """0x0310 + port: the link of ``port`` went down."""
+        address = r.LOST_LINK_COUNTER + port
+        self.mem[address] = min(0xFF, self.mem[address] + 1)
+
     def count_processing_error(self) -> None:
         address = r.PROCESSING_UNIT_ERROR
         self.mem[address] = min(0xFF, self.mem[address] + 1)

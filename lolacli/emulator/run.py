@@ -22,6 +22,8 @@ class EmulateOptions:
     drift_ppb: int = 0
     seed: int = 0
     link_down_after: int | None = None  # cable cut after this 1-based position
+    link_down_at_s: float = 0.0  # ... this long after serving starts (0: from the start)
+    corrupt_probability: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +65,13 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
     it; a product matched with another revision keeps the ENI's revision."""
     if not 0.0 <= options.drop_probability <= 1.0:
         raise UsageError(f"drop probability {options.drop_probability} is not in [0, 1]")
-    faults = Faults(drop_probability=options.drop_probability, seed=options.seed)
+    if not 0.0 <= options.corrupt_probability <= 1.0:
+        raise UsageError(f"corrupt probability {options.corrupt_probability} is not in [0, 1]")
+    faults = Faults(
+        drop_probability=options.drop_probability,
+        seed=options.seed,
+        corrupt_probability=options.corrupt_probability,
+    )
     chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
     for m in esi_matches(eni, esi):
         ident = eni.slaves[m.position - 1].identity
@@ -77,9 +85,34 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
                 f"--stuck-safeop {position}: the chain has slaves 1..{len(chain.slaves)}"
             )
         chain.stuck_in_safeop(position)
-    if options.link_down_after is not None:
-        chain.break_link(options.link_down_after)
+    after = options.link_down_after
+    if after is not None and not 0 <= after <= len(chain.slaves):
+        raise UsageError(f"--link-down {after}: the chain has slaves 1..{len(chain.slaves)}")
+    if after is not None and options.link_down_at_s <= 0:
+        chain.break_link(after)
     return chain
+
+
+def arm_link_loss(chain: Chain, options: EmulateOptions, start_ns: int) -> None:
+    """Schedule the ``link_down_after`` cut ``link_down_at_s`` after ``start_ns`` (the
+    chain's time base) when it is not one from the start."""
+    if options.link_down_after is not None and options.link_down_at_s > 0:
+        chain.schedule_link_loss(
+            options.link_down_after, start_ns + round(options.link_down_at_s * 1e9)
+        )
+
+
+def parse_link_down(text: str) -> tuple[int, float]:
+    """``K`` or ``K@SECONDS`` -> (position K, seconds; 0 = from the start); UsageError."""
+    position_text, at, seconds_text = text.partition("@")
+    try:
+        position = int(position_text)
+        seconds = float(seconds_text) if at else 0.0
+    except ValueError:
+        raise UsageError(f"--link-down {text!r}: expected K or K@SECONDS") from None
+    if position < 0 or not 0.0 <= seconds < 1e9 or (at and seconds == 0.0):
+        raise UsageError(f"--link-down {text!r}: K >= 0, SECONDS > 0")
+    return position, seconds
 
 
 def state_summary(chain: Chain) -> str:
