@@ -269,6 +269,8 @@ def test_kickcat_lola_chain(veth) -> None:
         ]
         bus.request_state(kickcat.State.SAFE_OP)
         bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
+        raw = bus.read_sdo(slaves[3], 0x1000, 0, kickcat.Access.PARTIAL, 4, 0.1)
+        assert struct.unpack("<I", raw)[0] == 0x00020192  # Joint04: a CiA 402 servo drive
         for s in slaves:
             s.set_output_bytes(bytes(s.output_size))
         bus.process_data_no_check()
@@ -408,3 +410,31 @@ def test_pysoem_finds_the_slaves_before_a_cut_cable(veth, pysoem) -> None:
     finally:
         master.close()
         _stop(proc)
+
+
+def test_pysoem_sees_damaged_frames_in_wkc_and_rx_error_counters(veth, pysoem) -> None:
+    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--corrupt-p", "0.01", "--seed", "5")
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 25  # SOEM retries a discovery frame that came back short
+        assert master.config_map() > 0
+        _to_op(master, pysoem, 20_000)
+        bad = _cycles(master, 1000, 0.002, 20_000)
+        low = [wkc for _, wkc in bad if wkc >= 0]
+        assert low and all(0 <= wkc < master.expected_wkc for wkc in low)
+        invalid = sum(_read_counter(slave, pysoem, 0x0300) for slave in master.slaves)
+        assert invalid > 0  # 0x0300: invalid frame counter of port 0, over the whole line
+    finally:
+        master.close()
+        _stop(proc)
+
+
+def _read_counter(slave, pysoem, address: int) -> int:
+    """One counter byte by FPRD; the read itself may be damaged (WkcError): read again."""
+    for _ in range(20):
+        try:
+            return int(slave._fprd(address, 1)[0])
+        except pysoem.WkcError:
+            continue
+    pytest.fail(f"FPRD 0x{address:04X} kept failing")
