@@ -232,7 +232,7 @@ class Chain:
 
     def schedule_link_loss(self, after: int, at_ns: int) -> None:
         """Fault: the cable after 1-based position ``after`` is cut at ``at_ns`` (the time
-        base of :meth:`process`). From the first frame at or after ``at_ns`` on, the slave
+        base of :meth:`process` and :meth:`tick`). From then on, the slave
         there shows port 1 closed without link in DL status 0x0110 and its lost link
         counter 0x0311 (port 1) has counted one; the slave behind it (out of reach)
         counts one on port 0 (0x0310)."""
@@ -413,7 +413,9 @@ class Chain:
             esc.count_forwarded_error(1)
 
     def tick(self, t_ns: int) -> None:
-        """Let time pass in every slave (process-data watchdogs)."""
+        """Let time pass in every slave (process-data watchdogs) and in the line (a
+        scheduled link loss)."""
+        self._due_link_loss(t_ns)
         if self._deferred_dc:
             self._run_deferred_dc()
         for esc in self._active:

@@ -341,10 +341,9 @@ class Esc:
             self._sm_written(start, end)
 
     def _register_side_effects(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
-        if _overlaps(start, end, r.RX_ERROR_COUNTER, r.ERROR_COUNTERS_END):
-            self.mem[r.RX_ERROR_COUNTER : r.ERROR_COUNTERS_END] = bytes(
-                r.ERROR_COUNTERS_END - r.RX_ERROR_COUNTER
-            )
+        for lo, hi in _COUNTER_CLEAR_GROUPS:  # a write into a group clears all of it
+            if _overlaps(start, end, lo, hi):
+                self.mem[lo:hi] = bytes(hi - lo)
         if _overlaps(start, end, r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2):
             self._eeprom_command()
         if _overlaps(start, end, r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4):
@@ -796,6 +795,16 @@ class Esc:
     def count_processing_error(self) -> None:
         address = r.PROCESSING_UNIT_ERROR
         self.mem[address] = min(0xFF, self.mem[address] + 1)
+
+
+# Error counters cleared together by a write to any of them (ESC datasheet section II,
+# 0x0300-0x0313): RX and forwarded RX errors, processing unit, PDI, lost links.
+_COUNTER_CLEAR_GROUPS = (
+    (r.RX_ERROR_COUNTER, r.PROCESSING_UNIT_ERROR),
+    (r.PROCESSING_UNIT_ERROR, r.PDI_ERROR),
+    (r.PDI_ERROR, r.PDI_ERROR + 1),
+    (r.LOST_LINK_COUNTER, r.ERROR_COUNTERS_END),
+)
 
 
 def system_time_loop(

@@ -226,3 +226,19 @@ def test_good_fault_flags_reach_the_socket(cli) -> None:
     )
     assert code == 4, err
     assert "no such interface: nosuchif0" in err
+
+
+def test_clearing_rx_error_counters_keeps_the_lost_link_counters() -> None:
+    chain = build_chain(LOLA, faults=Faults(corrupt_probability=1.0, corrupt_at_slave=1))
+    bus = Bus(chain)
+    bus.one(C.BRD, 0, 0, 1)
+    _quiet(chain)
+    chain.schedule_link_loss(after=1, at_ns=bus.t_ns)
+    assert bus.one(C.BRD, 0, 0, 1).wkc == 1
+    chain.restore_link()
+    assert _counters(bus, 2)[0] == 1 and _counters(bus, 2)[0x10] == 1
+    assert bus.one(C.BWR, 0, r.RX_ERROR_COUNTER, 8).wkc == SLAVES  # as SOEM's config_init
+    second = _counters(bus, 2)
+    assert second[0] == 0 and second[0x10] == 1  # the lost link group stays
+    bus.one(C.BWR, 0, r.LOST_LINK_COUNTER, 1)
+    assert _counters(bus, 2)[0x10] == 0

@@ -438,3 +438,17 @@ def _read_counter(slave, pysoem, address: int) -> int:
         except pysoem.WkcError:
             continue
     pytest.fail(f"FPRD 0x{address:04X} kept failing")
+
+
+def test_pysoem_sees_the_line_shorten_when_the_scheduled_link_loss_comes(veth, pysoem) -> None:
+    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--link-down", "3@1.5")
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 25  # the cable is still whole
+        time.sleep(2.0)
+        assert master.config_init() == 3  # cut after slave 3: a BRD reaches three slaves
+        assert _read_counter(master.slaves[2], pysoem, 0x0311) == 1  # lost link, port 1
+    finally:
+        master.close()
+        _stop(proc)
