@@ -110,6 +110,20 @@ def _to_op(master, pysoem, timeout_us: int) -> None:
     pytest.fail(f"not in OP: {[hex(s.al_status) for s in master.slaves]}")
 
 
+def _drive_sdo_checks(slave, pysoem) -> None:
+    """Expedited read, write/read round trip, segmented read, abort for a missing object."""
+    assert struct.unpack("<I", slave.sdo_read(0x1000, 0))[0] == 0x00020192
+    slave.sdo_write(0x607F, 0, struct.pack("<I", 250_000))
+    assert struct.unpack("<I", slave.sdo_read(0x607F, 0))[0] == 250_000
+    slave.sdo_write(0x607F, 0, struct.pack("<I", 0))  # no rate limit: CSP jumps
+    name = slave.sdo_read(0x1008, 0)
+    assert name == Cia402Drive.LONG_NAME.encode()
+    assert len(name) > 140 - 16  # more than one 140-byte mailbox holds: segmented
+    with pytest.raises(pysoem.SdoError) as exc:
+        slave.sdo_read(0x2345, 0)
+    assert exc.value.abort_code == 0x06020000
+
+
 def _cycles(master, n: int, period_s: float, timeout_us: int) -> list[int]:
     bad = []
     next_t = time.perf_counter()
@@ -145,16 +159,7 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         )
         assert master.config_map() > 0
         # SDO in SAFEOP: in OP the drive's process-data watchdog (100 ms) wants outputs
-        assert struct.unpack("<I", slave.sdo_read(0x1000, 0))[0] == 0x00020192
-        slave.sdo_write(0x607F, 0, struct.pack("<I", 250_000))
-        assert struct.unpack("<I", slave.sdo_read(0x607F, 0))[0] == 250_000
-        slave.sdo_write(0x607F, 0, struct.pack("<I", 0))  # no rate limit: CSP jumps
-        name = slave.sdo_read(0x1008, 0)
-        assert name == Cia402Drive.LONG_NAME.encode()
-        assert len(name) > 140 - 16  # more than one 140-byte mailbox holds: segmented
-        with pytest.raises(pysoem.SdoError) as exc:
-            slave.sdo_read(0x2345, 0)
-        assert exc.value.abort_code == 0x06020000
+        _drive_sdo_checks(slave, pysoem)
         _to_op(master, pysoem, 2000)
         assert master.expected_wkc == eni.cyclic_frames[0].commands[0].expected_wkc == 3
         # process data: enable the drive, command a position, see it followed
@@ -188,15 +193,7 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
         assert master.slaves[21].name == eni.slaves[21].name  # the CAN gateway
         assert master.config_map() > 0
         assert struct.unpack("<I", master.slaves[24].sdo_read(0x1018, 1))[0] == 2
-        drive = master.slaves[4]  # a joint drive in the middle of the line
-        assert struct.unpack("<I", drive.sdo_read(0x1000, 0))[0] == 0x00020192
-        drive.sdo_write(0x607F, 0, struct.pack("<I", 123_456))
-        assert struct.unpack("<I", drive.sdo_read(0x607F, 0))[0] == 123_456
-        drive.sdo_write(0x607F, 0, struct.pack("<I", 0))
-        assert drive.sdo_read(0x1008, 0) == Cia402Drive.LONG_NAME.encode()  # segmented
-        with pytest.raises(pysoem.SdoError) as exc:
-            drive.sdo_read(0x2345, 0)
-        assert exc.value.abort_code == 0x06020000
+        _drive_sdo_checks(master.slaves[4], pysoem)  # a joint drive in mid-line
         # generous reply timeout: CI hosts are loaded; a late reply still counts as a bad WKC
         _to_op(master, pysoem, 20_000)
         assert master.expected_wkc == 70 == eni.cyclic_frames[0].commands[0].expected_wkc
