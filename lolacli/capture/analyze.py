@@ -1,8 +1,8 @@
 """Capture analysis: one streaming pass of the scanner, then numpy statistics.
 
 :func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
-:func:`lolacli.capture.scan.scan` (numba-compiled when available) walk the records. The
-scanner pairs frames, counts commands, checks working counters and tracks DC drift
+:func:`lolacli.capture.scan.scan` (its C twin, or numba-compiled, when available) walk the
+records. The scanner pairs frames, counts commands, checks working counters and tracks DC drift
 compensation as it goes; the rare mailbox datagrams it flags are decoded here in Python
 (:mod:`lolacli.capture.sdo`). Definitions follow DESIGN.md (Direction, Pairing, Cyclic
 stream, Expected WKC, Lost frame); the JSON shape is ``lolacli.capture/1``.
@@ -178,8 +178,8 @@ def analyze_file(
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
-    ``engine`` is ``"auto"`` (numba when installed, except for files under 2 MB),
-    ``"numba"`` or ``"python"``; both give identical results.
+    ``engine`` is ``"auto"`` (C when built, else numba when installed, except for files
+    under 2 MB), ``"c"``, ``"numba"`` or ``"python"``; all give identical results.
     ``progress(done_bytes, total_bytes)`` is called once per chunk.
     ``keep_series`` keeps the return timestamp of every pair (for plots).
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
@@ -393,7 +393,12 @@ class _Pass:
         if btype == 0x0A0D0D0A:
             self.n_if = 0
         else:
-            iface = parse_idb(buf[pos : pos + total].tobytes(), self.big)
+            try:
+                iface = parse_idb(buf[pos : pos + total].tobytes(), self.big)
+            except ValueError:
+                return -1  # too short: a damaged block
+            if abs(iface.ts_params()[3]) > S.TS_OFFSET_LIMIT_NS:
+                return -1  # an absurd if_tsoffset: a damaged block
             self._add_interface(iface)
         self._block_done = pos + total
         return 0

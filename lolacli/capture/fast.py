@@ -1,4 +1,5 @@
-"""Pick the scanner engine: numba-compiled (extra ``fast``) or plain Python.
+"""Pick the scanner engine: the C kernel (built at install), numba-compiled (extra
+``fast``) or plain Python. All three give identical results; the tests compare them.
 
 The functions of :mod:`lolacli.capture.scan` are compiled into a private namespace, so
 that the plain-Python originals stay importable beside the compiled ones (the tests
@@ -32,17 +33,25 @@ def numba_available() -> bool:
 SMALL_FILE_BYTES = 2 * 1024 * 1024
 
 
+ENGINES = ("c", "numba", "python")
+
+
 def choose_engine(engine: str = "auto", file_bytes: int | None = None) -> str:
-    """``"numba"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``, which takes
-    Python for files under :data:`SMALL_FILE_BYTES` and numba (when installed) above."""
+    """``"c"``, ``"numba"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``,
+    which takes C when it was built (it loads in milliseconds), else Python for files
+    under :data:`SMALL_FILE_BYTES` and numba (when installed) above."""
     if engine == "auto":
         engine = os.environ.get("LOLACLI_ENGINE", "auto")
     if engine == "auto":
+        from lolacli.capture.cengine import c_available
+
+        if c_available():
+            return "c"
         if file_bytes is not None and file_bytes < SMALL_FILE_BYTES:
             return "python"
         return "numba" if numba_available() else "python"
-    if engine not in ("numba", "python"):
-        raise ValueError(f"unknown engine {engine!r}")
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r} (one of {', '.join(ENGINES)})")
     return engine
 
 
@@ -50,6 +59,10 @@ def kernels(engine: str) -> Any:
     """An object with ``scan``, ``rehash`` and ``finish`` for the engine."""
     if engine == "python":
         return scan
+    if engine == "c":
+        from lolacli.capture.cengine import CKernels
+
+        return CKernels()
     global _COMPILED
     if _COMPILED is None:
         _COMPILED = _compile()

@@ -83,6 +83,10 @@ def ts_params(tsresol: int, tsoffset_s: int = 0) -> tuple[int, int, int, int]:
         return 1, n, 0, offset_ns
     if n <= 9:
         return 0, 10 ** (9 - n), 1, offset_ns
+    if n - 9 >= 19:
+        # exact for units below 10^19 (the scanner converts only units below 2^63),
+        # and the divisor stays in int64 (the scanner's parameter array)
+        return 0, 0, 1, offset_ns
     return 0, 1, 10 ** (n - 9), offset_ns
 
 
@@ -183,7 +187,11 @@ def parse_shb(block: bytes | memoryview) -> bool:
 
 
 def parse_idb(block: bytes | memoryview, big: bool) -> Interface:
-    """An Interface Description Block (whole block incl. type and lengths)."""
+    """An Interface Description Block (whole block incl. type and lengths).
+
+    Raises ValueError for a block too short to hold the IDB body (20 bytes)."""
+    if len(block) < 20:
+        raise ValueError("interface description block shorter than 20 bytes")
     order = ">" if big else "<"
     total = struct.unpack_from(order + "I", block, 4)[0]
     link_type, _reserved, snaplen = struct.unpack_from(order + "HHI", block, 8)
@@ -334,7 +342,11 @@ class CaptureReader:
                 self.stats.sections += 1
                 ifaces, params = [], []
             elif btype == BLOCK_IDB:
-                iface = parse_idb(block, big)
+                try:
+                    iface = parse_idb(block, big)
+                except ValueError:
+                    self._corrupt(pos - total)
+                    return
                 ifaces.append(iface)
                 params.append(iface.ts_params())
                 self.stats.interfaces.append(iface)

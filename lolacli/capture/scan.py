@@ -94,6 +94,14 @@ SEED_PAIR = 0x2545F4914F6CDD1D
 SEED_STREAM = 0x1B873593
 SEED_WKC = 0x5BD1E995
 
+#: Timestamps are int64 nanoseconds: a pcapng packet whose raw timestamp has the top bit
+#: set, or converts beyond TS_LIMIT_NS (year 2116), is malformed; interface offsets
+#: (``if_tsoffset``) are limited to ±TS_OFFSET_LIMIT_NS (36 years). Differences of two
+#: timestamps then fit in int64 as well.
+TS_LIMIT_NS = 1 << 62
+TS_OFFSET_LIMIT_NS = 1 << 60
+TS_BAD = -(1 << 62)
+
 REG_DC_SYSTIME = 0x0910
 REG_DC_SYSTIME_DIFF = 0x092C
 MBX_AREA = 0x1000
@@ -140,14 +148,24 @@ def _addr_key(cmd: Any, addr: Any) -> Any:
 
 
 def _ts_ns(units: Any, mode: Any, a: Any, b: Any, off: Any) -> Any:
+    """Nanoseconds of raw pcapng units (``units`` < 2^63), or :data:`TS_BAD` beyond
+    :data:`TS_LIMIT_NS`. Every intermediate value fits in int64 (numba, C)."""
     if mode == 0:
+        if a > 0 and units > TS_LIMIT_NS // a:
+            return TS_BAD
         if b == 1:
             return units * a + off
         return units * a // b + off
-    sec = units >> a
-    frac = units & ((1 << a) - 1)
+    if a >= 63:
+        sec = 0
+        frac = units
+    else:
+        sec = units >> a
+        frac = units & ((1 << a) - 1)
+    if sec > TS_LIMIT_NS // 1000000000:
+        return TS_BAD
     if a > 30:
-        frac = frac >> (a - 30)
+        frac = 0 if a - 30 >= 63 else frac >> (a - 30)
         return sec * 1000000000 + ((frac * 1000000000) >> 30) + off
     return sec * 1000000000 + ((frac * 1000000000) >> a) + off
 
@@ -498,7 +516,7 @@ def _pcapng_record(
             iface = _u32(buf, pos + 8, big)
         else:
             iface = _u16(buf, pos + 8, big)
-        units = (_u32(buf, pos + 12, big) << 32) | _u32(buf, pos + 16, big)
+        hi = _u32(buf, pos + 12, big)
         incl = _u32(buf, pos + 20, big)
         orig = _u32(buf, pos + 24, big)
         start = pos + 28
@@ -506,12 +524,19 @@ def _pcapng_record(
             st[S_FRAMES] += 1
             st[S_MALFORMED] += 1
             return -1, 0, 0, 0
-        b = iface * 5
-        ts = _ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3])
+        ts = TS_BAD
+        if hi < 0x80000000:
+            b = iface * 5
+            units = (hi << 32) | _u32(buf, pos + 16, big)
+            ts = _ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3])
     if ifs[iface * 5 + 4] == 0:
         st[S_FRAMES] += 1
         st[S_NONECAT] += 1
         st[S_NON_ETH] += 1
+        return -1, 0, 0, 0
+    if ts == TS_BAD:
+        st[S_FRAMES] += 1
+        st[S_MALFORMED] += 1
         return -1, 0, 0, 0
     return start, incl, orig, ts
 

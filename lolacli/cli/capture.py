@@ -43,7 +43,7 @@ def analyze_cmd(
         typer.Option("--max-wkc-mismatches", help="WKC mismatches allowed before exit 1."),
     ] = 0,
     engine: Annotated[
-        str, typer.Option("--engine", help="auto | numba | python", hidden=True)
+        str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
     ] = "auto",
 ) -> None:
     """Out/return pairing, round trip, cycle period and jitter, lost frames, WKC errors,

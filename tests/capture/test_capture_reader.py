@@ -9,13 +9,11 @@ import pytest
 
 from lolacli.capture import writer as w
 from lolacli.capture.analyze import analyze_file
-from lolacli.capture.fast import numba_available
 from lolacli.capture.reader import CaptureReader, ts_params, ts_to_ns
 from lolacli.errors import CaptureError
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, encode_frame, make_frame
 
-FAST = "numba" if numba_available() else "python"
 OUT_MAC = b"\x10\x10\x10\x10\x10\x10"
 RET_MAC = b"\x12\x10\x10\x10\x10\x10"
 
@@ -72,12 +70,12 @@ def test_pcap_byte_orders_and_resolutions(tmp_path, big, ns):
 
 
 @pytest.mark.parametrize("big", [False, True])
-def test_pcapng_byte_orders(tmp_path, big):
+def test_pcapng_byte_orders(fast, tmp_path, big):
     frames = cyclic(20)
     path = write_pcapng(tmp_path / "c.pcapng", frames, big=big)
     assert [f.timestamp_ns for f in CaptureReader(path)] == [t for t, _ in frames]
     assert analyze_file(path, engine="python").to_dict()["pairs"] == 20
-    assert analyze_file(path, engine=FAST).to_dict()["pairs"] == 20
+    assert analyze_file(path, engine=fast).to_dict()["pairs"] == 20
 
 
 @pytest.mark.parametrize(
@@ -91,7 +89,7 @@ def test_pcapng_byte_orders(tmp_path, big):
         (0x80 | 40, lambda t: (t << 40) // 1_000_000_000),   # 2^-40 s
     ],
 )
-def test_if_tsresol(tmp_path, tsresol, to_units):
+def test_if_tsresol(fast, tmp_path, tsresol, to_units):
     t0 = 1_000_123_456_000  # small enough for picoseconds in 64 bits
     frames = [(t0, lrw(1)), (t0 + 2_000_000, lrw(1, wkc=3, ret=True))]
     body = w.shb() + w.idb(tsresol=tsresol) + b"".join(w.epb(to_units(t), f) for t, f in frames)
@@ -103,7 +101,7 @@ def test_if_tsresol(tmp_path, tsresol, to_units):
     for t_got, (t, _) in zip(got, frames, strict=True):
         step = 1_000_000 if tsresol == 3 else 1000
         assert abs(t_got - t) < step
-    rep_fast = analyze_file(path, engine=FAST).to_dict()
+    rep_fast = analyze_file(path, engine=fast).to_dict()
     rep_slow = analyze_file(path, engine="python").to_dict()
     assert rep_fast["round_trip_us"]["mean"] == rep_slow["round_trip_us"]["mean"]
     assert rep_fast["round_trip_us"]["mean"] == pytest.approx(2000.0, abs=1.0)
@@ -116,7 +114,7 @@ def test_if_tsoffset(tmp_path):
     assert [f.timestamp_ns for f in CaptureReader(path)] == [100_000_000_005]
 
 
-def test_several_sections_and_interfaces(tmp_path):
+def test_several_sections_and_interfaces(fast, tmp_path):
     """Section 1 little endian µs with two interfaces; section 2 big endian ns. Interface
     ids restart per section."""
     t = 1_000_000_000_000
@@ -134,7 +132,7 @@ def test_several_sections_and_interfaces(tmp_path):
         t, t + 30_000, t + 500_000, t + 540_000, t + 540_000, t + 600_000]
     assert [f.interface for f in frames] == [0, 1, 0, 0, 0, 0]
     assert reader.stats.sections == 2 and len(reader.stats.interfaces) == 3
-    for engine in (FAST, "python"):
+    for engine in (fast, "python"):
         rep = analyze_file(path, engine=engine, chunk_bytes=1 << 16).to_dict()
         assert rep["frames_total"] == 6 and rep["pairs"] == 3
         assert rep["round_trip_us"]["max"] == pytest.approx(60.0)
@@ -175,7 +173,7 @@ def test_snaplen_cut_frame_is_malformed(tmp_path):
     assert rep["malformed_frames"] == 1 and rep["ecat_frames"] == 1
 
 
-def test_table_growth_and_stack_depth(tmp_path):
+def test_table_growth_and_stack_depth(fast, tmp_path):
     """Many distinct pending signatures force the pairing table to grow; both engines
     still agree with each other."""
     frames = []
@@ -185,11 +183,11 @@ def test_table_growth_and_stack_depth(tmp_path):
     for i in range(9000):
         frames.append((t + 10**7 + i * 1000, ecat(Command.FPRD, i & 0xFF, 1, True, adp=0x1000 + i)))
     path = write_pcap(tmp_path / "many.pcap", frames)
-    fast = analyze_file(path, engine=FAST).to_dict()
+    got = analyze_file(path, engine=fast).to_dict()
     slow = analyze_file(path, engine="python").to_dict()
-    assert fast["pairs"] == slow["pairs"] == 9000
-    fast.pop("engine"), slow.pop("engine")
-    assert fast == slow
+    assert got["pairs"] == slow["pairs"] == 9000
+    assert got.pop("engine") == fast and slow.pop("engine") == "python"
+    assert got == slow
 
 
 # --- bad input: exit 3 (unreadable) or 0/1 with malformed counted --------------------
@@ -255,7 +253,7 @@ def test_truncated_pcapng_block_counts_malformed(cli, tmp_path):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_random_bytes_never_traceback(cli, tmp_path, seed):
+def test_random_bytes_never_traceback(fast, cli, tmp_path, seed):
     import random
 
     rnd = random.Random(seed)
@@ -272,11 +270,11 @@ def test_random_bytes_never_traceback(cli, tmp_path, seed):
     assert code in (0, 1, 3), err
     if code != 3:
         json.loads(out)
-    fast = analyze_file(path, engine=FAST).to_dict() if code != 3 else None
-    if fast is not None:
+    if code != 3:
+        got = analyze_file(path, engine=fast).to_dict()
         slow = analyze_file(path, engine="python").to_dict()
-        fast.pop("engine"), slow.pop("engine")
-        assert fast == slow
+        got.pop("engine"), slow.pop("engine")
+        assert got == slow
 
 
 def test_random_bytes_without_header_exit_3(cli, tmp_path):
@@ -287,16 +285,58 @@ def test_random_bytes_without_header_exit_3(cli, tmp_path):
 
 
 def test_engine_choice(monkeypatch):
-    from lolacli.capture.fast import SMALL_FILE_BYTES, choose_engine
+    from lolacli.capture import cengine
+    from lolacli.capture.fast import SMALL_FILE_BYTES, choose_engine, numba_available
 
     monkeypatch.delenv("LOLACLI_ENGINE", raising=False)
-    assert choose_engine("auto", SMALL_FILE_BYTES - 1) == "python"
-    assert choose_engine("auto", SMALL_FILE_BYTES) == FAST
+    # the C kernel, when built, serves every size: it loads in milliseconds
+    assert cengine.c_available()
+    assert choose_engine("auto", 100) == "c" == choose_engine("auto", 10**9)
     assert choose_engine("python", 10**9) == "python"
+    monkeypatch.setenv("LOLACLI_ENGINE", "numba")
+    assert choose_engine("auto", 10) == "numba"
     monkeypatch.setenv("LOLACLI_ENGINE", "python")
     assert choose_engine("auto", 10**9) == "python"
     with pytest.raises(ValueError):
         choose_engine("fortran")
+    # an install without a C compiler: Python for small files, numba above
+    monkeypatch.delenv("LOLACLI_ENGINE")
+    monkeypatch.setattr(cengine, "c_available", lambda: False)
+    assert choose_engine("auto", SMALL_FILE_BYTES - 1) == "python"
+    expected = "numba" if numba_available() else "python"
+    assert choose_engine("auto", SMALL_FILE_BYTES) == expected
+
+
+def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
+    """The C code trusts lengths; its wrapper checks them before every call."""
+    import numpy as np
+
+    from lolacli.capture import scan as S
+    from lolacli.capture.cengine import CKernels
+
+    k = CKernels()
+    z = lambda n: np.zeros(n, np.int64)  # noqa: E731
+    rows = 1 << 14
+    args = dict(st=z(S.S_SIZE), cmd_counts=z(256), dg=z(S.MAX_DGRAMS), pk=z(64), pn=z(64),
+                pts=z(64 * S.DEPTH), pmeta=z(64 * S.DEPTH), sk=z(64), sc=z(64), wk=z(64),
+                wv=z(64), o_rt=z(rows), o_rtts=z(rows), o_rtcyc=z(rows), o_period=z(rows),
+                o_burst=z(rows), o_dc=z(rows), o_mbx=z(rows * S.MBX_COLS),
+                o_wkc=z(rows * S.WKC_COLS))
+    buf = np.zeros(100, np.uint8)
+
+    def call(**change):
+        a = dict(args, **change)
+        return k.scan(buf if "buf" not in a else a.pop("buf"), 0, a.pop("end", 100), True,
+                      0, False, False, z(5), 0, **a)
+
+    # 100 zero bytes as classic pcap: six empty 16-byte records, then 4 bytes left over
+    assert call() == (96, S.ST_CORRUPT)
+    assert args["st"][S.S_FRAMES] == 6 == args["st"][S.S_MALFORMED]
+    for bad in (dict(end=101), dict(pts=z(10)), dict(pk=z(48), pn=z(48)), dict(o_dc=z(5)),
+                dict(st=z(3)), dict(o_mbx=z(rows)), dict(buf=np.zeros(100, np.int64)),
+                dict(st=np.zeros(S.S_SIZE, np.int32))):
+        with pytest.raises(ValueError):
+            call(**bad)
 
 
 def test_progress_is_called_up_to_the_file_size(tmp_path):
@@ -309,13 +349,28 @@ def test_progress_is_called_up_to_the_file_size(tmp_path):
     assert [d for d, _ in calls] == sorted(d for d, _ in calls)
 
 
-def test_output_flushes_keep_results_identical(tmp_path):
+def test_output_flushes_keep_results_identical(fast, tmp_path):
     """More pairs than one output buffer holds (64 Ki rows): the scanner returns to the
     driver to flush, in both engines, without losing or doubling anything."""
     frames = cyclic(70_000, period_ns=250_000)
     path = write_pcap(tmp_path / "long.pcap", frames, ns=True)
-    fast = analyze_file(path, engine=FAST).to_dict()
+    got = analyze_file(path, engine=fast).to_dict()
     slow = analyze_file(path, engine="python").to_dict()
-    assert fast["pairs"] == 70_000 and fast["cycle_period_us"]["count"] == 69_999
-    fast.pop("engine"), slow.pop("engine")
-    assert fast == slow
+    assert got["pairs"] == 70_000 and got["cycle_period_us"]["count"] == 69_999
+    got.pop("engine"), slow.pop("engine")
+    assert got == slow
+
+
+def test_c_kernel_constants_equal_scan_py():
+    """_cscan.c repeats scan.py's constants as #defines; they must not drift apart."""
+    import re
+    from pathlib import Path
+
+    from lolacli.capture import scan as S
+
+    source = (Path(S.__file__).parent / "_cscan.c").read_text()
+    defines = dict(re.findall(r"^#define (\w+) (.+)$", source, re.M))
+    assert len(defines) > 50
+    for name, text in defines.items():
+        value = eval(text.replace("ULL", "").replace("LL", ""))  # noqa: S307 (our file)
+        assert getattr(S, name) == value, name

@@ -1,0 +1,586 @@
+/* The capture scanner in C: the same algorithm as lolacli/capture/scan.py, statement for
+ * statement, for the "c" engine (lolacli/capture/cengine.py loads it with ctypes).
+ *
+ * scan.py is the reference: its docstrings describe the data layout (st counters, the
+ * open-addressing tables, the output rows). Keep both in step; tests compare the engines
+ * on every corpus capture, on damaged files and on files that force every return code,
+ * and a test checks that the constants below equal scan.py's.
+ *
+ * Why C and not only numba: the numba engine scans as fast, but loading its cached
+ * kernel costs about a second per process (numba import and LLVM start-up), which is
+ * most of the run time for captures of a few million frames. This file loads in
+ * milliseconds.
+ *
+ * Integers are int64 as in numba; scan.py bounds timestamps (TS_LIMIT_NS) so that no
+ * signed operation overflows and all three engines agree exactly. Hashes are computed in
+ * uint64 and masked to 63 bits.
+ */
+#include <Python.h>
+#include <stdint.h>
+
+/* st indices */
+#define S_FRAMES 0
+#define S_ECAT 1
+#define S_NONECAT 2
+#define S_MALFORMED 3
+#define S_DGRAMS 4
+#define S_OUT 5
+#define S_RET 6
+#define S_PAIRS 7
+#define S_UNMATCHED_RET 8
+#define S_CYC_N 9
+#define S_CYC_MATCHED 10
+#define S_LOST 11
+#define S_CYC_LAST_TS 12
+#define S_WKC_MISMATCH 13
+#define S_WKC_CHECKED 14
+#define S_DC_DGRAMS 15
+#define S_DC_BURST 16
+#define S_DC_LAST_TS 17
+#define S_N_RT 18
+#define S_N_PERIOD 19
+#define S_N_BURST 20
+#define S_N_DC 21
+#define S_N_MBX 22
+#define S_P_USED 23
+#define S_S_USED 24
+#define S_W_USED 25
+#define S_LAST_TS 26
+#define S_MODE 27
+#define S_STREAM_SIG 28
+#define S_WKC_FIXED 29
+#define S_NON_ETH 30
+#define S_ECAT_OTHER 31
+#define S_FIRST_TS 32
+#define S_END_TS 33
+#define S_UDP 34
+#define S_VLAN 35
+#define S_CUT 36
+#define S_LOGICAL_OUT 37
+#define S_SKIPPED 38
+#define S_N_WKCBAD 39
+
+/* return codes */
+#define ST_NEED_MORE 0
+#define ST_FLUSH 1
+#define ST_BLOCK 2
+#define ST_GROW 3
+#define ST_CORRUPT 4
+#define ST_DONE 5
+
+#define MODE_LOGICAL 0
+
+#define DEPTH 16
+#define MAX_DGRAMS 128
+#define CHECK_EVERY 64
+#define MBX_COLS 8
+#define WKC_COLS 5
+#define MAX_RECORD (16 * 1024 * 1024)
+#define BURST_GAP_NS 1000000
+#define MASK63 0x7FFFFFFFFFFFFFFFULL
+#define FNV 0x100000001B3ULL
+#define SEED_PAIR 0x2545F4914F6CDD1DULL
+#define SEED_STREAM 0x1B873593ULL
+#define SEED_WKC 0x5BD1E995ULL
+
+#define TS_LIMIT_NS (1LL << 62)
+#define TS_OFFSET_LIMIT_NS (1LL << 60)
+#define TS_BAD (-(1LL << 62))
+
+#define REG_DC_SYSTIME 0x0910
+#define REG_DC_SYSTIME_DIFF 0x092C
+#define MBX_AREA 0x1000
+
+typedef int64_t i64;
+typedef uint64_t u64;
+
+/* Every array the scanner reads or writes; lengths in elements. Filled by cengine.py. */
+typedef struct {
+    i64 *st, *cmd_counts;
+    i64 *pk, *pn, *pts, *pmeta;
+    i64 *sk, *sc, *wk, *wv;
+    i64 *o_rt, *o_rtts, *o_rtcyc, *o_period, *o_burst, *o_dc, *o_mbx, *o_wkc;
+    const i64 *ifs;
+    i64 n_if, p_len, s_len, w_len, o_len;
+} Tables;
+
+static inline i64 u16le(const uint8_t *b, i64 p) { return (i64)b[p] | ((i64)b[p + 1] << 8); }
+static inline i64 u16be(const uint8_t *b, i64 p) { return ((i64)b[p] << 8) | (i64)b[p + 1]; }
+static inline i64 u16x(const uint8_t *b, i64 p, int big) { return big ? u16be(b, p) : u16le(b, p); }
+static inline i64 u32le(const uint8_t *b, i64 p) { return u16le(b, p) | (u16le(b, p + 2) << 16); }
+static inline i64 u32x(const uint8_t *b, i64 p, int big) {
+    return big ? ((u16be(b, p) << 16) | u16be(b, p + 2)) : u32le(b, p);
+}
+
+static inline u64 mix(u64 h, u64 v) {
+    h = ((h ^ v) * FNV) & MASK63;
+    return h ^ (h >> 29);
+}
+
+static inline i64 key_of(u64 h) { return h != 0 ? (i64)h : 1; }
+
+static inline i64 slot(const i64 *keys, i64 len, i64 key) {
+    i64 mask = len - 1;
+    i64 i = (key ^ (key >> 21)) & mask;
+    while (keys[i] != key && keys[i] != 0) i = (i + 1) & mask;
+    return i;
+}
+
+static inline i64 addr_key(i64 cmd, i64 addr) {
+    /* APRD APWR APRW ARMW BRD BWR BRW: ADP is incremented by every slave. */
+    if (cmd == 1 || cmd == 2 || cmd == 3 || cmd == 13 || cmd == 7 || cmd == 8 || cmd == 9)
+        return addr & 0xFFFF0000LL;
+    return addr;
+}
+
+static inline i64 floordiv(i64 a, i64 b) {
+    i64 q = a / b;
+    if ((a % b != 0) && ((a < 0) != (b < 0))) q -= 1;
+    return q;
+}
+
+/* Nanoseconds of raw pcapng units (< 2^63), or TS_BAD beyond TS_LIMIT_NS. */
+static i64 ts_ns(i64 units, i64 mode, i64 a, i64 b, i64 off) {
+    if (mode == 0) {
+        if (a > 0 && units > TS_LIMIT_NS / a) return TS_BAD;
+        if (b == 1) return units * a + off;
+        return floordiv(units * a, b) + off;
+    }
+    i64 sec, frac;
+    if (a >= 63) {
+        sec = 0;
+        frac = units;
+    } else {
+        sec = units >> a;
+        frac = units & ((1LL << a) - 1);
+    }
+    if (sec > TS_LIMIT_NS / 1000000000LL) return TS_BAD;
+    if (a > 30) {
+        frac = (a - 30 >= 63) ? 0 : frac >> (a - 30);
+        return sec * 1000000000LL + ((frac * 1000000000LL) >> 30) + off;
+    }
+    return sec * 1000000000LL + ((frac * 1000000000LL) >> a) + off;
+}
+
+static inline void push(Tables *t, i64 key, i64 ts, i64 meta) {
+    i64 i = slot(t->pk, t->p_len, key);
+    if (t->pk[i] == 0) {
+        t->pk[i] = key;
+        t->st[S_P_USED] += 1;
+    }
+    i64 n = t->pn[i];
+    i64 base = i * DEPTH;
+    if (n == DEPTH) {
+        for (i64 j = 0; j < DEPTH - 1; j++) {
+            t->pts[base + j] = t->pts[base + j + 1];
+            t->pmeta[base + j] = t->pmeta[base + j + 1];
+        }
+        n = DEPTH - 1;
+    }
+    t->pts[base + n] = ts;
+    t->pmeta[base + n] = meta;
+    t->pn[i] = n + 1;
+}
+
+static inline void count_stream(Tables *t, i64 key) {
+    i64 i = slot(t->sk, t->s_len, key);
+    if (t->sk[i] == 0) {
+        t->sk[i] = key;
+        t->st[S_S_USED] += 1;
+    }
+    t->sc[i] += 1;
+}
+
+static inline void check_wkc(const uint8_t *buf, i64 q, i64 cmd, i64 akey, i64 ln, i64 wkc,
+                             Tables *t) {
+    i64 *st = t->st;
+    i64 wkey = key_of(mix(mix(mix(SEED_WKC, (u64)cmd), (u64)akey), (u64)ln));
+    i64 ws = slot(t->wk, t->w_len, wkey);
+    int known = t->wk[ws] != 0;
+    if (!known && st[S_WKC_FIXED] == 0) {
+        t->wk[ws] = wkey;
+        t->wv[ws] = wkc;
+        st[S_W_USED] += 1;
+        known = 1;
+    }
+    if (known) {
+        st[S_WKC_CHECKED] += 1;
+        if (t->wv[ws] != wkc) {
+            st[S_WKC_MISMATCH] += 1;
+            i64 r = st[S_N_WKCBAD] * WKC_COLS;
+            t->o_wkc[r] = st[S_FRAMES];
+            t->o_wkc[r + 1] = cmd;
+            t->o_wkc[r + 2] = u32le(buf, q + 2);
+            t->o_wkc[r + 3] = t->wv[ws];
+            t->o_wkc[r + 4] = wkc;
+            st[S_N_WKCBAD] += 1;
+        }
+    }
+}
+
+static inline void returned_extras(const uint8_t *buf, i64 q, i64 cmd, i64 ado, i64 ln,
+                                   i64 wkc, i64 ts, Tables *t) {
+    i64 *st = t->st;
+    /* Reads of the DC system-time difference (0x092C): sign-and-magnitude nanoseconds. */
+    if ((cmd == 1 || cmd == 4) && wkc >= 1 && ado <= REG_DC_SYSTIME_DIFF) {
+        if (ado + ln >= REG_DC_SYSTIME_DIFF + 4) {
+            i64 v = u32le(buf, q + 10 + REG_DC_SYSTIME_DIFF - ado);
+            i64 mag = v & 0x7FFFFFFF;
+            t->o_dc[st[S_N_DC]] = (v & 0x80000000LL) ? -mag : mag;
+            st[S_N_DC] += 1;
+        }
+    }
+    /* Mailbox candidates (ETG.1000.4 Table 29). */
+    if ((cmd == 1 || cmd == 2 || cmd == 4 || cmd == 5) && wkc >= 1 && ado >= MBX_AREA) {
+        if (ln >= 8) {
+            i64 mlen = u16le(buf, q + 10);
+            i64 mtype = buf[q + 15] & 0x0F;
+            if (mlen >= 2 && mlen + 6 <= ln && (mtype <= 5 || mtype == 15)) {
+                i64 r = st[S_N_MBX] * MBX_COLS;
+                t->o_mbx[r] = st[S_FRAMES];
+                t->o_mbx[r + 1] = ts;
+                t->o_mbx[r + 2] = q;
+                t->o_mbx[r + 3] = cmd;
+                t->o_mbx[r + 4] = u32le(buf, q + 2);
+                t->o_mbx[r + 5] = ln;
+                t->o_mbx[r + 6] = wkc;
+                t->o_mbx[r + 7] = u16le(buf, q + 8);
+                st[S_N_MBX] += 1;
+            }
+        }
+    }
+}
+
+static inline void drift(i64 ts, Tables *t) {
+    i64 *st = t->st;
+    st[S_DC_DGRAMS] += 1;
+    if (st[S_DC_BURST] > 0 && ts - st[S_DC_LAST_TS] > BURST_GAP_NS) {
+        t->o_burst[st[S_N_BURST]] = st[S_DC_BURST];
+        st[S_N_BURST] += 1;
+        st[S_DC_BURST] = 0;
+    }
+    st[S_DC_BURST] += 1;
+    st[S_DC_LAST_TS] = ts;
+}
+
+/* One EtherCAT payload at p (captured bytes end at limit); 0 when malformed. */
+static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t) {
+    i64 *st = t->st;
+    i64 dg[MAX_DGRAMS];
+    if (p + 2 > limit) return 0;
+    i64 word = u16le(buf, p);
+    if ((word >> 12) != 1) {
+        st[S_NONECAT] += 1;
+        st[S_ECAT_OTHER] += 1;
+        return 1;
+    }
+    i64 q = p + 2;
+    i64 n = 0;
+    for (;;) {
+        if (n == MAX_DGRAMS || q + 12 > limit) return 0;
+        i64 lw = u16le(buf, q + 6);
+        i64 ln = lw & 0x7FF;
+        if (q + 12 + ln > limit) return 0;
+        dg[n++] = q;
+        q += 12 + ln;
+        if ((lw & 0x8000) == 0) break;
+    }
+    st[S_ECAT] += 1;
+    st[S_DGRAMS] += n;
+    u64 hp = SEED_PAIR, hs = SEED_STREAM;
+    int logical = 0;
+    for (i64 j = 0; j < n; j++) {
+        q = dg[j];
+        i64 cmd = buf[q];
+        i64 akey = addr_key(cmd, u32le(buf, q + 2));
+        t->cmd_counts[cmd] += 1;
+        hp = mix(mix(hp, (u64)((cmd << 8) | buf[q + 1])), (u64)akey);
+        hs = mix(mix(hs, (u64)cmd), (u64)akey);
+        if (cmd == 10 || cmd == 11 || cmd == 12) logical = 1;
+    }
+    i64 kp = key_of(hp), ks = key_of(hs);
+    int cyc = st[S_MODE] == MODE_LOGICAL ? logical : (ks == st[S_STREAM_SIG]);
+    if (ret == 0) {
+        st[S_OUT] += 1;
+        if (logical)
+            st[S_LOGICAL_OUT] += 1;
+        else if (st[S_LOGICAL_OUT] == 0)
+            count_stream(t, ks);
+        i64 meta = 0;
+        if (cyc) {
+            if (st[S_CYC_N] > 0) {
+                if (st[S_CYC_MATCHED] == 0) st[S_LOST] += 1;
+                t->o_period[st[S_N_PERIOD]] = ts - st[S_CYC_LAST_TS];
+                st[S_N_PERIOD] += 1;
+            }
+            st[S_CYC_N] += 1;
+            st[S_CYC_MATCHED] = 0;
+            st[S_CYC_LAST_TS] = ts;
+            meta = st[S_CYC_N];
+        }
+        push(t, kp, ts, meta);
+        for (i64 j = 0; j < n; j++) {
+            q = dg[j];
+            i64 cmd = buf[q];
+            if ((cmd == 13 || cmd == 14) && u16le(buf, q + 4) == REG_DC_SYSTIME) drift(ts, t);
+        }
+        return 1;
+    }
+    st[S_RET] += 1;
+    i64 i = slot(t->pk, t->p_len, kp);
+    if (t->pk[i] != 0 && t->pn[i] > 0) {
+        i64 top = t->pn[i] - 1;
+        t->pn[i] = top;
+        i64 meta = t->pmeta[i * DEPTH + top];
+        i64 r = st[S_N_RT];
+        t->o_rt[r] = ts - t->pts[i * DEPTH + top];
+        t->o_rtts[r] = ts;
+        t->o_rtcyc[r] = meta > 0 ? 1 : 0;
+        st[S_N_RT] = r + 1;
+        st[S_PAIRS] += 1;
+        if (meta > 0 && meta == st[S_CYC_N]) st[S_CYC_MATCHED] = 1;
+    } else {
+        st[S_UNMATCHED_RET] += 1;
+    }
+    for (i64 j = 0; j < n; j++) {
+        q = dg[j];
+        i64 cmd = buf[q];
+        i64 ado = u16le(buf, q + 4);
+        i64 ln = u16le(buf, q + 6) & 0x7FF;
+        i64 wkc = u16le(buf, q + 10 + ln);
+        if (cyc) check_wkc(buf, q, cmd, addr_key(cmd, u32le(buf, q + 2)), ln, wkc, t);
+        returned_extras(buf, q, cmd, ado, ln, wkc, ts, t);
+    }
+    return 1;
+}
+
+/* One Ethernet frame of cap captured bytes at d. */
+static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, Tables *t) {
+    i64 *st = t->st;
+    st[S_FRAMES] += 1;
+    if (st[S_FRAMES] == 1) st[S_FIRST_TS] = ts;
+    st[S_END_TS] = ts;
+    st[S_LAST_TS] = ts;
+    if (cap < 14) {
+        st[S_MALFORMED] += 1;
+        return;
+    }
+    i64 limit = d + cap;
+    i64 etype = u16be(buf, d + 12);
+    i64 p = d + 14;
+    if (etype == 0x8100) {
+        if (cap < 18) {
+            st[S_MALFORMED] += 1;
+            return;
+        }
+        etype = u16be(buf, d + 16);
+        p = d + 18;
+        st[S_VLAN] += 1;
+    }
+    if (etype == 0x0800) {
+        /* EtherCAT over UDP (ETG.1000.4 5.3.2): IPv4, protocol 17, port 0x88A4. */
+        if (p + 20 > limit || (buf[p] >> 4) != 4 || buf[p + 9] != 17) {
+            st[S_NONECAT] += 1;
+            return;
+        }
+        i64 ihl = (buf[p] & 0x0F) * 4;
+        if ((u16be(buf, p + 6) & 0x1FFF) != 0 || p + ihl + 8 > limit) {
+            st[S_NONECAT] += 1;
+            return;
+        }
+        if (u16be(buf, p + ihl + 2) != 0x88A4) {
+            st[S_NONECAT] += 1;
+            return;
+        }
+        p = p + ihl + 8;
+        st[S_UDP] += 1;
+    } else if (etype != 0x88A4) {
+        st[S_NONECAT] += 1;
+        return;
+    }
+    i64 ret = buf[d + 6] & 0x02;
+    if (!ecat(buf, p, limit, ret, ts, t))
+        st[S_MALFORMED] += 1;
+    else if (cap < orig)
+        st[S_CUT] += 1;
+}
+
+static int full(Tables *t, i64 cap) {
+    i64 *st = t->st;
+    i64 lim = cap - MAX_DGRAMS - 2;
+    if (st[S_N_RT] >= lim || st[S_N_PERIOD] >= lim || st[S_N_BURST] >= lim ||
+        st[S_N_DC] >= lim || st[S_N_MBX] >= lim || st[S_N_WKCBAD] >= lim)
+        return ST_FLUSH;
+    if (st[S_P_USED] * 2 > t->p_len || st[S_S_USED] * 2 > t->s_len || st[S_W_USED] * 2 > t->w_len)
+        return ST_GROW;
+    return -1;
+}
+
+/* An EPB/OPB/SPB: data offset (-1 when not analysed), captured and original length, ts. */
+static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int big,
+                         Tables *t, i64 *incl_out, i64 *orig_out, i64 *ts_out) {
+    i64 *st = t->st;
+    const i64 *ifs = t->ifs;
+    i64 iface, incl, orig, ts, start;
+    if (btype == 3) {
+        if (total < 16 || t->n_if == 0) {
+            st[S_FRAMES] += 1;
+            st[S_MALFORMED] += 1;
+            return -1;
+        }
+        orig = u32x(buf, pos + 8, big);
+        incl = orig < total - 16 ? orig : total - 16;
+        iface = 0;
+        ts = st[S_LAST_TS];
+        start = pos + 12;
+    } else {
+        if (total < 32) {
+            st[S_FRAMES] += 1;
+            st[S_MALFORMED] += 1;
+            return -1;
+        }
+        iface = btype == 6 ? u32x(buf, pos + 8, big) : u16x(buf, pos + 8, big);
+        i64 hi = u32x(buf, pos + 12, big);
+        incl = u32x(buf, pos + 20, big);
+        orig = u32x(buf, pos + 24, big);
+        start = pos + 28;
+        if (28 + incl > total - 4 || iface >= t->n_if) {
+            st[S_FRAMES] += 1;
+            st[S_MALFORMED] += 1;
+            return -1;
+        }
+        ts = TS_BAD;
+        if (hi < 0x80000000LL) {
+            i64 b = iface * 5;
+            i64 units = (hi << 32) | u32x(buf, pos + 16, big);
+            ts = ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3]);
+        }
+    }
+    if (ifs[iface * 5 + 4] == 0) {
+        st[S_FRAMES] += 1;
+        st[S_NONECAT] += 1;
+        st[S_NON_ETH] += 1;
+        return -1;
+    }
+    if (ts == TS_BAD) {
+        st[S_FRAMES] += 1;
+        st[S_MALFORMED] += 1;
+        return -1;
+    }
+    *incl_out = incl;
+    *orig_out = orig;
+    *ts_out = ts;
+    return start;
+}
+
+/* Walk records from *pos until the buffer ends or the driver must act; returns the
+ * status and leaves the position of the next unread record in *pos. */
+i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64 big_,
+                 i64 ns_res, Tables *t) {
+    int big = big_ != 0;
+    i64 pos = *pos_io;
+    i64 cap = t->o_len - CHECK_EVERY * (MAX_DGRAMS + 2);
+    i64 count = 0;
+    i64 *st = t->st;
+    for (;;) {
+        count += 1;
+        if (count % CHECK_EVERY == 1) {
+            int act = full(t, cap);
+            if (act >= 0) {
+                *pos_io = pos;
+                return act;
+            }
+        }
+        i64 d, incl, orig, ts, size;
+        if (fmt == 0) {
+            if (pos + 16 > end) break;
+            incl = u32x(buf, pos + 8, big);
+            if (incl > MAX_RECORD) {
+                *pos_io = pos;
+                return ST_CORRUPT;
+            }
+            size = 16 + incl;
+            if (pos + size > end) break;
+            i64 frac = u32x(buf, pos + 4, big);
+            ts = u32x(buf, pos, big) * 1000000000LL + (ns_res ? frac : frac * 1000);
+            d = pos + 16;
+            orig = u32x(buf, pos + 12, big);
+        } else {
+            if (pos + 8 > end) break;
+            i64 btype = u32x(buf, pos, big);
+            if (btype == 0x0A0D0D0A) {
+                *pos_io = pos;
+                return ST_BLOCK;
+            }
+            size = u32x(buf, pos + 4, big);
+            if (size < 12 || size % 4 != 0 || size > MAX_RECORD) {
+                *pos_io = pos;
+                return ST_CORRUPT;
+            }
+            if (pos + size > end) break;
+            if (btype == 1) {
+                *pos_io = pos;
+                return ST_BLOCK;
+            }
+            if (btype != 6 && btype != 2 && btype != 3) {
+                st[S_SKIPPED] += 1;
+                pos += size;
+                continue;
+            }
+            d = pcapng_record(buf, pos, size, btype, big, t, &incl, &orig, &ts);
+            if (d < 0) {
+                pos += size;
+                continue;
+            }
+        }
+        packet(buf, d, incl, orig, ts, t);
+        pos += size;
+    }
+    *pos_io = pos;
+    if (eof) return pos == end ? ST_DONE : ST_CORRUPT;
+    return ST_NEED_MORE;
+}
+
+/* Move the entries of one open-addressing table into a new (empty) one; see scan.rehash.
+ * depth 0 for the stream and WKC tables (on = their values). */
+i64 lolacli_rehash(const i64 *ok, const i64 *on, const i64 *ots, const i64 *ometa, i64 olen,
+                   i64 depth, i64 *nk, i64 *nn, i64 *nts, i64 *nmeta, i64 nlen,
+                   i64 keep_empty) {
+    i64 used = 0;
+    for (i64 i = 0; i < olen; i++) {
+        i64 k = ok[i];
+        if (k == 0) continue;
+        if (depth > 0 && on[i] == 0 && !keep_empty) continue;
+        i64 j = slot(nk, nlen, k);
+        nk[j] = k;
+        nn[j] = on[i];
+        for (i64 d = 0; d < depth; d++) {
+            nts[j * depth + d] = ots[i * depth + d];
+            nmeta[j * depth + d] = ometa[i * depth + d];
+        }
+        used += 1;
+    }
+    return used;
+}
+
+/* End of file: the last cyclic frame without a return is lost; close the DC burst. */
+void lolacli_finish(i64 *st, i64 *o_burst) {
+    if (st[S_CYC_N] > 0 && st[S_CYC_MATCHED] == 0) {
+        st[S_LOST] += 1;
+        st[S_CYC_MATCHED] = 1;
+    }
+    if (st[S_DC_BURST] > 0) {
+        o_burst[st[S_N_BURST]] = st[S_DC_BURST];
+        st[S_N_BURST] += 1;
+        st[S_DC_BURST] = 0;
+    }
+}
+
+/* An importable module, so that the build and the package data find it; the functions
+ * above are called through ctypes. */
+static struct PyModuleDef cscan_module = {
+    PyModuleDef_HEAD_INIT, "_cscan",
+    "C kernel of the capture scanner (called through ctypes by lolacli.capture.cengine).",
+    -1, NULL, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__cscan(void) { return PyModule_Create(&cscan_module); }

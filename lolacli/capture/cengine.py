@@ -1,0 +1,129 @@
+"""The ``c`` engine: the scanner kernel of ``_cscan.c`` (built at install time), called
+through ctypes with the same arguments as :func:`lolacli.capture.scan.scan`.
+
+The extension is optional: when no C compiler was available at install time it is simply
+missing, :func:`c_available` says so and the numba or Python engine runs instead.
+
+The C code trusts the lengths it is given, so every call checks here, in Python, that
+the arrays are what the kernel assumes (dtype, contiguity, sizes); a mismatch raises
+instead of reading or writing out of bounds.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.util
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from lolacli.capture import scan as S
+
+_I64P = ctypes.POINTER(ctypes.c_int64)
+
+
+class _Tables(ctypes.Structure):
+    _fields_ = [
+        (name, ctypes.c_void_p)
+        for name in (
+            "st", "cmd_counts", "pk", "pn", "pts", "pmeta", "sk", "sc", "wk", "wv",
+            "o_rt", "o_rtts", "o_rtcyc", "o_period", "o_burst", "o_dc", "o_mbx", "o_wkc",
+            "ifs",
+        )
+    ] + [(name, ctypes.c_int64) for name in ("n_if", "p_len", "s_len", "w_len", "o_len")]
+
+
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL | None:
+    spec = importlib.util.find_spec("lolacli.capture._cscan")
+    if spec is None or spec.origin is None:
+        return None
+    lib = ctypes.CDLL(spec.origin)
+    i64, vp = ctypes.c_int64, ctypes.c_void_p
+    lib.lolacli_scan.argtypes = [vp, _I64P, i64, i64, i64, i64, i64, ctypes.POINTER(_Tables)]
+    lib.lolacli_scan.restype = i64
+    lib.lolacli_rehash.argtypes = [vp, vp, vp, vp, i64, i64, vp, vp, vp, vp, i64, i64]
+    lib.lolacli_rehash.restype = i64
+    lib.lolacli_finish.argtypes = [vp, vp]
+    lib.lolacli_finish.restype = None
+    return lib
+
+
+def c_available() -> bool:
+    """Whether the C kernel was built (``pip install`` with a C compiler)."""
+    try:
+        return _library() is not None
+    except OSError:
+        return False
+
+
+def _ptr(a: np.ndarray, n: int | None = None) -> int:
+    if a.dtype != np.int64 or not a.flags.c_contiguous or not a.flags.writeable:
+        raise ValueError("scanner arrays must be writable contiguous int64")
+    if n is not None and a.size < n:
+        raise ValueError(f"scanner array too short ({a.size} < {n})")
+    return int(a.ctypes.data)
+
+
+def _pow2(n: int) -> bool:
+    return n > 0 and n & (n - 1) == 0
+
+
+class CKernels:
+    """``scan``, ``rehash`` and ``finish`` with the signatures of :mod:`scan`."""
+
+    def __init__(self) -> None:
+        lib = _library()
+        if lib is None:
+            raise RuntimeError("the C scanner (lolacli.capture._cscan) is not built")
+        self._lib = lib
+        self._pos = ctypes.c_int64(0)
+
+    def scan(
+        self, buf: Any, pos: int, end: int, eof: Any, fmt: int, big: Any, ns_res: Any,
+        ifs: Any, n_if: int, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pts: Any,
+        pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtcyc: Any,
+        o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+    ) -> tuple[int, int]:
+        if buf.dtype != np.uint8 or not buf.flags.c_contiguous or not 0 <= pos <= end <= buf.size:
+            raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
+        rows = o_rt.size
+        p_len, s_len, w_len = pk.size, sk.size, wk.size
+        if not (_pow2(p_len) and _pow2(s_len) and _pow2(w_len)) or rows <= S.CHECK_EVERY * (
+            S.MAX_DGRAMS + 2
+        ) + S.MAX_DGRAMS + 2:
+            raise ValueError("scanner tables must be powers of two, outputs large enough")
+        t = _Tables(
+            _ptr(st, S.S_SIZE), _ptr(cmd_counts, 256),
+            _ptr(pk), _ptr(pn, p_len), _ptr(pts, p_len * S.DEPTH), _ptr(pmeta, p_len * S.DEPTH),
+            _ptr(sk), _ptr(sc, s_len), _ptr(wk), _ptr(wv, w_len),
+            _ptr(o_rt), _ptr(o_rtts, rows), _ptr(o_rtcyc, rows), _ptr(o_period, rows),
+            _ptr(o_burst, rows), _ptr(o_dc, rows), _ptr(o_mbx, rows * S.MBX_COLS),
+            _ptr(o_wkc, rows * S.WKC_COLS), _ptr(ifs, 5 * int(n_if)),
+            int(n_if), p_len, s_len, w_len, rows,
+        )
+        self._pos.value = int(pos)
+        status = self._lib.lolacli_scan(
+            int(buf.ctypes.data), ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
+            int(bool(big)), int(bool(ns_res)), ctypes.byref(t),
+        )
+        return int(self._pos.value), int(status)
+
+    def rehash(
+        self, ok: Any, on: Any, ots: Any, ometa: Any, nk: Any, nn: Any, nts: Any, nmeta: Any,
+        keep_empty: Any,
+    ) -> int:
+        olen, nlen = ok.size, nk.size
+        depth = ots.size // olen if olen else 0
+        if not _pow2(nlen) or nk.size < olen:
+            raise ValueError("the new table must be a power of two, not smaller")
+        return int(self._lib.lolacli_rehash(
+            _ptr(ok), _ptr(on, olen), _ptr(ots, olen * depth), _ptr(ometa, olen * depth),
+            olen, depth, _ptr(nk), _ptr(nn, nlen), _ptr(nts, nlen * depth),
+            _ptr(nmeta, nlen * depth), nlen, int(bool(keep_empty)),
+        ))
+
+    def finish(self, st: Any, o_burst: Any) -> None:
+        # finish may write one burst row, at st[S_N_BURST]
+        self._lib.lolacli_finish(_ptr(st, S.S_SIZE), _ptr(o_burst, int(st[S.S_N_BURST]) + 1))
