@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from lolacli.capture import scan
+from lolacli.errors import UsageError
 
 _COMPILED: SimpleNamespace | None = None
 
@@ -39,7 +40,9 @@ ENGINES = ("c", "numba", "python")
 def choose_engine(engine: str = "auto", file_bytes: int | None = None) -> str:
     """``"c"``, ``"numba"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``,
     which takes C when it was built (it loads in milliseconds), else Python for files
-    under :data:`SMALL_FILE_BYTES` and numba (when installed) above."""
+    under :data:`SMALL_FILE_BYTES` and numba (when installed) above.
+
+    Raises :class:`~lolacli.errors.UsageError` for an unknown or unavailable engine."""
     if engine == "auto":
         engine = os.environ.get("LOLACLI_ENGINE", "auto")
     if engine == "auto":
@@ -51,7 +54,15 @@ def choose_engine(engine: str = "auto", file_bytes: int | None = None) -> str:
             return "python"
         return "numba" if numba_available() else "python"
     if engine not in ENGINES:
-        raise ValueError(f"unknown engine {engine!r} (one of {', '.join(ENGINES)})")
+        raise UsageError(f"unknown capture engine {engine!r} (auto, {', '.join(ENGINES)})")
+    if engine == "c":
+        from lolacli.capture.cengine import c_available
+
+        if not c_available():
+            raise UsageError("capture engine c is not built: install a C compiler (gcc), "
+                             "then reinstall lolacli")
+    if engine == "numba" and not numba_available():
+        raise UsageError("capture engine numba needs numba: pip install 'lolacli[fast]'")
     return engine
 
 

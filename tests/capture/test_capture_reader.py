@@ -10,7 +10,7 @@ import pytest
 from lolacli.capture import writer as w
 from lolacli.capture.analyze import analyze_file
 from lolacli.capture.reader import CaptureReader, ts_params, ts_to_ns
-from lolacli.errors import CaptureError
+from lolacli.errors import CaptureError, UsageError
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, encode_frame, make_frame
 
@@ -297,14 +297,25 @@ def test_engine_choice(monkeypatch):
     assert choose_engine("auto", 10) == "numba"
     monkeypatch.setenv("LOLACLI_ENGINE", "python")
     assert choose_engine("auto", 10**9) == "python"
-    with pytest.raises(ValueError):
+    with pytest.raises(UsageError):
         choose_engine("fortran")
+    monkeypatch.setenv("LOLACLI_ENGINE", "fortran")
+    with pytest.raises(UsageError):
+        choose_engine("auto")
     # an install without a C compiler: Python for small files, numba above
     monkeypatch.delenv("LOLACLI_ENGINE")
     monkeypatch.setattr(cengine, "c_available", lambda: False)
     assert choose_engine("auto", SMALL_FILE_BYTES - 1) == "python"
     expected = "numba" if numba_available() else "python"
     assert choose_engine("auto", SMALL_FILE_BYTES) == expected
+    with pytest.raises(UsageError, match="not built"):
+        choose_engine("c")
+
+
+def test_unknown_engine_is_a_usage_error(cli, tmp_path):
+    path = write_pcap(tmp_path / "c.pcap", cyclic(2))
+    code, _, err = cli("capture", "analyze", str(path), "--engine", "fortran")
+    assert code == 2 and "Traceback" not in err and "unknown capture engine" in err
 
 
 def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
