@@ -3,6 +3,7 @@
     python benchmarks/capture_throughput.py                  # 1 M cyclic pairs (2 M frames)
     python benchmarks/capture_throughput.py --frames 200000  # quick
     python benchmarks/capture_throughput.py --rss-gb 2       # also a ~2 GB file: peak RSS
+    python benchmarks/capture_throughput.py --engine numba   # another scanner engine
 
 The capture is what a 2 kHz master produces: per cycle one outgoing frame with an LRW
 (``--lrw-bytes`` of process data) and a BRD of the AL status, and its returned copy
@@ -170,6 +171,9 @@ def _row_after_cycle(m: int, first: int, rows: int) -> int:
     return min(rows, 2 * m - lost_before)
 
 
+ENGINE = "auto"
+
+
 def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float, bytes, int]:
     """Wall time, stdout, and peak RSS (kB) of one command, measured by a wrapper."""
     sink = "subprocess.PIPE" if stdout else "subprocess.DEVNULL"
@@ -182,7 +186,7 @@ def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float,
         "sys.stderr.write(json.dumps([dt, rss, p.returncode]))\n"
         "sys.stdout.buffer.write(p.stdout or b'')\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=ENGINE)
     r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT)
     dt, rss, rc = json.loads(r.stderr.decode().strip().splitlines()[-1])
     return dt, r.stdout, rss if rc in (0, 1) else -1
@@ -227,7 +231,11 @@ def main() -> None:
                     help="also write a capture of about this many GB and measure analyze on it")
     ap.add_argument("--keep", type=Path, default=None, help="write files here and keep them")
     ap.add_argument("--json", action="store_true", help="print the results as JSON at the end")
+    ap.add_argument("--engine", choices=("auto", "c", "numba", "python"), default="auto",
+                    help="capture scanner engine (LOLACLI_ENGINE); default auto (c when built)")
     args = ap.parse_args()
+    global ENGINE
+    ENGINE = args.engine
     folder = args.keep or Path(tempfile.mkdtemp(prefix="lolacli-bench-"))
     folder.mkdir(parents=True, exist_ok=True)
     results: dict[str, object] = {}
