@@ -123,6 +123,8 @@ def _defused_gate(raw: bytes, source: str) -> None:
         line, _column = exc.position
         message = str(exc).split(": line ")[0]
         raise EniError(f"not well-formed XML: {message}", path=source, line=line) from exc
+    except (LookupError, ValueError) as exc:  # expat: unknown or multi-byte encoding
+        raise EniError(f"unsupported XML encoding: {exc}", path=source, line=1) from exc
 
 
 class _NullTarget:
