@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 
 from lolacli.errors import EniError
-
 from tests.conftest import CORPUS
 
 LOLA_PCAP = CORPUS / "pcap" / "ethercrab__twincat-run-ek1100-el1004.pcapng"
@@ -44,3 +43,41 @@ def test_esi_with_unusable_encoding_raises_eni_error(tmp_path: Path, encoding: s
     f.write_bytes(f"<?xml version='1.0' encoding='{encoding}'?><EtherCATInfo/>".encode())
     with pytest.raises(EniError, match="encoding"):
         load_esi(f)
+
+
+# --------------------------------------------------------------------------- --plot folder
+
+
+@pytest.mark.parametrize("fmt", ["human", "json"])
+def test_plot_pointing_at_a_file_is_usage_error_and_keeps_the_file(
+    cli, corpus: Path, tmp_path: Path, fmt: str
+) -> None:
+    victim = tmp_path / "notes.txt"
+    victim.write_text("precious\n")
+    code, out, err = cli("capture", "analyze", LOLA_PCAP, "--plot", victim, "-f", fmt)
+    assert code == 2
+    assert "is a file" in _one_line(err)
+    assert out == ""  # failed before the report was written
+    assert victim.read_text() == "precious\n"
+
+
+def test_plot_below_a_file_is_usage_error(cli, corpus: Path, tmp_path: Path) -> None:
+    victim = tmp_path / "notes.txt"
+    victim.write_text("precious\n")
+    code, _out, err = cli("capture", "analyze", LOLA_PCAP, "--plot", victim / "sub")
+    assert code == 2
+    assert "cannot create" in _one_line(err)
+    assert victim.read_text() == "precious\n"
+
+
+def test_write_plots_into_a_file_raises_usage_error(corpus: Path, tmp_path: Path) -> None:
+    from lolacli.capture.analyze import analyze_file
+    from lolacli.capture.plots import write_plots
+    from lolacli.errors import UsageError
+
+    victim = tmp_path / "notes.txt"
+    victim.write_text("precious\n")
+    report = analyze_file(LOLA_PCAP, keep_series=True)
+    with pytest.raises(UsageError):
+        write_plots(report, victim)
+    assert victim.read_text() == "precious\n"

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from lolacli.capture.analyze import CaptureReport
+from lolacli.errors import UsageError
 
 
 def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
@@ -17,8 +18,7 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
+    out = plot_folder(folder)
     stem = Path(report.path).stem
     written: list[Path] = []
     empty = np.zeros(0, np.int64)
@@ -51,10 +51,27 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
     return written
 
 
+def plot_folder(folder: str | Path) -> Path:
+    """``folder``, created if missing; :class:`UsageError` (exit 2) when it is a file or
+    cannot be created. Call it before the analysis so a bad folder fails first."""
+    out = Path(folder)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--plot {out}: is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--plot {out}: cannot create the folder: {exc.strerror or exc}") from None
+    return out
+
+
 def _save(fig: object, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
-    fig.tight_layout()  # type: ignore[attr-defined]
-    fig.savefig(path, dpi=100)  # type: ignore[attr-defined]
-    plt.close(fig)  # type: ignore[arg-type]
+    try:
+        fig.tight_layout()  # type: ignore[attr-defined]
+        fig.savefig(path, dpi=100)  # type: ignore[attr-defined]
+    except OSError as exc:
+        raise UsageError(f"--plot: cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)  # type: ignore[arg-type]
     return path

@@ -51,6 +51,10 @@ def analyze_cmd(
     mismatches exceed the thresholds."""
     from lolacli.capture.analyze import analyze_file
 
+    if plot is not None:
+        from lolacli.capture.plots import plot_folder
+
+        plot_folder(plot)  # a bad folder fails before the report is written
     model = None
     if eni is not None:
         from lolacli.files import load_eni
