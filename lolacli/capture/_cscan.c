@@ -484,7 +484,8 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
     i64 *st = t->st;
     for (;;) {
         count += 1;
-        if (count % CHECK_EVERY == 1) {
+        /* the WKC table before every record: one record may add MAX_DGRAMS keys */
+        if (count % CHECK_EVERY == 1 || st[S_W_USED] * 2 > t->w_len) {
             int act = full(t, cap);
             if (act >= 0) {
                 *pos_io = pos;

@@ -70,6 +70,25 @@ def _pow2(n: int) -> bool:
     return n > 0 and n & (n - 1) == 0
 
 
+#: st counters the kernel uses as row indices into the outputs (it bounds them above)
+_ROW_COUNTERS = (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_WKCBAD)
+
+
+def _check_state(st: np.ndarray, pn: np.ndarray, ifs: np.ndarray, n_if: int) -> None:
+    """The values the kernel indexes with or divides by, besides the array sizes: row
+    counters not negative, stack depths within DEPTH, interface rows as ts_params makes
+    them (mode 0: a >= 0, b >= 1; mode 1: a >= 0; offsets bounded)."""
+    if n_if < 0 or min(int(st[i]) for i in _ROW_COUNTERS) < 0:
+        raise ValueError("scanner state: negative interface count or output row")
+    if pn.size and (int(pn.min()) < 0 or int(pn.max()) > S.DEPTH):
+        raise ValueError("scanner state: pairing stack depth out of range")
+    rows = ifs[: 5 * n_if].reshape(n_if, 5)
+    mode, a, b, off = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+    ok = ((mode == 0) & (b >= 1)) | (mode == 1)
+    if not (ok.all() and (a >= 0).all() and (np.abs(off) <= S.TS_OFFSET_LIMIT_NS).all()):
+        raise ValueError("scanner state: interface timestamp parameters out of range")
+
+
 class CKernels:
     """``scan``, ``rehash`` and ``finish`` with the signatures of :mod:`scan`."""
 
@@ -103,6 +122,7 @@ class CKernels:
             _ptr(o_wkc, rows * S.WKC_COLS), _ptr(ifs, 5 * int(n_if)),
             int(n_if), p_len, s_len, w_len, rows,
         )
+        _check_state(st, pn, ifs, int(n_if))
         self._pos.value = int(pos)
         status = self._lib.lolacli_scan(
             int(buf.ctypes.data), ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
@@ -126,4 +146,7 @@ class CKernels:
 
     def finish(self, st: Any, o_burst: Any) -> None:
         # finish may write one burst row, at st[S_N_BURST]
-        self._lib.lolacli_finish(_ptr(st, S.S_SIZE), _ptr(o_burst, int(st[S.S_N_BURST]) + 1))
+        row = int(st[S.S_N_BURST]) if st.size > S.S_N_BURST else -1
+        if row < 0:
+            raise ValueError("scanner state: negative output row")
+        self._lib.lolacli_finish(_ptr(st, S.S_SIZE), _ptr(o_burst, row + 1))

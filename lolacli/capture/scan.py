@@ -439,12 +439,14 @@ def scan(
     5 integers per pcapng interface: ts mode, a, b, offset_ns, is_ethernet.
     Returns ``(pos, status)``.
     """
-    # outputs and tables are checked every CHECK_EVERY records: leave room for that many
+    # outputs and tables are checked every CHECK_EVERY records: leave room for that many.
+    # The WKC table is checked before every record: one record may add MAX_DGRAMS keys,
+    # and a full open-addressing table would make _slot loop forever.
     cap = len(o_rt) - CHECK_EVERY * (MAX_DGRAMS + 2)
     count = 0
     while True:
         count += 1
-        if count % CHECK_EVERY == 1:
+        if count % CHECK_EVERY == 1 or st[S_W_USED] * 2 > len(wk):
             act = _full(st, cap, pk, sk, wk)
             if act >= 0:
                 return pos, act

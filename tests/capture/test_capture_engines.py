@@ -102,3 +102,80 @@ def test_interface_block_too_short_is_damage_not_a_crash(tmp_path, fast, cli):
     assert list(reader) == [] and reader.stats.malformed_records == 1
     code, _, err = cli("capture", "list", str(path))
     assert code == 0 and "Traceback" not in err
+
+
+def _datagram(cmd: int, address: int, data: bytes, more: bool, wkc: int) -> bytes:
+    import struct
+
+    head = struct.pack("<BBIHH", cmd, 0, address, len(data) | (0x8000 if more else 0), 0)
+    return head + data + struct.pack("<H", wkc)
+
+
+def _wide_frame(first_address: int, ret: bool) -> bytes:
+    """An LRW and 127 FPRDs to distinct stations: 128 datagrams, 128 new WKC keys."""
+    import struct
+
+    dgs = [(12, 0x10000, bytes(8))]
+    dgs += [(4, ((first_address + j) << 16) | 0x130, bytes(1)) for j in range(127)]
+    body = b"".join(_datagram(c, a, d, j < len(dgs) - 1, 1 if ret else 0)
+                    for j, (c, a, d) in enumerate(dgs))
+    src = b"\x02" * 6 if ret else b"\x00" * 6
+    ecat_header = struct.pack("<H", 0x1000 | len(body))
+    return b"\xff" * 6 + src + struct.pack(">H", 0x88A4) + ecat_header + body
+
+
+@pytest.mark.timeout(120)
+def test_many_new_wkc_keys_in_a_few_frames_do_not_hang(tmp_path, fast):
+    """Each returned cyclic frame may add MAX_DGRAMS keys to the WKC table (256 slots):
+    four such frames between two table checks used to fill it, and the open-addressing
+    lookup then looped forever (every engine). The table is now checked every record."""
+    from lolacli.capture import writer as w
+
+    frames = []
+    for k in range(4):
+        frames += [_wide_frame(k * 1000, False), _wide_frame(k * 1000, True)]
+    path = tmp_path / "wide.pcap"
+    path.write_bytes(w.pcap_header() + b"".join(
+        w.pcap_record(i * 1000, f) for i, f in enumerate(frames)))
+    got = _outcome(path, fast)
+    assert got == _outcome(path, "python")
+    assert got["wkc"]["checked_datagrams"] == 4 * 128 and got["pairs"] == 4
+
+
+def test_c_kernel_refuses_state_it_would_index_out_of_bounds_with():
+    """Besides array sizes, the wrapper checks the values the C code indexes with or
+    divides by: output row counters, pairing stack depths, interface parameters."""
+    import numpy as np
+
+    from lolacli.capture import scan as S
+    from lolacli.capture.cengine import CKernels, c_available
+
+    if not c_available():
+        pytest.skip("the C kernel is not built")
+    k = CKernels()
+    z = lambda n: np.zeros(n, np.int64)  # noqa: E731
+    rows, slots = 1 << 14, 256
+    ifs = np.array([0, 1, 1, 0, 1], np.int64)  # one Ethernet interface, ns resolution
+
+    def call(st=None, pn=None, ifs=ifs, n_if=1):
+        st = z(S.S_SIZE) if st is None else st
+        pn = z(slots) if pn is None else pn
+        return k.scan(np.zeros(8, np.uint8), 0, 8, True, 1, False, False, ifs, n_if, st,
+                      z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH),
+                      z(slots * S.DEPTH), z(slots), z(slots), z(slots), z(slots), z(rows),
+                      z(rows), z(rows), z(rows), z(rows), z(rows), z(rows * S.MBX_COLS),
+                      z(rows * S.WKC_COLS))
+
+    assert call()[1] == S.ST_CORRUPT  # 8 zero bytes: a block of length 0
+    negative_row = z(S.S_SIZE)
+    negative_row[S.S_N_DC] = -1
+    deep = z(slots)
+    deep[7] = S.DEPTH + 1
+    for bad in (dict(st=negative_row), dict(pn=deep), dict(n_if=-1),
+                dict(ifs=np.array([0, 1, 0, 0, 1], np.int64)),        # divisor 0
+                dict(ifs=np.array([1, -3, 0, 0, 1], np.int64)),       # negative shift
+                dict(ifs=np.array([0, 1, 1, 1 << 62, 1], np.int64))):  # offset overflows
+        with pytest.raises(ValueError):
+            call(**bad)
+    with pytest.raises(ValueError):
+        k.finish(negative_row * 0 - 1, z(4))
