@@ -81,3 +81,61 @@ def test_write_plots_into_a_file_raises_usage_error(corpus: Path, tmp_path: Path
     with pytest.raises(UsageError):
         write_plots(report, victim)
     assert victim.read_text() == "precious\n"
+
+
+# --------------------------------------------------------------------------- bus timing numbers
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("--measured", "1e400us"),
+        ("--measured", "1e18s"),
+        ("--budget-us", "inf"),
+        ("--budget-us", "1e308"),
+        ("--link-mbit", "inf"),
+        ("--link-mbit", "1e308"),
+        ("--cable-m", "inf"),
+        ("--cable-m", "1e308"),
+        ("--frame-bytes", "10", "--slaves", "99999999999999999999999"),
+        ("--frame-bytes", "99999999999999999999999", "--slaves", "1"),
+        ("--per-slave-ns", "99999999999999999999999"),
+    ],
+)
+@pytest.mark.parametrize("fmt", ["human", "json"])
+def test_timing_huge_numbers_are_usage_errors(cli, args: tuple[str, ...], fmt: str) -> None:
+    code, out, err = cli("bus", "timing", *args, "-f", fmt)
+    assert code == 2
+    assert out == ""
+    assert _one_line(err).startswith("lolacli: error:")
+
+
+def test_estimate_refuses_out_of_range_values() -> None:
+    from lolacli.errors import UsageError
+    from lolacli.timing.model import estimate, parse_duration_ns
+
+    for kwargs in (
+        {"cable_m_per_segment": float("inf")},
+        {"cable_m_per_segment": float("nan")},
+        {"cable_m_per_segment": 1e308},
+        {"budget_ns": 10**30},
+        {"measured_total_ns": 10**30},
+        {"per_slave_delay_ns": 10**30},
+        {"link_bit_s": 10**30},
+    ):
+        with pytest.raises(UsageError):
+            estimate(846, 25, **kwargs)  # type: ignore[arg-type]
+    with pytest.raises(UsageError):
+        estimate(846, 10**23)
+    with pytest.raises(UsageError):
+        estimate(10**400, 1)
+    with pytest.raises(UsageError):
+        parse_duration_ns("1e400us")
+
+
+def test_timing_capture_with_zero_round_trips_is_exit_3(cli, corpus: Path) -> None:
+    # the classic-pcap copy has equal timestamps on each out/return pair
+    path = corpus / "pcap" / "DERIVED__ethercrab__twincat-run-ek1100-el1004.classic.pcap"
+    code, out, err = cli("bus", "timing", "--capture", path)
+    assert code == 3
+    assert "0 us" in _one_line(err)

@@ -80,11 +80,11 @@ def timing_cmd(
         measured_ns, measured_from = parse_duration_ns(measured), "option"
     elif capture is not None:
         measured_ns, measured_from = _capture_round_trip_ns(capture)
-    budget_ns = round(budget_us * 1000) if budget_us is not None else cycle_ns
+    budget_ns = _scaled("--budget-us", budget_us, 1000) if budget_us is not None else cycle_ns
     result = estimate(
         n_bytes,
         n_slaves,
-        link_bit_s=round(link_mbit * 1_000_000),
+        link_bit_s=_scaled("--link-mbit", link_mbit, 1_000_000),
         cable_m_per_segment=cable_m,
         per_slave_delay_ns=per_slave_ns,
         measured_total_ns=measured_ns,
@@ -114,6 +114,16 @@ def _check_options(
         raise UsageError("--measured and --capture contradict each other; give one")
 
 
+def _scaled(option: str, value: float, scale: int) -> int:
+    """round(value × scale); a usage error when that is not a finite number (typer lets
+    'inf' and '1e999' through its range checks)."""
+    import math
+
+    if not math.isfinite(value * scale):
+        raise UsageError(f"{option} {value:g}: out of range")
+    return round(value * scale)
+
+
 def _frame_and_slaves(
     eni: Path | None, frame_bytes: int | None, slaves: int | None
 ) -> tuple[int, int, int | None, str]:
@@ -140,8 +150,13 @@ def _capture_round_trip_ns(path: Path) -> tuple[int, str]:
     report = analyze_file(path).to_dict()
     for key in ("round_trip_cyclic_us", "round_trip_us"):
         stats = report.get(key)
-        if stats:
+        if stats and float(stats["max"]) > 0:
             return round(float(stats["mean"]) * 1000), f"capture:{key}.mean"
+    if report.get("round_trip_us"):
+        raise InputError(
+            "every round trip in the capture is 0 us: its timestamps cannot measure one",
+            path=str(path),
+        )
     raise InputError("no outgoing/returned frame pairs to measure a round trip", path=str(path))
 
 

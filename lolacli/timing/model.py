@@ -42,6 +42,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from enum import StrEnum
+from math import isfinite
 
 from lolacli.errors import UsageError
 from lolacli.wire.frame import MIN_FRAME_BYTES, frame_bytes_on_wire
@@ -55,6 +56,11 @@ DEFAULT_PER_SLAVE_DELAY_NS = 1000
 CABLE_NS_PER_M = 5.0
 DEFAULT_CABLE_M = 1.0  # per segment (master→slave 1, slave 1→slave 2, …)
 NS_PER_S = 1_000_000_000
+#: Durations, rates and byte counts are bounded to int64 (about 292 years in ns), like the
+#: capture timestamps; anything larger is a typo, not a bus.
+MAX_INT64 = 2**63 - 1
+#: Slaves of one segment are addressed by a 16-bit position (ETG.1000.4, ADP).
+MAX_SLAVES = 0xFFFF
 
 
 class DelaySource(StrEnum):
@@ -204,8 +210,10 @@ def estimate(
     when there is one, else :data:`DEFAULT_PER_SLAVE_DELAY_NS`. One cable segment per slave.
     Frames shorter than the Ethernet minimum are padded to 64 bytes, as on the wire.
     """
-    if frame_bytes <= 0 or slaves < 0 or link_bit_s <= 0 or cable_m_per_segment < 0:
+    if frame_bytes <= 0 or slaves < 0 or link_bit_s <= 0 or not cable_m_per_segment >= 0:
         raise UsageError("frame bytes and link rate must be positive, slaves and cable >= 0")
+    _check_bounds(frame_bytes, slaves, link_bit_s, cable_m_per_segment,
+                  per_slave_delay_ns, measured_total_ns, budget_ns)
     frame_bytes = max(frame_bytes, MIN_FRAME_BYTES)
     wire = wire_time_ns(frame_bytes, link_bit_s)
     cable = cable_delay_ns([cable_m_per_segment] * slaves)
@@ -235,6 +243,25 @@ def estimate(
     )
 
 
+def _check_bounds(
+    frame_bytes: int,
+    slaves: int,
+    link_bit_s: int,
+    cable_m_per_segment: float,
+    *ns_values: int | None,
+) -> None:
+    """:class:`UsageError` for values no bus has (and that would overflow a float)."""
+    if slaves > MAX_SLAVES:
+        raise UsageError(f"{slaves} slaves: a segment has at most {MAX_SLAVES}")
+    if max(frame_bytes, link_bit_s) > MAX_INT64:
+        raise UsageError(f"frame bytes and link rate must be below {MAX_INT64}")
+    if any(v is not None and not 0 <= v <= MAX_INT64 for v in ns_values):
+        raise UsageError(f"delays, measured totals and budgets must be 0..{MAX_INT64} ns")
+    if not (isfinite(cable_m_per_segment) and 2 * cable_m_per_segment * CABLE_NS_PER_M
+            * max(slaves, 1) <= MAX_INT64):
+        raise UsageError(f"cable length {cable_m_per_segment:g} m per segment is out of range")
+
+
 _UNITS_NS = {
     "ns": Decimal(1),
     "us": Decimal(1000),
@@ -261,6 +288,8 @@ def parse_duration_ns(text: str, default_unit: str = "us") -> int:
         ) from None
     if not value.is_finite() or value < 0:
         raise UsageError(f"not a duration: {text!r} (must be a finite time >= 0)")
+    if value > MAX_INT64:
+        raise UsageError(f"not a duration: {text!r} (longer than {MAX_INT64} ns)")
     return int(value.to_integral_value())
 
 
@@ -270,6 +299,8 @@ __all__ = [
     "DEFAULT_PER_SLAVE_DELAY_NS",
     "INTER_FRAME_GAP_BYTES",
     "LINK_100_MBIT_S",
+    "MAX_INT64",
+    "MAX_SLAVES",
     "PREAMBLE_SFD_BYTES",
     "TIMING_SCHEMA",
     "DelaySource",
