@@ -25,7 +25,11 @@ def read_eni_bytes(path: str | Path) -> bytes:
         size = p.stat().st_size
         if size > MAX_ENI_BYTES:
             raise EniError(f"file too large for an ENI ({size} bytes)", path=name)
-        return p.read_bytes()
+        with p.open("rb") as f:  # bounded: /dev/zero and pipes have no size to stat
+            data = f.read(MAX_ENI_BYTES + 1)
+        if len(data) > MAX_ENI_BYTES:
+            raise EniError(f"file too large for an ENI (over {MAX_ENI_BYTES} bytes)", path=name)
+        return data
     except FileNotFoundError:
         raise EniError("no such file", path=name) from None
     except PermissionError:

@@ -139,3 +139,19 @@ def test_timing_capture_with_zero_round_trips_is_exit_3(cli, corpus: Path) -> No
     code, out, err = cli("bus", "timing", "--capture", path)
     assert code == 3
     assert "0 us" in _one_line(err)
+
+
+# --------------------------------------------------------------------------- endless "files"
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="needs /dev/zero")
+def test_endless_eni_file_is_refused_not_read_forever(cli) -> None:
+    from lolacli.files import load_eni, load_esi
+
+    with pytest.raises(EniError, match="too large"):
+        load_eni("/dev/zero")
+    with pytest.raises(EniError, match="too large"):
+        load_esi("/dev/zero")
+    code, _out, err = cli("eni", "validate", "/dev/zero")
+    assert code == 3
+    assert "too large" in _one_line(err)
