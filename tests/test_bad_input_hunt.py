@@ -155,3 +155,34 @@ def test_endless_eni_file_is_refused_not_read_forever(cli) -> None:
     code, _out, err = cli("eni", "validate", "/dev/zero")
     assert code == 3
     assert "too large" in _one_line(err)
+
+
+# --------------------------------------------------------------------------- negative counts
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("capture", "list", LOLA_PCAP, "-c", "-5"),
+        ("capture", "analyze", LOLA_PCAP, "--max-lost", "-1"),
+        ("capture", "analyze", LOLA_PCAP, "--max-wkc-mismatches", "-1"),
+        ("bus", "emulate", "-i", "nosuchif0", "--duration", "-1"),
+        ("bus", "emulate", "-i", "nosuchif0", "--duration", "nan"),
+        ("bus", "emulate", "-i", "nosuchif0", "--realtime-priority", "100"),
+        ("bus", "emulate", "-i", "nosuchif0", "--realtime-priority", "-1"),
+    ],
+)
+def test_negative_or_out_of_range_option_is_usage_error(cli, corpus: Path, args) -> None:
+    code, out, err = cli(*args)
+    assert code == 2
+    assert out == ""
+    assert "Invalid value" in err and "Traceback" not in err
+
+
+def test_list_frames_refuses_a_negative_count(corpus: Path) -> None:
+    from lolacli.capture.listing import list_frames
+    from lolacli.errors import UsageError
+
+    with pytest.raises(UsageError):
+        next(iter(list_frames(LOLA_PCAP, count=-5)))
+    assert list(list_frames(LOLA_PCAP, count=0)) == []

@@ -212,6 +212,8 @@ def list_frames(
     path: str | Path, *, count: int | None = None, expr: str | None = None
 ) -> Iterator[ListedFrame]:
     """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``."""
+    if count is not None and count < 0:
+        raise UsageError(f"count {count}: must be >= 0")
     flt = DatagramFilter(expr)
     shown = 0
     first_ns: int | None = None

@@ -56,13 +56,18 @@ def emulate_cmd(
         ),
     ] = None,
     duration_s: Annotated[
-        float, typer.Option("--duration", help="Stop after this many seconds (0: until Ctrl-C).")
+        float,
+        typer.Option(
+            "--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."
+        ),
     ] = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
     realtime_priority: Annotated[
         int,
         typer.Option(
             "--realtime-priority",
+            min=0,
+            max=99,
             help="Run SCHED_FIFO at this priority (1-99; needs root or CAP_SYS_NICE). "
             "Use when master and emulator share a core.",
         ),

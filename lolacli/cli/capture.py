@@ -36,11 +36,13 @@ def analyze_cmd(
         typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
     ] = None,
     max_lost: Annotated[
-        int, typer.Option("--max-lost", help="Lost frames allowed before exit 1.")
+        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
     ] = 0,
     max_wkc: Annotated[
         int,
-        typer.Option("--max-wkc-mismatches", help="WKC mismatches allowed before exit 1."),
+        typer.Option(
+            "--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."
+        ),
     ] = 0,
     engine: Annotated[
         str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
@@ -186,7 +188,7 @@ def _render_sdo_dc(console: Any, d: dict[str, Any]) -> None:
 def list_cmd(
     file: CaptureArgument,
     count: Annotated[
-        int | None, typer.Option("-c", "--count", help="List at most N frames.")
+        int | None, typer.Option("-c", "--count", min=0, help="List at most N frames.")
     ] = None,
     expr: Annotated[
         str | None,
