@@ -59,6 +59,7 @@
 #define S_LOGICAL_OUT 37
 #define S_SKIPPED 38
 #define S_N_WKCBAD 39
+#define S_TS_SEEN 40
 
 /* return codes */
 #define ST_NEED_MORE 0
@@ -358,7 +359,11 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
 static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, Tables *t) {
     i64 *st = t->st;
     st[S_FRAMES] += 1;
-    if (st[S_FRAMES] == 1) st[S_FIRST_TS] = ts;
+    /* not S_FRAMES == 1: packets skipped in pcapng_record are counted without a time */
+    if (st[S_TS_SEEN] == 0) {
+        st[S_TS_SEEN] = 1;
+        st[S_FIRST_TS] = ts;
+    }
     st[S_END_TS] = ts;
     st[S_LAST_TS] = ts;
     if (cap < 14) {

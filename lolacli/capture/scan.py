@@ -68,6 +68,7 @@ S_CUT = 36
 S_LOGICAL_OUT = 37
 S_SKIPPED = 38
 S_N_WKCBAD = 39
+S_TS_SEEN = 40
 S_SIZE = 48
 
 # --- kernel return codes -----------------------------------------------------------------
@@ -373,7 +374,9 @@ def _packet(
 ) -> Any:
     """One Ethernet frame of ``cap`` captured bytes at ``d``."""
     st[S_FRAMES] += 1
-    if st[S_FRAMES] == 1:
+    # not S_FRAMES == 1: packets skipped in _pcapng_record are counted without a time
+    if st[S_TS_SEEN] == 0:
+        st[S_TS_SEEN] = 1
         st[S_FIRST_TS] = ts
     st[S_END_TS] = ts
     st[S_LAST_TS] = ts

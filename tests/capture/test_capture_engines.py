@@ -179,3 +179,19 @@ def test_c_kernel_refuses_state_it_would_index_out_of_bounds_with():
             call(**bad)
     with pytest.raises(ValueError):
         k.finish(negative_row * 0 - 1, z(4))
+
+
+def test_time_span_starts_at_the_first_analysed_frame(tmp_path, fast):
+    """A first packet that is not analysed (here on a raw-IP interface) is counted as a
+    frame but has no time: the span used to start at 0 ns (54 years, not 5 µs)."""
+    from lolacli.capture import writer as w
+
+    t0 = 1_700_000_000 * 10**9
+    body = w.shb() + w.idb(link_type=101) + w.idb()
+    body += w.epb(t0, b"\x45" + bytes(40), interface=0)
+    body += w.epb(t0 + 1000, _lrw(False), interface=1) + w.epb(t0 + 6000, _lrw(True), interface=1)
+    path = tmp_path / "span.pcapng"
+    path.write_bytes(body)
+    got = _outcome(path, fast)
+    assert got == _outcome(path, "python")
+    assert got["frames_total"] == 3 and got["time_span_us"] == 5.0
