@@ -186,3 +186,35 @@ def test_list_frames_refuses_a_negative_count(corpus: Path) -> None:
     with pytest.raises(UsageError):
         next(iter(list_frames(LOLA_PCAP, count=-5)))
     assert list(list_frames(LOLA_PCAP, count=0)) == []
+
+
+# --------------------------------------------------------------------------- ENI numbers
+
+
+def _lola_with(old: str, new: str) -> str:
+    from lolacli.cli.common import default_eni
+
+    text = default_eni().read_text(encoding="utf-8")
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+@pytest.mark.parametrize("length", ["-1", "18446744073709551616", "2000000000"])
+def test_init_cmd_data_length_out_of_range_is_eni_error(
+    cli, tmp_path: Path, length: str
+) -> None:
+    from lolacli.eni.parser import parse_eni
+
+    doc = (
+        "<EtherCATConfig><Config><Slave><Info><Name>s</Name></Info><InitCmds><InitCmd>"
+        "<Transition>PS</Transition><Cmd>2</Cmd><Adp>0</Adp><Ado>#x130</Ado>"
+        f"<DataLength>{length}</DataLength></InitCmd></InitCmds></Slave></Config>"
+        "</EtherCATConfig>"
+    )
+    with pytest.raises(EniError, match="DataLength"):
+        parse_eni(doc, "x.xml")
+    f = tmp_path / "len.xml"
+    f.write_text(doc)
+    code, _out, err = cli("eni", "inspect", f)
+    assert code == 3
+    assert "DataLength" in _one_line(err)

@@ -47,6 +47,7 @@ from lolacli.eni.model import (
     Variable,
 )
 from lolacli.errors import EniError
+from lolacli.wire.frame import MAX_DATAGRAM_DATA
 
 #: Root elements we accept. acontis tools write the second with a plain (unencrypted) body.
 ENI_ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
@@ -304,7 +305,13 @@ class _Reader:
         cmd = self.need(el, "Cmd")
         data = self.hexdata(el, "Data")
         if data is None:
-            data = bytes(self.number(el, "DataLength", 0) or 0)
+            length = self.number(el, "DataLength", 0) or 0
+            if not 0 <= length <= MAX_DATAGRAM_DATA:
+                raise self.error(
+                    self.child(el, "DataLength"),
+                    f"<DataLength> {length}: a datagram carries 0..{MAX_DATAGRAM_DATA} bytes",
+                )
+            data = bytes(length)
         logical = self.number(el, "Addr")
         adp = self.number(el, "Adp", 0) or 0
         ado = self.number(el, "Ado", 0) or 0
