@@ -218,3 +218,24 @@ def test_init_cmd_data_length_out_of_range_is_eni_error(
     code, _out, err = cli("eni", "inspect", f)
     assert code == 3
     assert "DataLength" in _one_line(err)
+
+
+# --------------------------------------------------------------------------- bus emulate
+
+
+@pytest.mark.parametrize(
+    ("old", "new"),
+    [
+        ("<BitLen>16</BitLen>", "<BitLen>256</BitLen>"),
+        ("<SubIndex>0</SubIndex>", "<SubIndex>-1</SubIndex>"),
+        ("<Index>#x6041</Index>", "<Index>#x16041</Index>"),
+    ],
+)
+def test_emulate_eni_numbers_too_wide_for_the_sii_are_exit_3(
+    cli, tmp_path: Path, old: str, new: str
+) -> None:
+    f = tmp_path / "wide.xml"
+    f.write_text(_lola_with(old, new), encoding="utf-8")
+    code, _out, err = cli("bus", "emulate", "-i", "nosuchif0", "--eni", f, "--duration", "0.1")
+    assert code == 3
+    assert "does not fit" in _one_line(err)

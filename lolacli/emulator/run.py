@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -12,7 +13,7 @@ from lolacli.emulator.sii import sii_from_esi_device
 from lolacli.emulator.slave import build_chain
 from lolacli.eni.esi import EsiDevice, EsiFile
 from lolacli.eni.model import Eni, Slave
-from lolacli.errors import UsageError
+from lolacli.errors import EniError, UsageError
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,13 +73,18 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
         seed=options.seed,
         corrupt_probability=options.corrupt_probability,
     )
-    chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
-    for m in esi_matches(eni, esi):
-        ident = eni.slaves[m.position - 1].identity
-        revision = None if m.exact_revision else ident.revision
-        chain.use_sii(
-            m.position, sii_from_esi_device(m.device, serial=ident.serial, revision=revision)
-        )
+    try:  # the ENI/ESI readers take any integer; SII and register fields have fixed widths
+        chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
+        for m in esi_matches(eni, esi):
+            ident = eni.slaves[m.position - 1].identity
+            revision = None if m.exact_revision else ident.revision
+            chain.use_sii(
+                m.position, sii_from_esi_device(m.device, serial=ident.serial, revision=revision)
+            )
+    except (struct.error, OverflowError) as exc:
+        raise EniError(
+            f"cannot emulate: a number does not fit its EtherCAT field ({exc})", path=eni.source
+        ) from None
     for position in options.stuck_safeop:
         if not 1 <= position <= len(chain.slaves):
             raise UsageError(
