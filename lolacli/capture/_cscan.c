@@ -12,8 +12,8 @@
  * milliseconds.
  *
  * Integers are int64 as in numba; scan.py bounds timestamps (TS_LIMIT_NS) so that no
- * signed operation overflows and all three engines agree exactly. Hashes are computed in
- * uint64 and masked to 63 bits.
+ * signed operation overflows and all three engines agree exactly; the hash (mix) avoids
+ * overflow as well.
  */
 #include <Python.h>
 #include <stdint.h>
@@ -78,11 +78,11 @@
 #define WKC_COLS 5
 #define MAX_RECORD (16 * 1024 * 1024)
 #define BURST_GAP_NS 1000000
-#define MASK63 0x7FFFFFFFFFFFFFFFULL
-#define FNV 0x100000001B3ULL
-#define SEED_PAIR 0x2545F4914F6CDD1DULL
-#define SEED_STREAM 0x1B873593ULL
-#define SEED_WKC 0x5BD1E995ULL
+#define FNV_HI 0x100
+#define FNV_LO 0x1B3
+#define SEED_PAIR 0x2545F4914F6CDD1DLL
+#define SEED_STREAM 0x1B873593LL
+#define SEED_WKC 0x5BD1E995LL
 
 #define TS_LIMIT_NS (1LL << 62)
 #define TS_OFFSET_LIMIT_NS (1LL << 60)
@@ -93,7 +93,6 @@
 #define MBX_AREA 0x1000
 
 typedef int64_t i64;
-typedef uint64_t u64;
 
 /* Every array the scanner reads or writes; lengths in elements. Filled by cengine.py. */
 typedef struct {
@@ -113,12 +112,17 @@ static inline i64 u32x(const uint8_t *b, i64 p, int big) {
     return big ? ((u16be(b, p) << 16) | u16be(b, p + 2)) : u32le(b, p);
 }
 
-static inline u64 mix(u64 h, u64 v) {
-    h = ((h ^ v) * FNV) & MASK63;
+/* (h ^ v) * FNV mod 2^63 from 32-bit halves, no intermediate beyond int64 (see scan._mix) */
+static inline i64 mix(i64 h, i64 v) {
+    i64 x = h ^ v;
+    i64 lo = x & 0xFFFFFFFFLL;
+    i64 low = lo * FNV_LO;
+    i64 mid = ((x >> 32) * FNV_LO + lo * FNV_HI + (low >> 32)) & 0x7FFFFFFFLL;
+    h = (mid << 32) | (low & 0xFFFFFFFFLL);
     return h ^ (h >> 29);
 }
 
-static inline i64 key_of(u64 h) { return h != 0 ? (i64)h : 1; }
+static inline i64 key_of(i64 h) { return h != 0 ? h : 1; }
 
 static inline i64 slot(const i64 *keys, i64 len, i64 key) {
     i64 mask = len - 1;
@@ -195,7 +199,7 @@ static inline void count_stream(Tables *t, i64 key) {
 static inline void check_wkc(const uint8_t *buf, i64 q, i64 cmd, i64 akey, i64 ln, i64 wkc,
                              Tables *t) {
     i64 *st = t->st;
-    i64 wkey = key_of(mix(mix(mix(SEED_WKC, (u64)cmd), (u64)akey), (u64)ln));
+    i64 wkey = key_of(mix(mix(mix(SEED_WKC, cmd), akey), ln));
     i64 ws = slot(t->wk, t->w_len, wkey);
     int known = t->wk[ws] != 0;
     if (!known && st[S_WKC_FIXED] == 0) {
@@ -288,15 +292,15 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
     }
     st[S_ECAT] += 1;
     st[S_DGRAMS] += n;
-    u64 hp = SEED_PAIR, hs = SEED_STREAM;
+    i64 hp = SEED_PAIR, hs = SEED_STREAM;
     int logical = 0;
     for (i64 j = 0; j < n; j++) {
         q = dg[j];
         i64 cmd = buf[q];
         i64 akey = addr_key(cmd, u32le(buf, q + 2));
         t->cmd_counts[cmd] += 1;
-        hp = mix(mix(hp, (u64)((cmd << 8) | buf[q + 1])), (u64)akey);
-        hs = mix(mix(hs, (u64)cmd), (u64)akey);
+        hp = mix(mix(hp, (cmd << 8) | buf[q + 1]), akey);
+        hs = mix(mix(hs, cmd), akey);
         if (cmd == 10 || cmd == 11 || cmd == 12) logical = 1;
     }
     i64 kp = key_of(hp), ks = key_of(hs);

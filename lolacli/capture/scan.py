@@ -89,8 +89,9 @@ MBX_COLS = 8
 WKC_COLS = 5
 MAX_RECORD = 16 * 1024 * 1024
 BURST_GAP_NS = 1_000_000
-MASK63 = 0x7FFFFFFFFFFFFFFF
-FNV = 0x100000001B3
+#: The 64-bit FNV prime, FNV_HI << 32 | FNV_LO (see _mix)
+FNV_HI = 0x100
+FNV_LO = 0x1B3
 SEED_PAIR = 0x2545F4914F6CDD1D
 SEED_STREAM = 0x1B873593
 SEED_WKC = 0x5BD1E995
@@ -125,7 +126,16 @@ def _u32(buf: Any, p: Any, big: Any) -> Any:
 
 
 def _mix(h: Any, v: Any) -> Any:
-    h = ((h ^ v) * FNV) & MASK63
+    """``(h ^ v) * FNV mod 2^63``, then a shift-xor; ``h`` and ``v`` in [0, 2^63).
+
+    The product is built from 32-bit halves so that no intermediate leaves int64: numba
+    (LLVM) takes signed overflow to be impossible, and dropped the 63-bit mask that once
+    followed a plain wrapping multiply (its keys then differed from Python's and C's)."""
+    x = h ^ v
+    lo = x & 0xFFFFFFFF
+    low = lo * FNV_LO                                     # < 2^41
+    mid = ((x >> 32) * FNV_LO + lo * FNV_HI + (low >> 32)) & 0x7FFFFFFF
+    h = (mid << 32) | (low & 0xFFFFFFFF)
     return h ^ (h >> 29)
 
 
