@@ -146,7 +146,8 @@ class CKernels:
 
     def finish(self, st: Any, o_burst: Any) -> None:
         # finish may write one burst row, at st[S_N_BURST]
-        row = int(st[S.S_N_BURST]) if st.size > S.S_N_BURST else -1
+        st_ptr = _ptr(st, S.S_SIZE)
+        row = int(st[S.S_N_BURST])
         if row < 0:
             raise ValueError("scanner state: negative output row")
-        self._lib.lolacli_finish(_ptr(st, S.S_SIZE), _ptr(o_burst, row + 1))
+        self._lib.lolacli_finish(st_ptr, _ptr(o_burst, row + 1))
