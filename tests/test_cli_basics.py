@@ -24,3 +24,25 @@ def test_help_does_not_import_heavy_libraries():
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def _closed_early(*args: str) -> tuple[int, str]:
+    """Run the CLI with a reader that takes 10 bytes and closes the pipe (`| head -c 10`)."""
+    p = subprocess.Popen([sys.executable, "-m", "lolacli", *args], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.read(10)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    return p.wait(), err
+
+
+def test_a_reader_that_goes_away_does_not_change_the_exit_code():
+    """Outputs larger than a pipe buffer (64 KiB): the write fails with EPIPE; the
+    command still exits with what it found, silently."""
+    lola = "eni_examples/lola.xml"
+    assert _closed_early("eni", "inspect", lola) == (0, "")            # rich tables
+    assert _closed_early("eni", "inspect", lola, "--format", "json") == (0, "")
+    # diff finds differences (exit 1) and says so in ~100 kB
+    other = "eni_examples/ek1100_io.xml"
+    assert _closed_early("eni", "diff", lola, other, "--format", "json") == (1, "")

@@ -6,7 +6,6 @@ the commands.
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -14,7 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json, silence_stdout
 
 app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captures.")
 
@@ -216,5 +215,4 @@ def list_cmd(
                 out.write(format_line(frame, d, i == 0) + "\n")
         out.flush()
     except BrokenPipeError:  # `lolacli capture list F | head`
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        silence_stdout()

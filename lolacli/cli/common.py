@@ -40,16 +40,32 @@ def default_eni() -> Path:
     return Path(str(files("lolacli.eni_examples").joinpath("lola.xml")))
 
 
+def silence_stdout() -> None:
+    """The reader of stdout went away (``lolacli … | head``): send the rest of the output
+    to /dev/null and let the command finish, so that its exit code still says what it
+    found (rich's default would exit 1, "checks found failures", at once)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
 def emit_json(data: Any) -> None:
     """Write one JSON document to stdout."""
-    sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False) + "\n")
-    sys.stdout.flush()
+    try:
+        sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+        sys.stdout.flush()
+    except BrokenPipeError:
+        silence_stdout()
 
 
 def stdout_console() -> Any:
     from rich.console import Console
 
-    return Console(highlight=False, soft_wrap=False)
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            silence_stdout()
+
+    return _Console(highlight=False, soft_wrap=False)
 
 
 def stderr_console() -> Any:
