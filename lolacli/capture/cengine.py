@@ -66,6 +66,14 @@ def _ptr(a: np.ndarray, n: int | None = None) -> int:
     return int(a.ctypes.data)
 
 
+#: Open-addressing lookups end only when a table has a free slot. The pairing and stream
+#: tables gain at most one key per record and are checked every CHECK_EVERY records; the
+#: WKC table gains up to MAX_DGRAMS keys per record and is checked before each one. A
+#: table grows once half full, so these sizes keep a free slot at all times.
+MIN_KEY_SLOTS = 2 * S.CHECK_EVERY
+MIN_WKC_SLOTS = 2 * S.MAX_DGRAMS
+
+
 def _pow2(n: int) -> bool:
     return n > 0 and n & (n - 1) == 0
 
@@ -113,6 +121,8 @@ class CKernels:
             S.MAX_DGRAMS + 2
         ) + S.MAX_DGRAMS + 2:
             raise ValueError("scanner tables must be powers of two, outputs large enough")
+        if p_len < MIN_KEY_SLOTS or s_len < MIN_KEY_SLOTS or w_len < MIN_WKC_SLOTS:
+            raise ValueError("scanner tables too small to stay below half full between checks")
         t = _Tables(
             _ptr(st, S.S_SIZE), _ptr(cmd_counts, 256),
             _ptr(pk), _ptr(pn, p_len), _ptr(pts, p_len * S.DEPTH), _ptr(pmeta, p_len * S.DEPTH),
