@@ -64,25 +64,24 @@ def order_statistic(
         lo, hi = lo + -(-b * span // bins), lo + -(-(b + 1) * span // bins) - 1
 
 
-def _population_std(
-    chunks: Sequence[np.ndarray], n: int, lo: int, hi: int, mean: float
-) -> float:
-    """Population standard deviation, in exact integer arithmetic when the range allows
-    (so that the result does not depend on how the series is chunked)."""
-    if hi - lo >= 1 << 43:
-        squares = 0.0
-        for c in chunks:
-            f = c.astype(np.float64) - mean
-            squares += float(np.dot(f, f))
-        return math.sqrt(squares / n)
+def _moments(chunks: Sequence[np.ndarray], lo: int) -> tuple[int, int]:
+    """Exact sums of the offsets from ``lo`` and of their squares, so that mean and std do
+    not depend on how the series is chunked (nor overflow int64): each offset (below
+    2^64) is split into three 22-bit limbs whose products sum in uint64 without overflow."""
+    m22 = np.uint64((1 << 22) - 1)
+    base = np.uint64(lo % (1 << 64))
     s1 = s2 = 0
     for c in chunks:
         for i in range(0, c.size, 1 << 16):
-            d = c[i : i + (1 << 16)].astype(np.int64) - lo
-            a, b = d >> 20, d & 0xFFFFF
-            s1 += int(d.sum())
-            s2 += (int((a * a).sum()) << 40) + (int((a * b).sum()) << 21) + int((b * b).sum())
-    return math.sqrt((s2 * n - s1 * s1) / (n * n))
+            d = c[i : i + (1 << 16)].astype(np.int64).astype(np.uint64) - base
+            x0, x1, x2 = d & m22, (d >> np.uint64(22)) & m22, d >> np.uint64(44)
+            t = [int(v) for v in (x0.sum(), x1.sum(), x2.sum())]
+            s1 += t[0] + (t[1] << 22) + (t[2] << 44)
+            p = [int(np.dot(a, b)) for a, b in
+                 ((x0, x0), (x0, x1), (x1, x1), (x0, x2), (x1, x2), (x2, x2))]
+            s2 += (p[0] + (p[1] << 23) + ((p[2] + 2 * p[3]) << 44) + (p[4] << 67)
+                   + (p[5] << 88))
+    return s1, s2
 
 
 def summary_us(chunks: Sequence[np.ndarray]) -> dict[str, float | int] | None:
@@ -97,9 +96,9 @@ def summary_us(chunks: Sequence[np.ndarray]) -> dict[str, float | int] | None:
         return None
     lo = min(int(c.min()) for c in chunks)
     hi = max(int(c.max()) for c in chunks)
-    total = sum(int(c.sum(dtype=np.int64)) for c in chunks)
-    mean = total / n
-    std = _population_std(chunks, n, lo, hi, mean)
+    s1, s2 = _moments(chunks, lo)
+    mean = (lo * n + s1) / n
+    std = math.sqrt((s2 * n - s1 * s1) / (n * n))
     memo: dict[int, int] = {}
     histograms: dict[tuple[int, int], np.ndarray] = {}
 

@@ -43,3 +43,19 @@ def test_summary_equals_numpy(monkeypatch, seed, gather_max):
 def test_empty_is_none():
     assert stats.summary_us([]) is None
     assert stats.summary_us([np.zeros(0, np.int32)]) is None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_std_is_exact_over_the_whole_int64_range(seed):
+    """Values spread over all of int64 (a damaged capture's timestamps): the std equals
+    the exact rational result (statistics.pstdev) and does not depend on the chunking."""
+    import statistics
+
+    rng = np.random.default_rng(seed)
+    v = rng.integers(-(2**63), 2**63 - 1, 300, dtype=np.int64, endpoint=True)
+    v[:2] = -(2**63), 2**63 - 1
+    exact = statistics.pstdev([int(x) for x in v]) / 1000.0
+    whole = stats.summary_us([v])
+    assert whole["std"] == pytest.approx(exact, rel=1e-15)
+    for cuts in ([1], [7, 100, 101], list(range(0, 300, 13))):
+        assert stats.summary_us(np.split(v, cuts)) == whole
