@@ -10,13 +10,14 @@ write 1, read-write 3; an LRW on a slave with only inputs counts 1, with only ou
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from lolacli.eni.model import CyclicCommand, Direction, Eni, Fmmu, Slave
+from lolacli.eni.model import CyclicCommand, Direction, Eni, Fmmu, InitCmd, Mailbox, Slave
 from lolacli.wire.commands import BROADCAST, LOGICAL, Command, mnemonic
+from lolacli.wire.frame import MAX_DATAGRAM_DATA
 
 VALIDATE_SCHEMA = "lolacli.eni-validate/1"
 
@@ -353,6 +354,202 @@ def check_process_image(eni: Eni) -> Iterator[Finding]:
                     )
 
 
+# --------------------------------------------------------------------------- field widths
+
+
+@dataclass(frozen=True, slots=True)
+class Width:
+    """The values an ENI number can take on the bus (``hi`` None: no upper bound)."""
+
+    lo: int
+    hi: int | None
+    name: str
+
+    def holds(self, value: int) -> bool:
+        return self.lo <= value and (self.hi is None or value <= self.hi)
+
+    def __str__(self) -> str:
+        if self.hi is None:
+            return f">= {self.lo} ({self.name})"
+        hi = f"0x{self.hi:X}" if self.hi > 0xFF else str(self.hi)
+        return f"{self.lo}..{hi} ({self.name})"
+
+
+# Register and object widths: ETG.1000.4 (datagram header: Cmd u8, ADP/ADO u16 or logical
+# address u32, 11-bit length, WKC u16; Table 56 FMMU, Table 58 sync manager; DC registers
+# 0x0980 activation u16, 0x09A0/0x09A4 SYNC0/SYNC1 cycle u32), ETG.1000.6 CoE (object index
+# u16, subindex u8; a PDO mapping entry is one u32 of index 16 | subindex 8 | bit length 8;
+# identity object 0x1018 u32 fields; mailbox SMs u16; 16 sync managers), CiA 301 (SDO
+# command specifier: 3 bits).
+U8 = Width(0, 0xFF, "u8")
+U16 = Width(0, 0xFFFF, "u16")
+U32 = Width(0, 0xFFFF_FFFF, "u32")
+I32 = Width(-(2**31), 2**31 - 1, "i32")
+SM_INDEX = Width(0, 15, "an ESC has 16 sync managers")
+CCS = Width(0, 7, "3-bit SDO command specifier")
+DATA_LENGTH = Width(0, MAX_DATAGRAM_DATA, "11-bit datagram length")
+BIT_LEN = Width(0, 0xFF, "u8 bit length of a PDO mapping entry; 0 pads")
+LOGICAL_BIT = Width(0, 0xFFFF_FFFF * 8 + 7, "a bit of the 4 GiB logical space")
+COUNT = Width(0, None, "not negative")
+POSITIVE = Width(1, None, "positive")
+
+RANGE_CODE = "value-out-of-range"
+
+_Field = tuple[str, int | None, Width]
+
+
+def _range_findings(
+    where: str, fields: Iterable[_Field], slave: int | None = None
+) -> Iterator[Finding]:
+    for label, value, width in fields:
+        if value is not None and not width.holds(value):
+            yield _error(RANGE_CODE, f"{where}: {label} {value} is outside {width}", slave)
+
+
+def _init_cmd_fields(n: int, c: InitCmd) -> Iterator[_Field]:
+    at = f"InitCmd {n} ({c.comment})" if c.comment else f"InitCmd {n}"
+    yield f"{at} <Cmd>", c.cmd, U8
+    if c.logical_address is None:
+        yield f"{at} <Adp>", c.adp, U16
+        yield f"{at} <Ado>", c.ado, U16
+    yield f"{at} <Addr>", c.logical_address, U32
+    yield f"{at} data length", len(c.data), DATA_LENGTH
+    yield f"{at} <Cnt>", c.expected_wkc, U16
+    yield f"{at} <Retries>", c.retries, COUNT
+    yield f"{at} <Timeout>", c.timeout_ms, COUNT
+    yield f"{at} <Validate><Timeout>", c.validate_timeout_ms, COUNT
+
+
+def _init_cmds_fields(cmds: Iterable[InitCmd]) -> Iterator[_Field]:
+    for n, c in enumerate(cmds, 1):
+        yield from _init_cmd_fields(n, c)
+
+
+def _identity_fields(s: Slave) -> Iterator[_Field]:
+    yield "<Info><PhysAddr>", s.station_address, U16
+    yield "<Info><AutoIncAddr>", s.auto_inc_address, U16
+    yield "<Info><VendorId>", s.identity.vendor_id, U32
+    yield "<Info><ProductCode>", s.identity.product_code, U32
+    yield "<Info><RevisionNo>", s.identity.revision, U32
+    yield "<Info><SerialNo>", s.identity.serial, U32
+    yield "<PreviousPort><PhysAddr>", s.previous_station_address, U16
+
+
+def _mailbox_fields(m: Mailbox | None) -> Iterator[_Field]:
+    if m is None:
+        return
+    yield "<Mailbox><Send><Start>", m.out_start, U16
+    yield "<Mailbox><Send><Length>", m.out_length_bytes, U16
+    yield "<Mailbox><Recv><Start>", m.in_start, U16
+    yield "<Mailbox><Recv><Length>", m.in_length_bytes, U16
+    yield "<Mailbox><Recv><PollTime>", m.poll_time_ms, COUNT
+    yield "<Mailbox><Recv><StatusBitAddr>", m.status_bit_address, LOGICAL_BIT
+    for n, c in enumerate(m.coe_init_cmds, 1):
+        at = f"CoE InitCmd {n} ({c.comment})" if c.comment else f"CoE InitCmd {n}"
+        yield f"{at} <Index>", c.index, U16
+        yield f"{at} <SubIndex>", c.subindex, U8
+        yield f"{at} <Ccs>", c.ccs, CCS
+        yield f"{at} <Timeout>", c.timeout_ms, COUNT
+
+
+def _sm_fmmu_fields(s: Slave) -> Iterator[_Field]:
+    for sm in s.sync_managers:
+        yield f"SM{sm.index} index", sm.index, SM_INDEX
+        yield f"SM{sm.index} start address", sm.start_address, U16
+        yield f"SM{sm.index} length", sm.length_bytes, U16
+        yield f"SM{sm.index} control byte", sm.control, U8
+    for f in s.fmmus:
+        yield f"FMMU{f.index} logical start", f.logical_start, U32
+        yield f"FMMU{f.index} length", f.length_bytes, U16
+        yield f"FMMU{f.index} physical start", f.physical_start, U16
+
+
+def _pdo_fields(s: Slave) -> Iterator[_Field]:
+    for p in s.pdos:
+        at = f"{'RxPdo' if p.direction is Direction.OUTPUT else 'TxPdo'} 0x{p.index:04X}"
+        yield f"{at} <Index>", p.index, U16
+        yield f"{at} Sm", p.sync_manager, SM_INDEX
+        for n, e in enumerate(p.entries, 1):
+            entry = f"{at} Entry {n} ({e.name})" if e.name else f"{at} Entry {n}"
+            yield f"{entry} <Index>", e.index, U16
+            yield f"{entry} <SubIndex>", e.subindex, U8
+            yield f"{entry} <BitLen>", e.bit_size, BIT_LEN
+
+
+def _dc_fields(s: Slave) -> Iterator[_Field]:
+    for kind, areas in (("Send", s.outputs), ("Recv", s.inputs)):
+        for a in areas:
+            yield f"<ProcessData><{kind}><BitStart>", a.bit_start, LOGICAL_BIT
+            yield f"<ProcessData><{kind}><BitLength>", a.bit_length, COUNT
+    if s.dc is None:
+        return
+    yield "<DC><CycleTime0>", s.dc.cycle_time0_ns, U32
+    yield "<DC><CycleTime1>", s.dc.cycle_time1_ns, U32
+    yield "<DC><ShiftTime>", s.dc.shift_time_ns, I32
+    yield "<DC><AssignActivate>", s.dc.assign_activate, U16
+
+
+def _slave_fields(s: Slave) -> Iterator[_Field]:
+    yield from _identity_fields(s)
+    yield from _mailbox_fields(s.mailbox)
+    yield from _sm_fmmu_fields(s)
+    yield from _pdo_fields(s)
+    yield from _dc_fields(s)
+    yield from _init_cmds_fields(s.init_cmds)
+
+
+def _cyclic_command_fields(c: CyclicCommand) -> Iterator[_Field]:
+    yield "<Cmd>", c.cmd, U8
+    yield "<Adp>", c.adp, U16
+    yield "<Ado>", c.ado, U16
+    yield "<Addr>", c.logical_address, U32
+    yield "<DataLength>", c.data_length_bytes, DATA_LENGTH
+    yield "<Cnt>", c.expected_wkc, U16
+    yield "<InputOffs>", c.input_offset_bytes, COUNT
+    yield "<OutputOffs>", c.output_offset_bytes, COUNT
+
+
+def _cyclic_findings(eni: Eni) -> Iterator[Finding]:
+    for t, task in enumerate(eni.cyclic, 1):
+        yield from _range_findings(
+            f"cyclic task {t}", [("<CycleTime> (ns)", task.cycle_time_ns, POSITIVE)]
+        )
+        for fn, frame in enumerate(task.frames, 1):
+            # CycleTimeFactor (Elmo Application Studio) is no bus field; its exports write 0.
+            where = f"cyclic task {t} frame {fn}"
+            for cn, c in enumerate(frame.commands, 1):
+                yield from _range_findings(
+                    f"{where} Cmd {cn} ({mnemonic(c.cmd)})", _cyclic_command_fields(c)
+                )
+
+
+def _image_fields(eni: Eni) -> Iterator[_Field]:
+    pi = eni.process_image
+    yield "<Inputs><ByteSize>", pi.inputs_bytes, COUNT
+    yield "<Outputs><ByteSize>", pi.outputs_bytes, COUNT
+    for v in pi.variables:
+        yield f"variable {v.name!r} <BitSize>", v.bit_size, COUNT
+
+
+def check_field_ranges(eni: Eni) -> Iterator[Finding]:
+    """Numbers outside the width their register, datagram field or CoE object gives them."""
+    master = eni.master
+    yield from _range_findings(
+        "master",
+        [
+            ("<CycleTime> (ns)", master.cycle_time_ns, POSITIVE),
+            *_init_cmds_fields(master.init_cmds),
+        ],
+    )
+    for s in eni.slaves:
+        where = (
+            f"slave {s.position} ({s.name.strip()})" if s.name.strip() else f"slave {s.position}"
+        )
+        yield from _range_findings(where, _slave_fields(s), s.position)
+    yield from _cyclic_findings(eni)
+    yield from _range_findings("process image", _image_fields(eni))
+
+
 def check_cyclic_present(eni: Eni) -> Iterator[Finding]:
     if eni.slaves and not eni.cyclic_frames:
         yield _warning("no-cyclic-frames", "the ENI has slaves but no cyclic frame")
@@ -368,6 +565,7 @@ CHECKS: tuple[Callable[[Eni], Iterator[Finding]], ...] = (
     check_wkc,
     check_pdo_sizes,
     check_process_image,
+    check_field_ranges,
     check_cyclic_present,
 )
 
@@ -391,9 +589,12 @@ def validate_report(eni: Eni, findings: tuple[Finding, ...]) -> dict[str, Any]:
 
 __all__ = [
     "CHECKS",
+    "RANGE_CODE",
     "VALIDATE_SCHEMA",
     "Finding",
     "Severity",
+    "Width",
+    "check_field_ranges",
     "expected_wkc",
     "validate_eni",
     "validate_report",
