@@ -466,7 +466,8 @@ def _sm_fmmu_fields(s: Slave) -> Iterator[_Field]:
 
 def _pdo_fields(s: Slave) -> Iterator[_Field]:
     for p in s.pdos:
-        at = f"{'RxPdo' if p.direction is Direction.OUTPUT else 'TxPdo'} 0x{p.index:04X}"
+        index = f"0x{p.index:04X}" if p.index >= 0 else str(p.index)
+        at = f"{'RxPdo' if p.direction is Direction.OUTPUT else 'TxPdo'} {index}"
         yield f"{at} <Index>", p.index, U16
         yield f"{at} Sm", p.sync_manager, SM_INDEX
         for n, e in enumerate(p.entries, 1):
