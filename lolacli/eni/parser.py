@@ -128,6 +128,16 @@ def _defused_gate(raw: bytes, source: str) -> None:
         raise EniError(f"unsupported XML encoding: {exc}", path=source, line=1) from exc
 
 
+def _field(value: int, bits: int) -> int:
+    """A number of a ``bits``-wide field: negative values down to -2^(bits-1) are its two's
+    complement (ENIs write the auto-increment address 0xFFFF as -1); any other value
+    outside the field stays as written, for ``eni validate`` to report rather than a
+    silent wrap (station 65537 is not station 1)."""
+    if -(1 << (bits - 1)) <= value < 0:
+        return value & ((1 << bits) - 1)
+    return value
+
+
 class _NullTarget:
     """An expat target that builds nothing: the gate only checks, lxml builds the tree."""
 
@@ -321,8 +331,8 @@ class _Reader:
         return InitCmd(
             transitions=self.texts(el, "Transition"),
             cmd=cmd,
-            adp=adp & 0xFFFF,
-            ado=ado & 0xFFFF,
+            adp=_field(adp, 16),
+            ado=_field(ado, 16),
             data=data,
             expected_wkc=self.number(el, "Cnt"),
             comment=self.text(el, "Comment").strip(),
@@ -349,7 +359,7 @@ class _Reader:
             position=position,
             name=self.text(info, "Name"),
             identity=self.identity(info, position),
-            station_address=self.need(info, "PhysAddr") & 0xFFFF,
+            station_address=_field(self.need(info, "PhysAddr"), 16),
             auto_inc_address=self.auto_inc(info, position),
             previous_port=port,
             previous_station_address=port_address,
@@ -366,17 +376,17 @@ class _Reader:
     def auto_inc(self, info: _El, position: int) -> int:
         """AutoIncAddr as a 16-bit word (the ENI may write 65535 or -1); absent: from position."""
         value = self.number(info, "AutoIncAddr")
-        return (-(position - 1) if value is None else value) & 0xFFFF
+        return _field(-(position - 1) if value is None else value, 16)
 
     def identity(self, info: _El, position: int) -> Identity:
         for name in ("PhysAddr", "VendorId", "ProductCode"):
             if self.child(info, name) is None:
                 raise self.error(info, f"slave {position}: <Info> has no <{name}>")
         return Identity(
-            vendor_id=self.need(info, "VendorId") & 0xFFFFFFFF,
-            product_code=self.need(info, "ProductCode") & 0xFFFFFFFF,
-            revision=(self.number(info, "RevisionNo", 0) or 0) & 0xFFFFFFFF,
-            serial=(self.number(info, "SerialNo", 0) or 0) & 0xFFFFFFFF,
+            vendor_id=_field(self.need(info, "VendorId"), 32),
+            product_code=_field(self.need(info, "ProductCode"), 32),
+            revision=_field(self.number(info, "RevisionNo", 0) or 0, 32),
+            serial=_field(self.number(info, "SerialNo", 0) or 0, 32),
         )
 
     def previous_port(self, el: _El) -> tuple[str | None, int | None]:
@@ -582,9 +592,9 @@ class _Reader:
             cmd=cmd,
             data_length_bytes=length,
             expected_wkc=self.number(el, "Cnt"),
-            adp=None if adp is None else adp & 0xFFFF,
-            ado=None if ado is None else ado & 0xFFFF,
-            logical_address=None if addr is None else addr & 0xFFFFFFFF,
+            adp=None if adp is None else _field(adp, 16),
+            ado=None if ado is None else _field(ado, 16),
+            logical_address=None if addr is None else _field(addr, 32),
             input_offset_bytes=self.number(el, "InputOffs"),
             output_offset_bytes=self.number(el, "OutputOffs"),
             states=self.texts(el, "State"),

@@ -2,9 +2,8 @@
 its field is one ``value-out-of-range`` error naming slave and element; just inside, none.
 
 File-level cases mutate one field of ``eni_examples/single_drive.xml`` (text replacement in a
-tmp copy) and run the CLI; model-level cases cover the fields the parser folds into their
-width while reading (station/auto-increment addresses, identity, datagram ADP/ADO/Addr,
-register blocks decoded from InitCmd data), so a file cannot carry them out of range.
+tmp copy) and run the CLI; model-level cases also cover the fields a file cannot carry out of
+range (register blocks decoded from InitCmd data) and models built in code.
 """
 
 from __future__ import annotations
@@ -73,6 +72,22 @@ WATCHDOG = "<Comment>watchdog divider 100 us</Comment>"
 INTERPOLATION = "<Comment>interpolation period: 5 x 10^-4 s</Comment>"
 C = Case
 CASES = [
+    # slave identity and addresses: kept as written by the parser (not folded into 16 or 32
+    # bits), except negative values within the width (AutoIncAddr -1 is 0xFFFF)
+    C("phys-addr", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>", "65536",
+      "65535", "<Info><PhysAddr>"),
+    C("auto-inc-addr", None, "<AutoIncAddr>#x0000</AutoIncAddr>",
+      "<AutoIncAddr>{}</AutoIncAddr>", "-32769", "-1", "<Info><AutoIncAddr>"),
+    C("vendor-id", None, "<VendorId>#x0000009a</VendorId>", "<VendorId>{}</VendorId>",
+      "#x100000000", "-1", "<Info><VendorId>"),
+    C("product-code", None, "<ProductCode>#x00030924</ProductCode>",
+      "<ProductCode>{}</ProductCode>", "#x100000000", "#xffffffff", "<Info><ProductCode>"),
+    C("serial-no", None, "<SerialNo>4097</SerialNo>", "<SerialNo>{}</SerialNo>",
+      "-2147483649", "-2147483648", "<Info><SerialNo>"),
+    C("cyclic-ado", AL_STATUS, "<Ado>#x0130</Ado>", "<Ado>{}</Ado>", "#x10000", "#xffff",
+      f"{BRD} <Ado>", slave=None),
+    C("cyclic-addr", PD_CMD, "<Addr>#x00010000</Addr>", "<Addr>{}</Addr>", "#x100000000",
+      "#xffffffff", f"{LRW} <Addr>", slave=None, cascades=frozenset({"wkc-mismatch"})),
     # PDOs (ETG.1000.6: object index u16, subindex u8; mapping entry u32 = index|sub|bits)
     C("pdo-index", "<TxPdo", "<Index>#x1a00</Index>", "<Index>{}</Index>", "#x10000", "#xffff",
       "TxPdo 0x10000 <Index>"),
