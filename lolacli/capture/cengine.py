@@ -51,10 +51,11 @@ def _library() -> ctypes.CDLL | None:
 
 
 def c_available() -> bool:
-    """Whether the C kernel was built (``pip install`` with a C compiler)."""
+    """Whether the C kernel was built (``pip install`` with a C compiler) and loads with
+    the functions this module expects (a stale build from an older checkout may not)."""
     try:
         return _library() is not None
-    except OSError:
+    except (OSError, AttributeError):
         return False
 
 
