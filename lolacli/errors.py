@@ -97,3 +97,41 @@ class SdoAbortError(LolaError):
             f"SDO 0x{index:04X}:{subindex:02X} aborted: code 0x{code:08X}"
             + (f", {message}" if message else "")
         )
+
+
+class TransitionRefusedError(LolaError):
+    """A slave refused an AL state transition (or did not reach the state in time).
+
+    ``al_status_code`` is the slave's register 0x0134 (ETG.1000.6 Table 11) and ``text``
+    its meaning; ``transition`` is the ENI's name for it ("IP", "PS", "SO", ...).
+    """
+
+    def __init__(
+        self,
+        slave: str,
+        position: int,
+        transition: str,
+        al_status_code: int | None,
+        text: str,
+        detail: str = "",
+    ) -> None:
+        self.slave = slave
+        self.position = position
+        self.transition = transition
+        self.al_status_code = al_status_code
+        self.text = text
+        self.detail = detail
+        code = "" if al_status_code is None else f": AL status code 0x{al_status_code:04X}"
+        super().__init__(
+            f"slave {position} ({slave}) refused {transition}{code} {text}"
+            + (f" ({detail})" if detail else "")
+        )
+
+
+class LinkError(UsageError):
+    """A Bus Variable cannot be linked to a process-image variable: unknown name, wrong
+    type or size, wrong direction (exit 2). ``name`` is the variable's ENI name."""
+
+    def __init__(self, name: str, message: str) -> None:
+        self.name = name
+        super().__init__(f"bus variable {name!r}: {message}")

@@ -16,7 +16,6 @@ device cycle waits with the outputs it was due (:meth:`Chain.hold_deferred_cycle
 from __future__ import annotations
 
 import ctypes
-import errno
 import gc
 import os
 import select
@@ -28,10 +27,8 @@ from dataclasses import dataclass
 
 from lolacli.emulator.chain import Chain
 from lolacli.errors import TransportError
+from lolacli.rawsocket import MAX_FRAME_BYTES, PACKET_OUTGOING, open_socket
 
-ETH_P_ECAT = 0x88A4
-PACKET_OUTGOING = 4
-MAX_FRAME_BYTES = 1600
 DEFAULT_GRACE_S = 100e-6
 PR_SET_TIMERSLACK = 29
 TIMER_SLACK_NS = 1000
@@ -44,28 +41,6 @@ class ServerStats:
     lost: int = 0
     started_ns: int = 0
     max_service_ns: int = 0
-
-
-def open_socket(iface: str) -> socket.socket:
-    """A raw packet socket bound to ``iface`` for ethertype 0x88A4; TransportError if not."""
-    try:
-        sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(ETH_P_ECAT))
-    except PermissionError as exc:
-        raise TransportError(
-            f"no permission for a raw socket ({exc.strerror}); run as root "
-            "or give python CAP_NET_RAW"
-        ) from None
-    except OSError as exc:
-        raise TransportError(f"cannot open a raw socket: {exc.strerror or exc}") from None
-    try:
-        sock.bind((iface, ETH_P_ECAT))
-    except OSError as exc:
-        sock.close()
-        if exc.errno in (errno.ENODEV, errno.ENXIO) or "No such device" in str(exc):
-            raise TransportError(f"no such interface: {iface}") from None
-        raise TransportError(f"cannot bind to {iface}: {exc.strerror or exc}") from None
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    return sock
 
 
 class RawSocketServer:
