@@ -9,7 +9,7 @@ import typer
 from typer.core import TyperGroup
 
 from lolacli import __version__
-from lolacli.cli import bus, bus_emulate, bus_timing, capture, eni  # noqa: F401
+from lolacli.cli import bus, bus_emulate, bus_simulate, bus_timing, capture, eni  # noqa: F401
 from lolacli.cli.common import debug_enabled
 
 

@@ -112,6 +112,36 @@ CONTROLWORD_FAULT_RESET = 0x0080
 _STATE_MASK = 0x006F
 
 
+def _state_of(word: int) -> Cia402State | int:
+    """The power state a statusword shows (CiA 402-2 Table 30: bits 0-3, 5, 6)."""
+    for state, mask in _PATTERNS:
+        if word & mask == state:
+            return state
+    return word & _STATE_MASK
+
+
+_PATTERNS = (
+    (Cia402State.NOT_READY_TO_SWITCH_ON, 0x4F),
+    (Cia402State.SWITCH_ON_DISABLED, 0x4F),
+    (Cia402State.READY_TO_SWITCH_ON, 0x6F),
+    (Cia402State.SWITCHED_ON, 0x6F),
+    (Cia402State.OPERATION_ENABLED, 0x6F),
+    (Cia402State.QUICK_STOP_ACTIVE, 0x6F),
+    (Cia402State.FAULT_REACTION_ACTIVE, 0x4F),
+    (Cia402State.FAULT, 0x4F),
+)
+#: masked statusword -> state, for every value the mask leaves
+_STATE_TABLE = {w: _state_of(w) for w in range(0x80) if w & ~_STATE_MASK == 0}
+#: the controlword that leads from a state towards operation enabled
+_TOWARDS_ENABLED = {
+    Cia402State.FAULT: CONTROLWORD_FAULT_RESET,
+    Cia402State.FAULT_REACTION_ACTIVE: CONTROLWORD_FAULT_RESET,
+    Cia402State.SWITCH_ON_DISABLED: CONTROLWORD_SHUTDOWN,
+    Cia402State.NOT_READY_TO_SWITCH_ON: CONTROLWORD_SHUTDOWN,
+    Cia402State.READY_TO_SWITCH_ON: CONTROLWORD_SWITCH_ON,
+}
+
+
 class Cia402Drive(BusSlave):
     """A CiA 402 servo drive in cyclic synchronous position (the seed's Elmo drive class).
 
@@ -132,27 +162,16 @@ class Cia402Drive(BusSlave):
     def __init__(self, image: ProcessImage | Master, slave: str) -> None:
         super().__init__(image, slave)
         self.want_enabled = False
+        self.state: Cia402State | int = Cia402State.NOT_READY_TO_SWITCH_ON
         self._target: int | None = None
-
-    @property
-    def state(self) -> Cia402State | int:
-        word = self.statusword.value & _STATE_MASK
-        if word & 0x4F == Cia402State.SWITCH_ON_DISABLED:
-            return Cia402State.SWITCH_ON_DISABLED
-        if word & 0x4F in (
-            Cia402State.NOT_READY_TO_SWITCH_ON,
-            Cia402State.FAULT,
-            Cia402State.FAULT_REACTION_ACTIVE,
-        ):
-            return Cia402State(word & 0x4F)
-        try:
-            return Cia402State(word)
-        except ValueError:
-            return word
+        self._controlword = -1
+        if self.mode is not None:
+            self.mode.value = MODE_CSP
 
     @property
     def enabled(self) -> bool:
-        return self.state == Cia402State.OPERATION_ENABLED
+        """The drive showed *operation enabled* in the last cycle's statusword."""
+        return self.state is Cia402State.OPERATION_ENABLED
 
     @property
     def actual_position(self) -> int:
@@ -164,7 +183,11 @@ class Cia402Drive(BusSlave):
 
     @target_position.setter
     def target_position(self, value: int) -> None:
-        self._target = int(value)
+        """The next set-point; it goes out in this cycle's frame when the drive is enabled
+        (set between procData and copyTXData, as the seed's updateDes)."""
+        self._target = value
+        if self.state is Cia402State.OPERATION_ENABLED and self.target is not None:
+            self.target.value = value
 
     def enable(self) -> None:
         self.want_enabled = True
@@ -173,22 +196,15 @@ class Cia402Drive(BusSlave):
         self.want_enabled = False
 
     def process(self) -> None:
-        state = self.state
-        if self.mode is not None:
-            self.mode.value = MODE_CSP
+        state = self.state = _STATE_TABLE[self.statusword.value & _STATE_MASK]
         if not self.want_enabled:
-            self.controlword.value = CONTROLWORD_SHUTDOWN if state != Cia402State.FAULT else 0
-        elif state in (Cia402State.FAULT, Cia402State.FAULT_REACTION_ACTIVE):
-            self.controlword.value = CONTROLWORD_FAULT_RESET
-        elif state == Cia402State.SWITCH_ON_DISABLED:
-            self.controlword.value = CONTROLWORD_SHUTDOWN
-        elif state == Cia402State.READY_TO_SWITCH_ON:
-            self.controlword.value = CONTROLWORD_SWITCH_ON
+            cw = 0 if state is Cia402State.FAULT else CONTROLWORD_SHUTDOWN
         else:
-            self.controlword.value = CONTROLWORD_ENABLE_OPERATION
-        if self.target is not None:
-            if state != Cia402State.OPERATION_ENABLED or self._target is None:
-                self._target = self.actual_position  # follow: enabling never jumps
+            cw = _TOWARDS_ENABLED.get(state, CONTROLWORD_ENABLE_OPERATION)  # type: ignore[call-overload]
+        if cw != self._controlword:
+            self.controlword.value = self._controlword = cw
+        if state is not Cia402State.OPERATION_ENABLED and self.target is not None:
+            self._target = self.actual_position  # follow: enabling never jumps
             self.target.value = self._target
 
 

@@ -99,6 +99,7 @@ class ChainTransport:
         self._inbox: deque[Received] = deque()
         self.frames_sent = 0
         self.frames_lost = 0
+        self.processing_ns = 0  # CPU time spent in the processor (the emulated bus itself)
 
     def now_ns(self) -> int:
         return self._now
@@ -110,7 +111,10 @@ class ChainTransport:
             tap(t, frame, False)
         self.frames_sent += 1
         self._port_free_ns = t + frame_time_on_wire_ns(len(frame), self.link_bit_s)
+        clock = time.perf_counter_ns
+        c0 = clock()
         reply, delay_ns = self.processor.process(frame, t)
+        self.processing_ns += clock() - c0
         if reply is None:
             self.frames_lost += 1
         else:

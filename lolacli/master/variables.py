@@ -119,21 +119,32 @@ class BusVariable:
     @property
     def value(self) -> Any:
         image = self._need_image()
-        if self.direction is Direction.INPUT:
-            return self.read(image.snapshot.data)
-        return self.read(image.outputs)
+        data = image.snapshot.data if self.direction is Direction.INPUT else image.outputs
+        if self._bit == 0 and self._struct is not None:
+            return self._struct.unpack_from(data, self._byte)[0]
+        return self.read(data)
 
     @value.setter
     def value(self, value: Any) -> None:
-        image = self._need_image()
-        if self.direction is Direction.INPUT:
-            raise UsageError(f"bus variable {self.name!r} is an input: it cannot be written")
-        checked = self._check(value)
-        with image.lock:
-            if self._bit == 0 and self._struct is not None:
-                self._struct.pack_into(image.outputs, self._byte, checked)
-            else:
-                self._to_bits(image.outputs, checked)
+        # one pack_into is one step under the GIL: the master's copy of the outputs into
+        # the frame sees the value before or after, never half of it (no lock needed for
+        # one variable; hold image.lock around several to send them in one cycle)
+        image = self._image
+        if image is None or self.direction is Direction.INPUT:
+            self._refuse_write()
+        if self._bit == 0 and self._struct is not None:
+            try:
+                self._struct.pack_into(image.outputs, self._byte, value)  # type: ignore[union-attr]
+                return
+            except struct.error:
+                self._check(value)
+                raise
+        self._to_bits(image.outputs, self._check(value))  # type: ignore[union-attr]
+
+    def _refuse_write(self) -> None:
+        if self._image is None:
+            raise UsageError(f"{self!r} is not linked to a process-image variable")
+        raise UsageError(f"bus variable {self.name!r} is an input: it cannot be written")
 
     def _need_image(self) -> ProcessImage:
         if self._image is None:

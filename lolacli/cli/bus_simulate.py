@@ -1,0 +1,239 @@
+"""`lolacli bus simulate`: the ENI-driven master against the emulated chain, virtual time."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from lolacli.cli.bus import app
+from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json
+from lolacli.errors import UsageError
+
+
+@app.command("simulate")
+def simulate_cmd(
+    eni: Annotated[
+        Path | None,
+        typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain."),
+    ] = None,
+    rate: Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")] = 2000.0,
+    duration: Annotated[
+        str | None,
+        typer.Option("--duration", help="Simulated time: 10s, 500ms, … (default 10s)."),
+    ] = None,
+    cycles: Annotated[
+        int | None,
+        typer.Option("--cycles", min=0, help="Number of cycles (instead of --duration)."),
+    ] = None,
+    pcap: Annotated[
+        Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")
+    ] = None,
+    mcap: Annotated[
+        Path | None,
+        typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
+    ] = None,
+    drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
+    stuck_safeop: Annotated[
+        list[int] | None,
+        typer.Option(
+            "--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."
+        ),
+    ] = None,
+    link_down: Annotated[
+        str | None,
+        typer.Option(
+            "--link-down",
+            metavar="K[@SECONDS]",
+            help="Cut the cable after slave K (0: at the master), from the start or SECONDS "
+            "into the cyclic run.",
+        ),
+    ] = None,
+    drift_ppb: Annotated[
+        int, typer.Option("--drift-ppb", help="Clock drift step along the line (ppb).")
+    ] = 0,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
+    shm: Annotated[
+        str | None,
+        typer.Option(
+            "--shm",
+            metavar="NAME",
+            help="Publish inputs and take outputs through shared memory NAME "
+            "(lolacli.master.shm.ShmClient).",
+        ),
+    ] = None,
+    pace: Annotated[
+        bool, typer.Option("--pace", help="Run no faster than real time (with --shm).")
+    ] = False,
+    watch: Annotated[
+        list[str] | None,
+        typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
+    ] = None,
+    set_value: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."
+        ),
+    ] = None,
+    no_middleware: Annotated[
+        bool,
+        typer.Option(
+            "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
+        ),
+    ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    fmt: FormatOption = OutputFormat.human,
+) -> None:
+    """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
+    virtual time, enable the drives, move every joint on a minimum-jerk back-and-forth,
+    and report round trip, WKC, lost frames, DC error and the per-cycle software sections
+    (lolacli.simulate/1). Exit 1 on WKC mismatches, lost frames or refused transitions;
+    2 for bad options, unknown variables, values of the wrong type or an unwritable
+    output; 3 for an ENI that cannot be read or simulated; 4 when no slave answers;
+    130 when interrupted (recordings are kept up to the last cycle)."""
+    import signal
+
+    from lolacli.emulator.run import parse_link_down
+    from lolacli.files import load_eni
+    from lolacli.master.simulate import SimulateOptions, simulate
+    from lolacli.timing.model import parse_duration_ns
+
+    if duration is not None and cycles is not None:
+        raise UsageError("--duration and --cycles contradict each other; give one")
+    if not 0.0 <= drop_p <= 1.0:
+        raise typer.BadParameter(f"{drop_p} is not in [0, 1]", param_hint="--drop-p")
+    n_cycles = cycles
+    if n_cycles is None:
+        ns = parse_duration_ns(duration) if duration is not None else 10_000_000_000
+        n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
+    cut = parse_link_down(link_down) if link_down is not None else None
+    pairs = []
+    for item in set_value or ():
+        name, eq, value = item.rpartition("=")
+        if not eq or not name:
+            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
+        pairs.append((name, value))
+    model = load_eni(eni if eni is not None else default_eni())
+    options = SimulateOptions(
+        rate_hz=rate,
+        cycles=n_cycles,
+        pcap=pcap,
+        mcap=mcap,
+        drop_probability=drop_p,
+        stuck_safeop=tuple(stuck_safeop or ()),
+        link_down=cut,
+        drift_ppb=drift_ppb,
+        seed=seed,
+        middleware=not no_middleware,
+        shm=shm,
+        pace=pace,
+        watch=tuple(watch or ()),
+        set_values=tuple(pairs),
+    )
+    stop = {"flag": False}
+
+    def _stop(_signum: int, _frame: object) -> None:
+        stop["flag"] = True
+
+    old_int = signal.signal(signal.SIGINT, _stop)
+    old_term = signal.signal(signal.SIGTERM, _stop)
+    try:
+        with _progress(quiet or not sys.stderr.isatty()) as progress:
+            result = simulate(model, options, progress=progress, should_stop=lambda: stop["flag"])
+    finally:
+        signal.signal(signal.SIGINT, old_int)
+        signal.signal(signal.SIGTERM, old_term)
+    if fmt is OutputFormat.json:
+        emit_json(result.doc)
+    else:
+        _render(result.doc)
+    if result.interrupted:
+        sys.stderr.write("lolacli: interrupted; recordings kept up to the last cycle\n")
+        raise typer.Exit(130)
+    if result.failed:
+        raise typer.Exit(1)
+
+
+class _progress:
+    """A rich progress bar on stderr (nothing when ``off``)."""
+
+    def __init__(self, off: bool) -> None:
+        self.off = off
+        self._bar: Any = None
+        self._task: Any = None
+
+    def __enter__(self) -> Any:
+        if self.off:
+            return None
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        from lolacli.cli.common import stderr_console
+
+        self._bar = Progress(
+            TextColumn("simulating"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} cycles"),
+            TimeRemainingColumn(),
+            console=stderr_console(),
+            transient=True,
+        )
+        self._bar.__enter__()
+        self._task = self._bar.add_task("cycles", total=None)
+
+        def update(done: int, total: int) -> None:
+            self._bar.update(self._task, completed=done, total=total)
+
+        return update
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(*exc)
+
+
+def _render(doc: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    from lolacli.cli.common import stdout_console
+
+    console = stdout_console()
+    rt = doc["round_trip_us"] or {}
+    table = Table(title=f"Simulation ({doc['eni']})", show_header=False, title_justify="left")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    rows = [
+        ("cycles", f"{doc['cycles']} at {doc['rate_hz']:g} Hz (+{doc['startup_cycles']} start-up)"),
+        ("slaves", str(doc["slaves"])),
+        ("frame", f"{doc['frame_bytes']} B, wire time {doc['wire_time_us']:g} µs"),
+        ("round trip", f"{rt.get('mean', 0):g} µs (max {rt.get('max', 0):g})"),
+        ("WKC mismatches", f"{doc['wkc_mismatches']} of {doc['wkc_checked']} checked"),
+        ("lost frames", str(doc["lost_frames"])),
+        (
+            "DC max error",
+            f"{doc['dc_max_error_ns']} ns" if doc["dc_max_error_ns"] is not None else "-",
+        ),
+        ("drives enabled", f"{doc['drives_enabled']} of {doc['drives']}"),
+        ("software per cycle", f"{doc['software_us_per_cycle']} µs"),
+        ("max rate (bus only)", f"{doc['max_rate_hz'] or 0:,} Hz"),
+        ("max rate (bus + software)", f"{doc['max_rate_with_software_hz'] or 0:,} Hz"),
+        ("virtual / wall time", f"{doc['realtime_factor']}×"),
+    ]
+    for name, value in rows:
+        table.add_row(name, value)
+    console.print(table)
+    if doc["sections_us"]:
+        sections = Table(
+            title="Per-cycle sections (seed Tables I/II, Fig. 7)", title_justify="left"
+        )
+        for column in ("section", "thread", "mean µs", "p99 µs", "max µs"):
+            sections.add_column(
+                column, justify="left" if column in ("section", "thread") else "right"
+            )
+        for name, s in doc["sections_us"].items():
+            sections.add_row(name, s["thread"], f"{s['mean']:g}", f"{s['p99']:g}", f"{s['max']:g}")
+        console.print(sections)
+    for r in doc["refusals"]:
+        console.print(
+            f"refused: slave {r['position']} ({r['slave']}) {r['transition']}: {r['text']}"
+        )
