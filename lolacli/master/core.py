@@ -174,6 +174,7 @@ class Master:
         self._stray: dict[int, Received] = {}
         self._plans: dict[AlState, list[FramePlan]] = {}
         self._pending: list[tuple[FramePlan, int, int]] = []  # (plan, index, sent ns)
+        self._pending_dc: list[tuple[int, int]] = []  # DC diagnosis frames: (index, sent)
         self._cyclic = False
         self._in_cycle = False
         self._next_cycle_ns = 0
@@ -246,21 +247,20 @@ class Master:
         return out
 
     def _await(self, index: int, timeout_ns: int) -> Received | None:
+        """The returned frame with ``index`` within ``timeout_ns``; other returned frames
+        that come meanwhile are kept for whoever waits for them."""
         got = self._stray.pop(index, None)
         if got is not None:
             return got
         deadline = self.transport.now_ns() + timeout_ns
         while True:
-            left = deadline - self.transport.now_ns()
-            r = self.transport.recv(max(0, left))
+            r = self.transport.recv(max(0, deadline - self.transport.now_ns()))
             if r is None:
                 return None
             frame_index = r.frame[_INDEX_AT] if len(r.frame) > _INDEX_AT else -1
             if frame_index == index:
                 return r
             self._stray[frame_index] = r
-            if left <= 0:
-                return None
 
     def fprd(self, station: int, ado: int, length: int) -> Datagram:
         return self.exchange_one(Datagram.physical(Command.FPRD, station, ado, length))
@@ -543,7 +543,10 @@ class Master:
             Command.ARMW, (-(reference.position - 1)) & 0xFFFF, Register.DC_SYSTEM_TIME, 8
         )
         for _ in range(self.options.dc_drift_frames):
-            self.exchange_one(compensate)
+            try:  # a lost compensation frame is just one step fewer
+                self.exchange([compensate], retries=0)
+            except TransportError:
+                continue
         self.check_dc()
 
     def system_time_ns(self) -> int:
@@ -561,16 +564,11 @@ class Master:
         return -(-start // cycle) * cycle
 
     def check_dc(self) -> int | None:
-        """Read 0x092C of every synchronised DC slave: the largest |difference| in ns."""
-        followers = [s for s in self.dc_slaves if s is not self.dc_reference]
-        if not followers:
+        """Read 0x092C of every synchronised DC slave but the reference (its own value
+        means nothing): the largest |difference| in ns."""
+        reads = self._dc_check_datagrams()
+        if not reads:
             return None
-        reads = [
-            Datagram.physical(
-                Command.FPRD, s.station_address, Register.DC_SYSTEM_TIME_DIFFERENCE, 4
-            )
-            for s in followers
-        ]
         worst = 0
         for d in self.exchange_many(reads):
             if d.wkc == 1:
@@ -687,14 +685,18 @@ class Master:
 
     def _rx(self) -> None:
         """Take the returned cyclic frames of the last cycle: inputs, WKC, round trip."""
+        if self._pending_dc:
+            self._take_dc_checks()
         if not self._pending:
             return
         pending, self._pending = self._pending, []
         stats = self.stats
         inputs = self.image.inputs
         mismatched = False
+        now = self.transport.now_ns()
         for plan, index, sent in pending:
-            got = self._stray.pop(index, None) or self._await(index, 0)
+            # a frame gets one cycle time to come back (more only when this cycle is late)
+            got = self._await(index, max(0, sent + self.cycle_time_ns - now))
             if got is None:
                 stats.cyclic_lost += 1
                 stats.frames_lost += 1
@@ -711,14 +713,57 @@ class Master:
     def _admin(self) -> None:
         every = self.options.dc_check_cycles
         if every and self.dc_slaves and self.stats.cycles % every == every - 1:
-            self.check_dc()
+            self._send_dc_check()
         for hook in self.admin:
             hook(self)
+
+    def _dc_check_datagrams(self) -> list[Datagram]:
+        return [
+            Datagram.physical(
+                Command.FPRD, s.station_address, Register.DC_SYSTEM_TIME_DIFFERENCE, 4
+            )
+            for s in self.dc_slaves
+            if s is not self.dc_reference
+        ]
+
+    def _send_dc_check(self) -> None:
+        """Send the DC diagnosis (0x092C of every follower) without waiting: the answer is
+        taken with the next cycle's frames, as a real master's acyclic traffic."""
+        reads = self._dc_check_datagrams()
+        if not reads or sum(d.wire_bytes for d in reads) > MAX_FRAME_DATAGRAM_BYTES:
+            return
+        index = self._new_index()
+        frame = encode_frame(
+            make_frame(
+                [replace(d, index=index) for d in reads],
+                src=self.source_mac,
+                dst=self.eni.master.destination_mac,
+            ),
+            pad=True,
+        )
+        sent = self.transport.send(frame)
+        self.stats.frames_sent += 1
+        self.stats.acyclic_frames += 1
+        self._pending_dc.append((index, sent))
+
+    def _take_dc_checks(self) -> None:
+        pending, self._pending_dc = self._pending_dc, []
+        now = self.transport.now_ns()
+        for index, sent in pending:
+            got = self._await(index, max(0, sent + self.cycle_time_ns - now))
+            if got is None:
+                self.stats.frames_lost += 1
+                continue
+            worst = 0
+            for d in decode_frame(got.frame).datagrams:
+                if d.wkc == 1:
+                    worst = max(worst, abs(decode_system_time_difference(d.data)))
+            self.stats.dc_errors_ns.append((sent, worst))
 
     def drain(self) -> None:
         """Take the answers of the last cycle's frames (at the next cycle time) and stop
         cycling."""
-        if self._pending:
+        if self._pending or self._pending_dc:
             self.transport.wait_until(self._next_cycle_ns)
             self._in_cycle = True
             try:
