@@ -118,5 +118,5 @@ class McapRecorder:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
-            self._writer.finish()
+            self._writer.finish()  # type: ignore[no-untyped-call]
             self._file.close()

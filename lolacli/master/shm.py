@@ -68,7 +68,7 @@ class ShmPublisher:
             raise UsageError(f"--shm {name}: {exc}") from None
         self.name = name
         self.n_in, self.n_out = inputs_bytes, outputs_bytes
-        buf = self.shm.buf
+        buf = self._buf()
         buf[0:8] = MAGIC
         _SIZES.pack_into(buf, _SIZES_AT, inputs_bytes, outputs_bytes)
         self._in_at = HEADER_BYTES
@@ -81,7 +81,7 @@ class ShmPublisher:
         self.applied = 0
 
     def publish(self, cycle: int, t_ns: int, inputs: bytes | bytearray) -> None:
-        buf = self.shm.buf
+        buf = self._buf()
         self._seq += 1
         _U64.pack_into(buf, _IN_SEQ, self._seq)  # odd: writing
         buf[self._in_at : self._in_at + self.n_in] = inputs
@@ -92,7 +92,7 @@ class ShmPublisher:
 
     def apply(self, outputs: bytearray) -> None:
         """Copy the bytes a client set (its mask) into ``outputs``, as of its last commit."""
-        buf = self.shm.buf
+        buf = self._buf()
         seq = _U64.unpack_from(buf, _OUT_SEQ)[0]
         if seq != self._out_seq and not seq & 1:
             data = bytes(buf[self._out_at : self._out_at + self.n_out])
@@ -106,6 +106,11 @@ class ShmPublisher:
             outputs[start:end] = data[start:end]
         if self._spans:
             self.applied += 1
+
+    def _buf(self) -> memoryview:
+        buf = self.shm.buf
+        assert buf is not None  # open until close()
+        return buf
 
     def close(self) -> None:
         try:
@@ -131,7 +136,7 @@ class ShmClient:
                     raise TransportError(f"no shared memory block {name!r}") from None
                 time.sleep(0.01)
         _untrack(self.shm)
-        buf = self.shm.buf
+        buf = self._buf()
         while bytes(buf[0:8]) != MAGIC:  # the bus may still be writing the header
             if time.monotonic() >= deadline:
                 raise TransportError(f"{name!r} is not a lolacli shared memory block")
@@ -146,7 +151,7 @@ class ShmClient:
 
     def read(self) -> Snapshot:
         """The inputs of the latest complete cycle (retries while the bus writes)."""
-        buf = self.shm.buf
+        buf = self._buf()
         while True:
             seq = _U64.unpack_from(buf, _IN_SEQ)[0]
             if seq & 1:
@@ -181,12 +186,17 @@ class ShmClient:
 
     def commit(self) -> None:
         """Hand the staged outputs to the bus (one consistent update)."""
-        buf = self.shm.buf
+        buf = self._buf()
         seq = _U64.unpack_from(buf, _OUT_SEQ)[0] | 1  # odd: writing
         _U64.pack_into(buf, _OUT_SEQ, seq)
         buf[self._out_at : self._out_at + self.n_out] = self.image.outputs
         buf[self._mask_at : self._mask_at + self.n_out] = self._mask
         _U64.pack_into(buf, _OUT_SEQ, seq + 1)
+
+    def _buf(self) -> memoryview:
+        buf = self.shm.buf
+        assert buf is not None  # open until close()
+        return buf
 
     def close(self) -> None:
         self.shm.close()

@@ -247,12 +247,12 @@ class ForceTorqueSensor(BusSlave):
     @property
     def force(self) -> tuple[float, float, float]:
         snap = self.image.snapshot
-        return tuple(snap[self.axes[f"Force {a}"]] for a in "XYZ")  # type: ignore[return-value]
+        return tuple(snap[self.axes[f"Force {a}"]] for a in "XYZ")
 
     @property
     def torque(self) -> tuple[float, float, float]:
         snap = self.image.snapshot
-        return tuple(snap[self.axes[f"Torque {a}"]] for a in "XYZ")  # type: ignore[return-value]
+        return tuple(snap[self.axes[f"Torque {a}"]] for a in "XYZ")
 
 
 def cia402_slaves(image: ProcessImage) -> list[str]:
