@@ -9,8 +9,9 @@ What is read per ``Descriptions/Devices/Device`` (ETG.2000 §5): ``<Type Product
 RevisionNo=>``, ``<Name LcId=…>`` (1033 preferred), ``<GroupType>``, the ``Physics``
 attribute, ``<Fmmu>``, ``<Sm>`` (kind, StartAddress, DefaultSize, ControlByte, Enable),
 ``<RxPdo>``/``<TxPdo>`` with their ``Sm`` attribute and entries, ``<Mailbox>`` protocols and
-CoE flags, ``<Dc>/<OpMode>`` and ``<Eeprom>`` (ByteSize, ConfigData). The object dictionary
-(``<Profile>/<Dictionary>``) is not read. Numbers are decimal, ``#x…`` or ``0x…``.
+CoE flags, ``<Dc>/<OpMode>``, ``<Eeprom>`` (ByteSize, ConfigData) and the object dictionary
+(``<Profile>/<Dictionary>``, :mod:`lolacli.eni.esi_dictionary`). Numbers are decimal,
+``#x…`` or ``0x…``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from lolacli.eni.esi_dictionary import EsiDictionary, read_dictionary
 from lolacli.eni.model import Direction, Identity, Pdo, PdoEntry
 from lolacli.eni.parser import parse_number, safe_tree
 from lolacli.errors import EniError
@@ -86,6 +88,7 @@ class EsiDevice:
     dc_op_modes: tuple[EsiDcOpMode, ...] = ()
     eeprom: EsiEeprom | None = None
     line: int | None = None
+    dictionary: EsiDictionary | None = None
 
     def sync_manager(self, kind: str) -> EsiSyncManager | None:
         """The first SM of ``kind`` (case-insensitive), or None."""
@@ -208,6 +211,7 @@ class _EsiReader:
             dc_op_modes=self.dc(el.find("Dc")),
             eeprom=self.eeprom(el.find("Eeprom")),
             line=el.sourceline,
+            dictionary=read_dictionary(el.find("Profile/Dictionary"), self),
         )
 
     def sm(self, index: int, el: _El) -> EsiSyncManager:
