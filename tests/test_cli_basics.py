@@ -5,7 +5,7 @@ import sys
 def test_help_lists_command_groups(cli):
     code, out, _ = cli("--help")
     assert code == 0
-    for group in ("eni", "bus", "capture"):
+    for group in ("eni", "bus", "capture", "sdo"):
         assert group in out
 
 
@@ -18,7 +18,8 @@ def test_help_does_not_import_heavy_libraries():
     probe = (
         "import sys\n"
         "from lolacli.cli.main import app\n"
-        "heavy = [m for m in ('numpy', 'matplotlib', 'scapy', 'pysoem', 'lxml', 'numba', 'rich')"
+        "heavy = [m for m in ('numpy', 'matplotlib', 'scapy', 'pysoem', 'lxml', 'numba', 'rich',"
+        " 'canopen', 'can', 'yaml', 'msgpack')"
         " if m in sys.modules]\n"
         "print(','.join(heavy))\n"
     )
@@ -28,8 +29,9 @@ def test_help_does_not_import_heavy_libraries():
 
 def _closed_early(*args: str) -> tuple[int, str]:
     """Run the CLI with a reader that takes 10 bytes and closes the pipe (`| head -c 10`)."""
-    p = subprocess.Popen([sys.executable, "-m", "lolacli", *args], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "lolacli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
     assert p.stdout is not None and p.stderr is not None
     p.stdout.read(10)
     p.stdout.close()
@@ -41,7 +43,7 @@ def test_a_reader_that_goes_away_does_not_change_the_exit_code():
     """Outputs larger than a pipe buffer (64 KiB): the write fails with EPIPE; the
     command still exits with what it found, silently."""
     lola = "eni_examples/lola.xml"
-    assert _closed_early("eni", "inspect", lola) == (0, "")            # rich tables
+    assert _closed_early("eni", "inspect", lola) == (0, "")  # rich tables
     assert _closed_early("eni", "inspect", lola, "--format", "json") == (0, "")
     # diff finds differences (exit 1) and says so in ~100 kB
     other = "eni_examples/ek1100_io.xml"

@@ -9,7 +9,7 @@ import typer
 from typer.core import TyperGroup
 
 from lolacli import __version__
-from lolacli.cli import bus, bus_emulate, bus_simulate, bus_timing, capture, eni  # noqa: F401
+from lolacli.cli import bus, bus_emulate, bus_simulate, bus_timing, capture, eni, sdo  # noqa: F401
 from lolacli.cli.common import debug_enabled
 
 
@@ -34,7 +34,7 @@ class _LolaGroup(TyperGroup):
 app = typer.Typer(
     cls=_LolaGroup,
     name="lolacli",
-    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation.",
+    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation, SDO.",
     rich_markup_mode=None,
     pretty_exceptions_enable=False,
     no_args_is_help=True,
@@ -43,6 +43,7 @@ app = typer.Typer(
 app.add_typer(eni.app, name="eni")
 app.add_typer(bus.app, name="bus")
 app.add_typer(capture.app, name="capture")
+app.add_typer(sdo.app, name="sdo")
 
 
 def _version(value: bool) -> None:

@@ -1,0 +1,255 @@
+"""What a client knows about a slave's objects: names, data types, access, defaults.
+
+A neutral description (no values, no IO) with one adapter per source, as cantools keeps
+one model and one adapter per file format: an EDS/DCF through canopen's importer
+(:func:`from_canopen`), an ESI ``<Dictionary>`` (:func:`from_esi`), the slave's own SDO
+Information service (:func:`from_sdo_info`), and the CiA 301 / ETG.1000.6 communication
+objects every slave has (:func:`standard_type`), used when nothing better is known.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from lolacli.eni.esi_dictionary import EsiDictionary
+from lolacli.wire.datatypes import DataType, Value, decode_value, type_name
+
+VAR, ARRAY, RECORD = "VAR", "ARRAY", "RECORD"
+
+
+@dataclass(frozen=True, slots=True)
+class OdEntry:
+    index: int
+    subindex: int
+    name: str
+    data_type: int | None  # None: not a basic type known here
+    access: str = "rw"  # ro, rw, wo, const
+    bit_size: int | None = None
+    default: Value | None = None
+    pdo_mapping: bool = False
+
+    @property
+    def readable(self) -> bool:
+        return self.access != "wo"
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("rw", "wo")
+
+    @property
+    def type_label(self) -> str:
+        return "?" if self.data_type is None else type_name(self.data_type)
+
+
+@dataclass(frozen=True, slots=True)
+class OdObject:
+    index: int
+    name: str
+    object_code: str  # VAR, ARRAY, RECORD
+    entries: tuple[OdEntry, ...]
+
+    def entry(self, subindex: int) -> OdEntry | None:
+        return next((e for e in self.entries if e.subindex == subindex), None)
+
+
+@dataclass(frozen=True)
+class Dictionary:
+    """Objects by index; ``source`` says where they came from (``eds``, ``esi``,
+    ``sdo_info``) and ``path`` which file, if any."""
+
+    objects: tuple[OdObject, ...]
+    source: str
+    path: str = ""
+    _index: dict[int, OdObject] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        for obj in self.objects:
+            self._index.setdefault(obj.index, obj)
+
+    def __iter__(self) -> Iterator[OdObject]:
+        return iter(self.objects)
+
+    def __len__(self) -> int:
+        return len(self.objects)
+
+    def object(self, index: int) -> OdObject | None:
+        return self._index.get(index)
+
+    def entry(self, index: int, subindex: int) -> OdEntry | None:
+        obj = self._index.get(index)
+        return None if obj is None else obj.entry(subindex)
+
+    def entries(self) -> Iterator[OdEntry]:
+        for obj in self.objects:
+            yield from obj.entries
+
+
+# --- CiA 301 / ETG.1000.6 communication objects ------------------------------------------------
+
+_U8, _U16, _U32 = DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32
+_STRING = DataType.VISIBLE_STRING
+_VARS: dict[int, DataType] = {
+    0x1000: _U32,  # device type
+    0x1001: _U8,  # error register
+    0x1002: _U32,  # manufacturer status register
+    0x1005: _U32,  # COB-ID SYNC
+    0x1006: _U32,  # communication cycle period
+    0x1007: _U32,  # synchronous window length
+    0x1008: _STRING,  # manufacturer device name
+    0x1009: _STRING,  # manufacturer hardware version
+    0x100A: _STRING,  # manufacturer software version
+    0x100C: _U16,  # guard time
+    0x100D: _U8,  # life time factor
+    0x1014: _U32,  # COB-ID EMCY
+    0x1015: _U16,  # inhibit time EMCY
+    0x1017: _U16,  # producer heartbeat time
+}
+#: Arrays/records: (first index, last index) -> type of subindex 1.. (sub 0 is UNSIGNED8).
+_RECORDS: tuple[tuple[int, int, dict[int, DataType] | DataType], ...] = (
+    (0x1003, 0x1003, _U32),  # pre-defined error field
+    (0x1010, 0x1011, _U32),  # store / restore parameters
+    (0x1016, 0x1016, _U32),  # consumer heartbeat time
+    (0x1018, 0x1018, _U32),  # identity: vendor, product, revision, serial
+    (0x1200, 0x12FF, {1: _U32, 2: _U32, 3: _U8}),  # SDO server/client parameter
+    (0x1400, 0x15FF, {1: _U32, 2: _U8, 3: _U16, 5: _U16}),  # RPDO communication
+    (0x1600, 0x17FF, _U32),  # RxPDO mapping
+    (0x1800, 0x19FF, {1: _U32, 2: _U8, 3: _U16, 5: _U16, 6: _U8}),  # TPDO communication
+    (0x1A00, 0x1BFF, _U32),  # TxPDO mapping
+    (0x1C00, 0x1C00, _U8),  # sync manager communication type
+    (0x1C10, 0x1C2F, _U16),  # sync manager PDO assignment
+)
+
+
+def standard_type(index: int, subindex: int) -> DataType | None:
+    """The data type of a CiA 301 / ETG.1000.6 communication object entry, if it is one."""
+    if index in _VARS:
+        return _VARS[index] if subindex == 0 else None
+    for first, last, types in _RECORDS:
+        if first <= index <= last:
+            if subindex == 0:
+                return _U8
+            if isinstance(types, dict):
+                return types.get(subindex)
+            return types
+    return None
+
+
+# --- adapters ----------------------------------------------------------------------------------
+
+
+def _value(data_type: int | None, raw: bytes | None) -> Value | None:
+    if raw is None:
+        return None
+    if data_type is None:
+        return bytes(raw)
+    try:
+        return decode_value(data_type, raw)
+    except Exception:  # a default that does not fit its type: keep the bytes
+        return bytes(raw)
+
+
+def from_esi(dictionary: EsiDictionary, path: str = "") -> Dictionary:
+    """An ESI device's ``<Dictionary>`` (read by :mod:`lolacli.eni.esi_dictionary`)."""
+    objects = []
+    for o in dictionary.objects:
+        entries = tuple(
+            OdEntry(
+                o.index,
+                e.subindex,
+                e.name,
+                e.data_type,
+                e.access,
+                e.bit_size,
+                _value(e.data_type, e.default),
+                bool(e.pdo_mapping),
+            )
+            for e in o.entries
+        )
+        objects.append(OdObject(o.index, o.name, o.object_code, entries))
+    return Dictionary(tuple(objects), "esi", path)
+
+
+def from_canopen(od: Any, path: str = "") -> Dictionary:
+    """A ``canopen.ObjectDictionary`` (an EDS/DCF through canopen's importer)."""
+    from canopen import objectdictionary as cod
+
+    objects = []
+    for index in od:
+        obj = od[index]
+        if isinstance(obj, cod.ODVariable):
+            objects.append(OdObject(index, obj.name, VAR, (_canopen_entry(obj),)))
+            continue
+        code = ARRAY if isinstance(obj, cod.ODArray) else RECORD
+        entries = tuple(_canopen_entry(obj.subindices[s]) for s in sorted(obj.subindices))
+        objects.append(OdObject(index, obj.name, code, entries))
+    return Dictionary(tuple(objects), "eds", path)
+
+
+def _canopen_entry(var: Any) -> OdEntry:
+    data_type = var.data_type
+    default = var.value if var.value is not None else var.default
+    if isinstance(default, bytearray):
+        default = bytes(default)
+    if data_type == DataType.BOOLEAN and isinstance(default, int):
+        default = bool(default)
+    return OdEntry(
+        var.index,
+        var.subindex,
+        var.name,
+        data_type,
+        var.access_type,
+        None if data_type is None else len(var),
+        default,
+        bool(var.pdo_mappable),
+    )
+
+
+def from_sdo_info(
+    objects: Iterable[tuple[int, str, int, Iterable[tuple[int, str, int, int, int]]]],
+) -> Dictionary:
+    """SDO Information answers: per object ``(index, name, object code, entries)`` with
+    entries ``(subindex, name, data type, bit length, object access bits)`` (ETG.1000.6
+    Tables 52 and 54; access bits 0–2 read in PREOP/SAFEOP/OP, 3–5 write)."""
+    out = []
+    codes = {7: VAR, 8: ARRAY, 9: RECORD}
+    for index, name, code, entries in objects:
+        items = tuple(
+            OdEntry(
+                index,
+                sub,
+                entry_name,
+                data_type or None,
+                _access_bits(access),
+                bits,
+                None,
+                bool(access & 0xC0),
+            )
+            for sub, entry_name, data_type, bits, access in entries
+        )
+        out.append(OdObject(index, name, codes.get(code, VAR), items))
+    return Dictionary(tuple(out), "sdo_info")
+
+
+def _access_bits(access: int) -> str:
+    read, write = access & 0x07, access & 0x38
+    if read and write:
+        return "rw"
+    if write:
+        return "wo"
+    return "ro"
+
+
+__all__ = [
+    "ARRAY",
+    "RECORD",
+    "VAR",
+    "Dictionary",
+    "OdEntry",
+    "OdObject",
+    "from_canopen",
+    "from_esi",
+    "from_sdo_info",
+    "standard_type",
+]

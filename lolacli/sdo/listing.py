@@ -1,0 +1,87 @@
+"""``sdo list``: a slave's object dictionary, from the slave or from its description file.
+
+Order of sources: an EDS given with ``--eds`` (CANopen has no SDO Information service);
+on EtherCAT the slave's SDO Information service, else the ``--esi`` device matching the
+slave's identity. With no transport, the file alone (``--esi`` with ``--eni`` to pick
+the device by SLAVE's identity).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from lolacli.errors import UsageError
+from lolacli.sdo.client import json_value
+from lolacli.sdo.dictionary import Dictionary
+from lolacli.sdo.session import TransportOptions, open_session
+
+
+def dictionary_report(slave: str, dictionary: Dictionary) -> dict[str, Any]:
+    return {
+        "schema": "lolacli.sdo-list/1",
+        "slave": slave,
+        "source": dictionary.source,
+        "path": dictionary.path or None,
+        "objects": [
+            {
+                "index": o.index,
+                "object": f"0x{o.index:04X}",
+                "name": o.name,
+                "object_code": o.object_code,
+                "entries": [
+                    {
+                        "subindex": e.subindex,
+                        "object": f"0x{e.index:04X}:{e.subindex:02X}",
+                        "name": e.name,
+                        "data_type": None if e.data_type is None else e.type_label,
+                        "access": e.access,
+                        "bit_size": e.bit_size,
+                        "default": json_value(e.default),
+                        "pdo_mapping": e.pdo_mapping,
+                    }
+                    for e in o.entries
+                ],
+            }
+            for o in dictionary
+        ],
+    }
+
+
+def list_dictionary(slave: str, options: TransportOptions) -> dict[str, Any]:
+    """The report of ``sdo list`` (schema ``lolacli.sdo-list/1``)."""
+    if options.eds is not None:
+        from lolacli.sdo.address import parse_node_id
+        from lolacli.sdo.files import load_eds
+
+        node = parse_node_id(slave)
+        return dictionary_report(str(node), load_eds(options.eds, node))
+    if options.can is None and options.iface is None and options.esi:
+        return dictionary_report(slave, _offline_esi(slave, options))
+    with open_session(options) as session:
+        target = session.target(slave)
+        found = target.client.dictionary() or target.dictionary
+        if found is None:
+            raise UsageError(
+                f"slave {slave} has no SDO Information service and no --esi describes it: "
+                "give --esi FILE"
+            )
+        return dictionary_report(target.label, found)
+
+
+def _offline_esi(slave: str, options: TransportOptions) -> Dictionary:
+    from lolacli.files import load_eni, load_esi
+    from lolacli.sdo.address import resolve_slave
+    from lolacli.sdo.files import esi_dictionary
+
+    files = [load_esi(p) for p in options.esi]
+    identity = None
+    if options.eni is not None:
+        identity = resolve_slave(slave, load_eni(options.eni)).identity
+    found = esi_dictionary(files, identity)
+    if found is None:
+        which = "the slave's identity" if identity is not None else "one device (give --eni)"
+        raise UsageError(f"no ESI device with a dictionary matches {which}")
+    return found
+
+
+__all__ = ["dictionary_report", "list_dictionary"]

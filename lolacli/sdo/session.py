@@ -1,0 +1,173 @@
+"""Pick the transport from the options and hand out one client per SLAVE.
+
+========================  =================================================================
+options                   transport
+========================  =================================================================
+``--can CH [--interface`` CANopen through canopen + python-can; SLAVE is the node ID
+``NAME] [--node N]``
+``--iface IF --backend``  EtherCAT through pysoem (SOEM) on a live bus: a ``bus emulate`` at
+``soem``                  the other end of a veth pair, or hardware
+(none) / ``--iface IF``   lolacli's own master (in-process emulated chain / live bus): not
+                          available in this build; a usage error says what to use instead
+========================  =================================================================
+
+Object dictionaries for value types: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device
+whose identity the slave reports), and for ``sdo list`` the slave's SDO Information.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lolacli.errors import UsageError
+from lolacli.sdo.address import parse_node_id, resolve_ref, slave_refs
+from lolacli.sdo.client import SdoClient
+from lolacli.sdo.dictionary import Dictionary
+
+BACKENDS = ("lolacli", "soem")
+
+
+@dataclass(frozen=True)
+class TransportOptions:
+    can: str | None = None
+    interface: str | None = None
+    node: int | None = None
+    iface: str | None = None
+    backend: str = "lolacli"
+    eni: Path | None = None
+    eds: Path | None = None
+    esi: tuple[Path, ...] = ()
+    timeout_s: float = 1.0
+    can_options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Target:
+    """One slave: the label the output calls it by, its client, its dictionary if known."""
+
+    label: str
+    client: SdoClient
+    dictionary: Dictionary | None
+
+
+class Session:
+    """An open transport. :meth:`target` resolves SLAVE; :meth:`close` releases it all."""
+
+    def target(self, spec: str) -> Target:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class CanSession(Session):
+    def __init__(self, options: TransportOptions) -> None:
+        from lolacli.sdo.canopen_client import CanopenNetwork
+        from lolacli.sdo.files import load_eds
+
+        assert options.can is not None
+        self.options = options
+        self._eds_path = options.eds
+        self._dictionaries: dict[int, Dictionary] = {}
+        if options.eds is not None:  # a bad EDS fails before any bus is opened
+            first = options.node or 1
+            self._dictionaries[first] = load_eds(options.eds, first)
+        self._load_eds = load_eds
+        self.network = CanopenNetwork(
+            options.can,
+            interface=options.interface,
+            timeout_s=options.timeout_s,
+            **options.can_options,
+        )
+
+    def target(self, spec: str) -> Target:
+        node = parse_node_id(spec)
+        if self.options.node is not None and self.options.node != node:
+            raise UsageError(
+                f"SLAVE {spec!r} and --node {self.options.node} name different nodes "
+                "(on CANopen SLAVE is the node ID)"
+            )
+        return Target(str(node), self.network.client(node), self._dictionary(node))
+
+    def _dictionary(self, node: int) -> Dictionary | None:
+        if self._eds_path is None:
+            return None
+        if node not in self._dictionaries:  # $NODEID defaults differ per node
+            self._dictionaries[node] = self._load_eds(self._eds_path, node)
+        return self._dictionaries[node]
+
+    def close(self) -> None:
+        self.network.close()
+
+
+class SoemSession(Session):
+    def __init__(self, options: TransportOptions) -> None:
+        from lolacli.files import load_eni, load_esi
+        from lolacli.sdo.soem_client import SoemBus
+
+        assert options.iface is not None
+        self.eni = load_eni(options.eni) if options.eni is not None else None
+        self.esi = [load_esi(p) for p in options.esi]
+        self.bus = SoemBus(options.iface, timeout_s=options.timeout_s)
+
+    def target(self, spec: str) -> Target:
+        from lolacli.sdo.files import esi_dictionary
+
+        on_bus = self.bus.slaves()
+        if self.eni is not None:
+            ref = resolve_ref(spec, slave_refs(self.eni), source=self.eni.source or "the ENI")
+        else:
+            ref = resolve_ref(spec, on_bus, source=self.bus.iface)
+        client = self.bus.client(ref.position, ref.name)
+        identity = on_bus[ref.position - 1].identity if ref.position <= len(on_bus) else None
+        dictionary = esi_dictionary(self.esi, identity) if self.esi else None
+        return Target(spec.strip(), client, dictionary)
+
+    def close(self) -> None:
+        self.bus.close()
+
+
+def open_session(options: TransportOptions) -> Session:
+    """The transport the options ask for; UsageError when they ask for none that exists."""
+    if options.backend not in BACKENDS:
+        raise UsageError(f"unknown --backend {options.backend!r} (one of {', '.join(BACKENDS)})")
+    if options.can is not None:
+        if options.iface is not None:
+            raise UsageError("--can and --iface exclude each other (CANopen or EtherCAT)")
+        if options.esi:
+            raise UsageError("--esi describes EtherCAT slaves; a CANopen node takes --eds")
+        return CanSession(options)
+    if options.eds is not None:
+        raise UsageError("--eds describes a CANopen node: give --can CHANNEL too")
+    if options.interface is not None or options.node is not None:
+        raise UsageError("--interface and --node are CANopen options: give --can CHANNEL too")
+    if options.iface is not None and options.backend == "soem":
+        return SoemSession(options)
+    if options.iface is not None:
+        raise UsageError(
+            "--iface through lolacli's own master is not available in this build: "
+            "add --backend soem (pysoem), or use --can for CANopen"
+        )
+    raise UsageError(
+        "no transport: give --can CHANNEL (CANopen) or --iface IF --backend soem (EtherCAT); "
+        "the in-process emulated chain is not available in this build"
+    )
+
+
+__all__ = [
+    "BACKENDS",
+    "CanSession",
+    "Session",
+    "SoemSession",
+    "Target",
+    "TransportOptions",
+    "open_session",
+]
