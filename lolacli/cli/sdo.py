@@ -329,7 +329,7 @@ def _render_list(report: dict[str, Any]) -> None:
         for e in obj["entries"]:
             name = e["name"] if obj["object_code"] == "VAR" else f"{obj['name']}: {e['name']}"
             default = "" if e["default"] is None else str(e["default"])
-            table.add_row(e["object"], name, e["data_type"] or "?", e["access"], default)
+            table.add_row(e["object"], name, e["data_type"] or "?", e["access"] or "?", default)
     console.print(table)
 
 

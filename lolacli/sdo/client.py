@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from lolacli.errors import SdoAbortError, UsageError
-from lolacli.sdo.dictionary import Dictionary, OdObject, standard_type
+from lolacli.sdo.dictionary import Dictionary, OdObject, standard_object, standard_type
 from lolacli.wire.datatypes import (
     DataType,
     Value,
@@ -199,7 +199,11 @@ def read(
     raw = client.upload(index, subindex, complete_access=complete_access)
     if complete_access:
         obj = None if dictionary is None else dictionary.object(index)
-        return _complete_value(slave, index, subindex, raw, obj)
+        source = "none" if dictionary is None else dictionary.source
+        if obj is None and raw:
+            count = raw[0] if subindex == 0 else 0
+            obj, source = standard_object(index, count), "standard"
+        return _complete_value(slave, index, subindex, raw, obj, source)
     choice = choose_type(index, subindex, data_type, dictionary)
     value, name, source, note = decode(raw, choice)
     return SdoValue(slave, index, subindex, raw, value, name, source, choice.name, False, note)
@@ -256,7 +260,7 @@ def _need_bytes(value: Value) -> bytes:
 
 
 def _complete_value(
-    slave: str, index: int, subindex: int, raw: bytes, obj: OdObject | None
+    slave: str, index: int, subindex: int, raw: bytes, obj: OdObject | None, source: str
 ) -> SdoValue:
     """Complete access: sub 0 (8 bits, padded to 16 when the transfer starts at sub 0),
     then each entry by its size (ETG.1000.6 §5.6.2.1.2). Entries of a size that is not a
@@ -287,9 +291,7 @@ def _complete_value(
             value = bytes(chunk)
         items.append({"subindex": entry.subindex, "value": value})
         pos += size
-    return SdoValue(
-        slave, index, subindex, raw, items, obj.object_code, "dictionary", obj.name, True
-    )
+    return SdoValue(slave, index, subindex, raw, items, obj.object_code, source, obj.name, True)
 
 
 __all__ = [

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lolacli.eni.esi_dictionary import EsiDictionary
-from lolacli.wire.datatypes import DataType, Value, decode_value, type_name
+from lolacli.wire.datatypes import DataType, Value, bit_size, decode_value, type_name
 
 VAR, ARRAY, RECORD = "VAR", "ARRAY", "RECORD"
 
@@ -136,6 +136,19 @@ def standard_type(index: int, subindex: int) -> DataType | None:
     return None
 
 
+def standard_object(index: int, count: int) -> OdObject | None:
+    """A CiA 301 array/record with ``count`` entries after sub 0, if ``index`` is one."""
+    if standard_type(index, 0) is None or index in _VARS:
+        return None
+    entries = [OdEntry(index, 0, "Number of entries", _U8, "ro", 8)]
+    for sub in range(1, count + 1):
+        kind = standard_type(index, sub)
+        if kind is None:
+            return None
+        entries.append(OdEntry(index, sub, f"Sub {sub}", kind, "ro", bit_size(kind)))
+    return OdObject(index, "", RECORD, tuple(entries))
+
+
 # --- adapters ----------------------------------------------------------------------------------
 
 
@@ -206,28 +219,33 @@ def _canopen_entry(var: Any) -> OdEntry:
     )
 
 
-def from_sdo_info(
-    objects: Iterable[tuple[int, str, int, Iterable[tuple[int, str, int, int, int]]]],
-) -> Dictionary:
-    """SDO Information answers: per object ``(index, name, object code, entries)`` with
-    entries ``(subindex, name, data type, bit length, object access bits)`` (ETG.1000.6
-    Tables 52 and 54; access bits 0–2 read in PREOP/SAFEOP/OP, 3–5 write)."""
+SdoInfoObject = tuple[int, str, int, int, int, Iterable[tuple[int, str, int, int, int]]]
+
+
+def from_sdo_info(objects: Iterable[SdoInfoObject]) -> Dictionary:
+    """SDO Information answers: per object ``(index, name, object code, data type, bit
+    length, entries)`` with entries ``(subindex, name, data type, bit length, access
+    bits)`` (ETG.1000.6 Tables 52 and 54; access bits 0–2 read in PREOP/SAFEOP/OP, 3–5
+    write, 6–7 PDO mapping). A variable may come without entries (SOEM asks none for
+    it): it is then one entry of the object's type, access not known (``""``)."""
     out = []
     codes = {7: VAR, 8: ARRAY, 9: RECORD}
-    for index, name, code, entries in objects:
+    for index, name, code, data_type, bits, entries in objects:
         items = tuple(
             OdEntry(
                 index,
                 sub,
                 entry_name,
-                data_type or None,
+                kind or None,
                 _access_bits(access),
-                bits,
+                size,
                 None,
                 bool(access & 0xC0),
             )
-            for sub, entry_name, data_type, bits, access in entries
+            for sub, entry_name, kind, size, access in entries
         )
+        if not items:
+            items = (OdEntry(index, 0, name, data_type or None, "", bits or None),)
         out.append(OdObject(index, name, codes.get(code, VAR), items))
     return Dictionary(tuple(out), "sdo_info")
 
@@ -251,5 +269,6 @@ __all__ = [
     "from_canopen",
     "from_esi",
     "from_sdo_info",
+    "standard_object",
     "standard_type",
 ]

@@ -34,7 +34,7 @@ def dictionary_report(slave: str, dictionary: Dictionary) -> dict[str, Any]:
                         "object": f"0x{e.index:04X}:{e.subindex:02X}",
                         "name": e.name,
                         "data_type": None if e.data_type is None else e.type_label,
-                        "access": e.access,
+                        "access": e.access or None,
                         "bit_size": e.bit_size,
                         "default": json_value(e.default),
                         "pdo_mapping": e.pdo_mapping,

@@ -118,6 +118,8 @@ class SoemClient:
                 o.index,
                 _text(o.name),
                 o.object_code,
+                o.data_type,
+                o.bit_length,
                 (
                     (sub, _text(e.name), e.data_type, e.bit_length, e.obj_access)
                     for sub, e in enumerate(o.entries)
