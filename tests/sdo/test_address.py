@@ -56,3 +56,15 @@ def test_node_ids() -> None:
     for bad in ("0", "128", "x"):
         with pytest.raises(UsageError):
             parse_node_id(bad)
+
+
+def test_abort_table_covers_cia_301() -> None:
+    """One table (wire/sdo.py): every code canopen knows (CiA 301 Table 22) has a text,
+    every named code too; unknown codes still read as a line."""
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    from lolacli.wire.sdo import SdoAbortCode, abort_text
+
+    for code in [*SdoAbortedError.CODES, *SdoAbortCode]:
+        assert not abort_text(code).startswith("Unknown"), hex(code)
+    assert abort_text(0x12345678) == "Unknown abort code 0x12345678"
