@@ -50,8 +50,10 @@ def canopen_copy(od):  # type: ignore[no-untyped-def]
             var.data_type, var.access_type = e.data_type, e.access
             cod.add_object(var)
             continue
-        group = ODArray(obj.name, obj.index) if obj.object_code == ObjectCode.ARRAY else ODRecord(
-            obj.name, obj.index
+        group = (
+            ODArray(obj.name, obj.index)
+            if obj.object_code == ObjectCode.ARRAY
+            else ODRecord(obj.name, obj.index)
         )
         for sub, e in sorted(obj.entries.items()):
             var = ODVariable(e.name, obj.index, sub)
@@ -119,22 +121,32 @@ def main() -> int:
     assert ours.handle(download)[0][6:] == theirs.handle(download)[0][6:]
 
     rows = [
-        ("SDO upload 0x6041 via SdoServer.handle",
-         lambda: ours.handle(upload), lambda: theirs.handle(upload)),
-        ("SDO download 0x607F via SdoServer.handle",
-         lambda: ours.handle(download), lambda: theirs.handle(download)),
+        (
+            "SDO upload 0x6041 via SdoServer.handle",
+            lambda: ours.handle(upload),
+            lambda: theirs.handle(upload),
+        ),
+        (
+            "SDO download 0x607F via SdoServer.handle",
+            lambda: ours.handle(download),
+            lambda: theirs.handle(download),
+        ),
     ]
     status = node.object_dictionary[0x6041]
-    rows.append((
-        "device get statusword (typed)",
-        lambda: drive.od.get(0x6041, 0),
-        lambda: status.decode_raw(node.get_data(0x6041, 0)),
-    ))
-    rows.append((
-        "device set statusword (typed)",
-        lambda: drive.od.set(0x6041, 0, 0x0237),
-        lambda: node.set_data(0x6041, 0, status.encode_raw(0x0237)),
-    ))
+    rows.append(
+        (
+            "device get statusword (typed)",
+            lambda: drive.od.get(0x6041, 0),
+            lambda: status.decode_raw(node.get_data(0x6041, 0)),
+        )
+    )
+    rows.append(
+        (
+            "device set statusword (typed)",
+            lambda: drive.od.set(0x6041, 0, 0x0237),
+            lambda: node.set_data(0x6041, 0, status.encode_raw(0x0237)),
+        )
+    )
     print(f"{'hot path':<42} {'devices/od.py':>14} {'canopen OD':>12} {'ratio':>7}")
     for name, a, b in rows:
         ns_a, ns_b = per_call_ns(a, args.calls), per_call_ns(b, args.calls)

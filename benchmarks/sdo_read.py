@@ -110,14 +110,18 @@ def whole_process(n: int) -> dict[str, float] | None:
         can_args = ["--can", UDP_MULTICAST_IPV4, "--interface", "udp_multicast"]
         server = subprocess.Popen(
             [*inside, "-m", "lolacli", "sdo", "serve", *can_args, "--gateway"],
-            cwd=ROOT, stderr=subprocess.PIPE, text=True,
+            cwd=ROOT,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         assert server.stderr is not None
         server.stderr.readline()
         return {
             "python_pass_ms": _wall_ms([*inside, "-c", "pass"], n),
             "lolacli_version_ms": _wall_ms([*inside, "-m", "lolacli", "--version"], n),
-            "sdo_read_ms": _wall_ms([*inside, "-m", "lolacli", "sdo", "read", "16", "0x1000", *can_args], n),
+            "sdo_read_ms": _wall_ms(
+                [*inside, "-m", "lolacli", "sdo", "read", "16", "0x1000", *can_args], n
+            ),
         }
     finally:
         if server is not None:
@@ -141,18 +145,27 @@ def main() -> int:
     r = result["in_process"]
     assert isinstance(r, dict)
     print(f"in process, {args.reads} expedited reads of 0x1000 over python-can virtual:")
-    print(f"  lolacli.sdo.read      median {r['lolacli_median_us']:7.1f} us  p99 {r['lolacli_p99_us']:.1f} us")
-    print(f"  canopen sdo.upload    median {r['canopen_median_us']:7.1f} us  "
-          f"(lolacli / canopen = {r['lolacli_median_us'] / r['canopen_median_us']:.2f})")
-    print(f"  python-can round trip median {r['python_can_round_trip_median_us']:7.1f} us  "
-          f"(lolacli / floor = {r['lolacli_median_us'] / r['python_can_round_trip_median_us']:.2f})")
+    print(
+        f"  lolacli.sdo.read      median {r['lolacli_median_us']:7.1f} us  "
+        f"p99 {r['lolacli_p99_us']:.1f} us"
+    )
+    print(
+        f"  canopen sdo.upload    median {r['canopen_median_us']:7.1f} us  "
+        f"(lolacli / canopen = {r['lolacli_median_us'] / r['canopen_median_us']:.2f})"
+    )
+    print(
+        f"  python-can round trip median {r['python_can_round_trip_median_us']:7.1f} us  "
+        f"(lolacli / floor = {r['lolacli_median_us'] / r['python_can_round_trip_median_us']:.2f})"
+    )
     w = result.get("whole_process")
     if isinstance(w, dict):
         print(f"whole process, median of {args.processes} (udp_multicast, other process serves):")
         print(f"  python -c pass            {w['python_pass_ms']:6.0f} ms")
         print(f"  lolacli --version         {w['lolacli_version_ms']:6.0f} ms")
-        print(f"  lolacli sdo read 16 0x1000 {w['sdo_read_ms']:5.0f} ms  "
-              f"(sdo read - --version = {w['sdo_read_ms'] - w['lolacli_version_ms']:.0f} ms)")
+        print(
+            f"  lolacli sdo read 16 0x1000 {w['sdo_read_ms']:5.0f} ms  "
+            f"(sdo read - --version = {w['sdo_read_ms'] - w['lolacli_version_ms']:.0f} ms)"
+        )
     return 0
 
 

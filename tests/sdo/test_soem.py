@@ -174,3 +174,15 @@ def test_no_such_interface_and_no_slave(bus) -> None:
     assert code == 4 and "e11nosuch0" in err
     code, _out, err = sdo(bus, "read", "26", "0x1000")
     assert code == 2 and "position 26" in err
+
+
+def test_the_check_file_of_the_docs(bus, tmp_path) -> None:
+    text = (ROOT / "docs" / "sdo.md").read_text(encoding="utf-8")
+    example = text.split("```yaml\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "drive5.yaml"
+    path.write_text(example)
+    eni = str(EXAMPLES / "lola.xml")
+    code, out, err = sdo(bus, "check", str(path), "--eni", eni, "-f", "json")
+    doc = json.loads(out)
+    assert code == 0, (err, [r for r in doc["results"] if not r["ok"]])
+    assert doc["checks"] == 7 and doc["failed"] == 0
