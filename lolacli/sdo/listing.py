@@ -61,6 +61,8 @@ def list_dictionary(slave: str, options: TransportOptions) -> dict[str, Any]:
         target = session.target(slave)
         found = target.client.dictionary() or target.dictionary
         if found is None:
+            if options.can is not None:
+                raise UsageError("CANopen has no SDO Information service: give --eds FILE")
             raise UsageError(
                 f"slave {slave} has no SDO Information service and no --esi describes it: "
                 "give --esi FILE"

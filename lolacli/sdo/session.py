@@ -142,8 +142,8 @@ def open_session(options: TransportOptions) -> Session:
     if options.can is not None:
         if options.iface is not None:
             raise UsageError("--can and --iface exclude each other (CANopen or EtherCAT)")
-        if options.esi:
-            raise UsageError("--esi describes EtherCAT slaves; a CANopen node takes --eds")
+        if options.esi or options.eni is not None:
+            raise UsageError("--esi/--eni describe EtherCAT slaves; a CANopen node takes --eds")
         return CanSession(options)
     if options.eds is not None:
         raise UsageError("--eds describes a CANopen node: give --can CHANNEL too")

@@ -193,3 +193,14 @@ def test_node_server_refuses_a_bad_eds_before_the_bus(tmp_path) -> None:
     bad.write_text("this is not an EDS\n")
     with pytest.raises(InputError, match="bad.eds"):
         NodeServer("unused", [NodeSpec(bad, 1)], interface="virtual")
+
+
+def test_cli_options_of_the_other_bus_are_usage_errors(cli, channel, gateway, tmp_path) -> None:
+    code, _out, err = cli("sdo", "list", "16", *_can(channel))
+    assert code == 2 and "give --eds" in err
+    code, _out, err = cli("sdo", "read", "16", "0x1000", *_can(channel), "--esi", str(tmp_path))
+    assert code == 2 and "EtherCAT" in err
+    code, _out, err = cli("sdo", "read", "1", "0x1000")
+    assert code == 2 and "no transport" in err
+    code, _out, err = cli("sdo", "read", "1", "0x1000", "--iface", "lo")
+    assert code == 2 and "--backend soem" in err
