@@ -149,11 +149,7 @@ def display_value(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
-        return (
-            f"{value} (0x{value & ((1 << max(8, value.bit_length() + 1)) - 1):X})"
-            if value < 0
-            else f"{value} (0x{value:X})"
-        )
+        return str(value) if value < 0 else f"{value} (0x{value:X})"
     if isinstance(value, bytes | bytearray):
         return bytes(value).hex(" ") if value else "(empty)"
     if isinstance(value, str):
