@@ -14,10 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from lolacli.eni.model import Eni, Identity
 from lolacli.errors import UsageError
 from lolacli.wire.datatypes import parse_int
+
+if TYPE_CHECKING:  # the ENI modules load only where an ENI is read (start-up time)
+    from lolacli.eni.model import Eni, Identity
 
 
 @dataclass(frozen=True, slots=True)

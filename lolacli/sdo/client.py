@@ -27,7 +27,6 @@ from lolacli.wire.datatypes import (
     parse_text,
     type_name,
 )
-from lolacli.wire.sdo import abort_text
 
 
 class SdoClient(Protocol):
@@ -55,7 +54,9 @@ class SdoClient(Protocol):
 
 
 def abort_error(index: int, subindex: int, code: int) -> SdoAbortError:
-    """The error for an abort, with the code's CiA 301 text (:func:`abort_text`)."""
+    """The error for an abort, with the code's CiA 301 text (``wire.sdo.abort_text``)."""
+    from lolacli.wire.sdo import abort_text
+
     return SdoAbortError(index, subindex, code, abort_text(code))
 
 

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from lolacli.eni.esi_dictionary import EsiDictionary
 from lolacli.wire.datatypes import DataType, Value, bit_size, decode_value, type_name
+
+if TYPE_CHECKING:  # loads only where an ESI is read (start-up time)
+    from lolacli.eni.esi_dictionary import EsiDictionary
 
 VAR, ARRAY, RECORD = "VAR", "ARRAY", "RECORD"
 

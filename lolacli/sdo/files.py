@@ -7,13 +7,15 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from lolacli.eni.esi import EsiDevice, EsiFile
-from lolacli.eni.model import Identity
 from lolacli.errors import InputError
 from lolacli.files import MAX_ENI_BYTES
 from lolacli.sdo.dictionary import Dictionary, from_canopen, from_esi
+
+if TYPE_CHECKING:  # the ESI modules load only where an ESI is read (start-up time)
+    from lolacli.eni.esi import EsiDevice, EsiFile
+    from lolacli.eni.model import Identity
 
 
 def read_text_file(path: str | Path, what: str) -> str:
