@@ -5,7 +5,8 @@
    through ``lolacli.sdo.read`` (typed, over ``CanopenClient``), against two baselines
    measured in the same run: canopen's own ``RemoteNode.sdo.upload`` on the same bus (what
    canopen costs without lolacli on top) and a bare python-can request/answer round trip
-   through the same notifier threads (the floor of this transport).
+   through the same notifier threads (an echo, no SDO). The three are measured in
+   alternating batches, so a load change on the shared machine hits them alike.
 2. Whole process (needs root: both ends join a udp_multicast group inside a private network
    namespace): wall time of ``python -m lolacli sdo read 16 0x1000 --can … --interface
    udp_multicast`` against ``python -c pass`` and ``python -m lolacli --version``.
@@ -24,6 +25,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -33,66 +35,83 @@ from lolacli.sdo.canopen_client import UDP_MULTICAST_IPV4, CanopenNetwork  # noq
 from lolacli.sdo.node import IMU_NODE, NodeServer, gateway_nodes  # noqa: E402
 
 
-def _median_us(fn, n: int) -> tuple[float, float]:  # type: ignore[no-untyped-def]
-    for _ in range(min(200, n)):
-        fn()
-    times = []
-    for _ in range(n):
-        t = time.perf_counter_ns()
-        fn()
-        times.append(time.perf_counter_ns() - t)
-    times.sort()
-    return times[len(times) // 2] / 1000, times[int(len(times) * 0.99)] / 1000
+def _interleaved_us(
+    fns: dict[str, Any], n: int, rounds: int = 10
+) -> dict[str, tuple[float, float]]:
+    """Median and p99 per function, measured in alternating batches so that a load change
+    on the shared machine hits all of them alike."""
+    samples: dict[str, list[int]] = {name: [] for name in fns}
+    for fn in fns.values():
+        for _ in range(min(200, n)):
+            fn()
+    for _ in range(rounds):
+        for name, fn in fns.items():
+            for _ in range(max(1, n // rounds)):
+                t = time.perf_counter_ns()
+                fn()
+                samples[name].append(time.perf_counter_ns() - t)
+    out = {}
+    for name, times in samples.items():
+        times.sort()
+        out[name] = (times[len(times) // 2] / 1000, times[int(len(times) * 0.99)] / 1000)
+    return out
 
 
 def in_process(n: int) -> dict[str, float]:
     import can
 
-    with NodeServer("bench-sdo", gateway_nodes(), interface="virtual"):
-        with CanopenNetwork("bench-sdo", interface="virtual", timeout_s=1.0) as net:
-            client = net.client(IMU_NODE)
-            ours = _median_us(lambda: read(client, 0x1000, 0), n)
-            canopen_only = _median_us(lambda: client.node.sdo.upload(0x1000, 0), n)
-    # floor: one CAN frame out, one back, through python-can notifiers on a virtual bus
-    server_bus = can.Bus(interface="virtual", channel="bench-echo")
-    client_bus = can.Bus(interface="virtual", channel="bench-echo")
-    answer = can.Message(arbitration_id=0x590, data=bytes(8), is_extended_id=False)
+    # an echo on the same kind of bus, through the same notifier threads, without SDO
+    server_bus = can.Bus(interface="virtual", channel="bench-sdo")
+    answer = can.Message(arbitration_id=0x7E8, data=bytes(8), is_extended_id=False)
     got = threading.Event()
 
     def echo(msg: can.Message) -> None:
-        server_bus.send(answer)
+        if msg.arbitration_id == 0x7E0:
+            server_bus.send(answer)
 
     def back(msg: can.Message) -> None:
-        got.set()
+        if msg.arbitration_id == 0x7E8:
+            got.set()
 
-    notifiers = [can.Notifier(server_bus, [echo], 0.02), can.Notifier(client_bus, [back], 0.02)]
-    request = can.Message(arbitration_id=0x610, data=bytes(8), is_extended_id=False)
+    request = can.Message(arbitration_id=0x7E0, data=bytes(8), is_extended_id=False)
+    echo_notifier = can.Notifier(server_bus, [echo], 0.02)
+    with NodeServer("bench-sdo", gateway_nodes(), interface="virtual"):
+        with CanopenNetwork("bench-sdo", interface="virtual", timeout_s=1.0) as net:
+            client = net.client(IMU_NODE)
+            net.network.notifier.add_listener(back)
 
-    def round_trip() -> None:
-        got.clear()
-        client_bus.send(request)
-        got.wait(1.0)
+            def round_trip() -> None:
+                got.clear()
+                net.bus.send(request)
+                got.wait(1.0)
 
-    floor = _median_us(round_trip, n)
-    for notifier in notifiers:
-        notifier.stop()
+            r = _interleaved_us(
+                {
+                    "lolacli": lambda: read(client, 0x1000, 0),
+                    "canopen": lambda: client.node.sdo.upload(0x1000, 0),
+                    "echo": round_trip,
+                },
+                n,
+            )
+    echo_notifier.stop()
     server_bus.shutdown()
-    client_bus.shutdown()
     return {
-        "lolacli_median_us": ours[0],
-        "lolacli_p99_us": ours[1],
-        "canopen_median_us": canopen_only[0],
-        "python_can_round_trip_median_us": floor[0],
+        "lolacli_median_us": r["lolacli"][0],
+        "lolacli_p99_us": r["lolacli"][1],
+        "canopen_median_us": r["canopen"][0],
+        "python_can_echo_median_us": r["echo"][0],
     }
 
 
-def _wall_ms(cmd: list[str], n: int) -> float:
-    times = []
+def _wall_ms(cmds: dict[str, list[str]], n: int) -> dict[str, float]:
+    """Median wall time of each command, run in turn n times (interleaved)."""
+    times: dict[str, list[float]] = {name: [] for name in cmds}
     for _ in range(n):
-        t = time.perf_counter()
-        subprocess.run(cmd, cwd=ROOT, capture_output=True, check=True)
-        times.append(time.perf_counter() - t)
-    return statistics.median(times) * 1000
+        for name, cmd in cmds.items():
+            t = time.perf_counter()
+            subprocess.run(cmd, cwd=ROOT, capture_output=True, check=True)
+            times[name].append(time.perf_counter() - t)
+    return {name: statistics.median(t) * 1000 for name, t in times.items()}
 
 
 def whole_process(n: int) -> dict[str, float] | None:
@@ -116,13 +135,14 @@ def whole_process(n: int) -> dict[str, float] | None:
         )
         assert server.stderr is not None
         server.stderr.readline()
-        return {
-            "python_pass_ms": _wall_ms([*inside, "-c", "pass"], n),
-            "lolacli_version_ms": _wall_ms([*inside, "-m", "lolacli", "--version"], n),
-            "sdo_read_ms": _wall_ms(
-                [*inside, "-m", "lolacli", "sdo", "read", "16", "0x1000", *can_args], n
-            ),
-        }
+        return _wall_ms(
+            {
+                "python_pass_ms": [*inside, "-c", "pass"],
+                "lolacli_version_ms": [*inside, "-m", "lolacli", "--version"],
+                "sdo_read_ms": [*inside, "-m", "lolacli", "sdo", "read", "16", "0x1000", *can_args],
+            },
+            n,
+        )
     finally:
         if server is not None:
             server.send_signal(2)
@@ -154,8 +174,8 @@ def main() -> int:
         f"(lolacli / canopen = {r['lolacli_median_us'] / r['canopen_median_us']:.2f})"
     )
     print(
-        f"  python-can round trip median {r['python_can_round_trip_median_us']:7.1f} us  "
-        f"(lolacli / floor = {r['lolacli_median_us'] / r['python_can_round_trip_median_us']:.2f})"
+        f"  python-can echo       median {r['python_can_echo_median_us']:7.1f} us  "
+        f"(lolacli / echo = {r['lolacli_median_us'] / r['python_can_echo_median_us']:.2f})"
     )
     w = result.get("whole_process")
     if isinstance(w, dict):
