@@ -1,11 +1,13 @@
 """SDO over EtherCAT through pysoem (SOEM): ``--backend soem --iface IF``.
 
-SOEM scans the bus (``config_init``: addresses, mailboxes, PREOP) and runs the CoE
-transfers itself. Timeouts: the mailbox wait is the caller's ``timeout_s``; the
-datagram return timeout is raised from SOEM's 2 ms to :data:`FRAME_TIMEOUT_US` because the
-emulated chain (``bus emulate``) answers single datagrams in 0.2–2 ms on a loaded host
-today, and hardware behind a switch or a slow NIC can too; a bus that does not answer
-at all still fails within a few of them.
+SOEM scans the bus (``config_init``: addresses, mailboxes, PREOP; tried
+:data:`SCAN_ATTEMPTS` times) and runs the CoE transfers itself. Timeouts, raised from
+SOEM's defaults because the emulated chain (``bus emulate``) answers single datagrams in
+0.2–2 ms on a loaded host today and stalls for 10–20 ms at worst (hardware behind a
+switch or a slow NIC can too): datagram return :data:`FRAME_TIMEOUT_US` (SOEM: 2 ms), the
+slave-counting broadcast :data:`SAFE_TIMEOUT_US` (20 ms), both mailbox waits the caller's
+``timeout_s`` (SOEM: 20 ms to send, 700 ms to receive). A bus that does not answer at
+all fails in about 2 s (exit 4).
 """
 
 from __future__ import annotations
@@ -18,6 +20,9 @@ from lolacli.sdo.client import abort_error
 from lolacli.sdo.dictionary import Dictionary, from_sdo_info
 
 FRAME_TIMEOUT_US = 20_000
+#: SOEM's wait for the broadcast that counts the slaves (its default: 20 ms).
+SAFE_TIMEOUT_US = 100_000
+SCAN_ATTEMPTS = 3
 #: Upload buffer: SOEM refuses objects larger than the buffer it is given.
 UPLOAD_BUFFER_BYTES = 65_536
 #: SOEM sets station addresses 0x1001, 0x1002, … in chain order (ecx_config_init).
@@ -32,24 +37,34 @@ class SoemBus:
 
         self.pysoem = pysoem
         self.iface = iface
-        pysoem.settings.timeouts.ret = max(pysoem.settings.timeouts.ret, FRAME_TIMEOUT_US)
+        microseconds = max(1000, int(timeout_s * 1e6))
+        timeouts = pysoem.settings.timeouts
+        timeouts.ret = max(timeouts.ret, FRAME_TIMEOUT_US)
+        timeouts.safe = max(timeouts.safe, SAFE_TIMEOUT_US)
+        # SOEM waits tx_mailbox for the slave to take a mailbox write and rx_mailbox for
+        # its answer; both are the caller's timeout (SOEM's 20 ms send wait loses
+        # segmented uploads to a slave that stalls, as the emulated chain does under load)
+        timeouts.tx_mailbox = max(timeouts.tx_mailbox, microseconds)
+        timeouts.rx_mailbox = microseconds
         self.master = pysoem.Master()
         try:
             self.master.open(iface)
         except Exception as exc:  # ConnectionError: no such interface, no permission
             raise TransportError(f"cannot open {iface}: {exc}") from None
-        try:
-            found = self.master.config_init()
-        except Exception as exc:
-            self.close()
-            raise TransportError(f"{iface}: bus scan failed: {exc}") from None
+        found = 0
+        for _ in range(SCAN_ATTEMPTS):  # a scan lost to a stalled frame is tried again
+            try:
+                found = self.master.config_init()
+            except Exception as exc:
+                self.close()
+                raise TransportError(f"{iface}: bus scan failed: {exc}") from None
+            if found > 0:
+                break
         if found <= 0:
             self.close()
             raise TransportError(f"{iface}: no slaves answering")
-        microseconds = max(1000, int(timeout_s * 1e6))
         self.master.sdo_read_timeout = microseconds
         self.master.sdo_write_timeout = microseconds
-        pysoem.settings.timeouts.rx_mailbox = microseconds
         self.master.state_check(pysoem.PREOP_STATE, 2_000_000)
 
     def slaves(self) -> tuple[SlaveRef, ...]:
