@@ -1,0 +1,301 @@
+"""A device's cyclic state as flat tables, for the compiled chain core.
+
+The device classes (:mod:`~lolacli.devices.base`, :mod:`~lolacli.devices.cia402`,
+:mod:`~lolacli.devices.io`) are the reference. :func:`flatten` describes one device as the
+tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
+
+* ``vals``: one block of bytes holding the value of every object-dictionary entry the
+  cycle reads or writes (its slots);
+* the PDO mappings (``Device._layout``) as rows ``(image bit, bits, value offset, value
+  bytes)``, outputs and inputs, with the semantics of ``unpack_outputs``/``pack_inputs``
+  (an output entry takes ``ceil(bits / 8)`` bytes, at least one; an input contributes its
+  value's low ``bits`` bits, zero beyond its bytes);
+* the step's own rows: the CiA 402 drive's cyclic entries, the digital IO channels, the
+  analog channels with their phases.
+
+``None`` when the core does not follow the device: a class with its own step or mapping
+code, or a use the tables cannot hold without changing it (a value whose length the cycle
+would change, more than 64 bits where the core computes in 64). Python runs those.
+
+While the core holds a device's state, the entries' values and the device's scalars
+(time of the last cycle, CiA 402 power state and last controlword, last analog sample)
+live in the tables; :meth:`FlatDevice.store` gives them back to the objects.
+"""
+
+from __future__ import annotations
+
+from array import array
+from dataclasses import dataclass
+
+from lolacli.devices.base import Device
+from lolacli.devices.cia402 import Cia402Drive, Cia402State
+from lolacli.devices.io import _FLOAT_PACK, AnalogInput, DigitalIo
+from lolacli.devices.od import DataType, Entry
+from lolacli.eni.model import Direction
+from lolacli.errors import LolaError
+
+KIND_GENERIC = 2
+KIND_CIA402 = 3
+KIND_DIGITAL_IO = 4
+KIND_ANALOG = 5
+
+#: bytes of the CiA 402 cyclic entries, in ``Cia402Drive._entries`` order
+CYCLIC_BYTES = (2, 2, 1, 1, 4, 4, 4, 4, 4, 2)
+#: the core's arithmetic takes any state value below this in magnitude
+VALUE_LIMIT = 1 << 62
+
+_STEPS = {
+    Device.step: KIND_GENERIC,
+    Cia402Drive.step: KIND_CIA402,
+    DigitalIo.step: KIND_DIGITAL_IO,
+    AnalogInput.step: KIND_ANALOG,
+}
+_BASE_METHODS = (
+    "cycle",
+    "unpack_outputs",
+    "pack_inputs",
+    "process_data_bytes",
+    "mapping",
+    "_layout",
+    "_byte_layout",
+)
+_KIND_METHODS = {
+    KIND_CIA402: ("_entries", "_move", "_update_status"),
+    KIND_DIGITAL_IO: ("_channels",),
+    KIND_ANALOG: ("_channels",),
+}
+_KIND_CLASS: dict[int, type[Device]] = {
+    KIND_CIA402: Cia402Drive,
+    KIND_DIGITAL_IO: DigitalIo,
+    KIND_ANALOG: AnalogInput,
+}
+_POWER_STATES = frozenset(int(s) for s in Cia402State)
+_MASK64 = (1 << 64) - 1
+
+
+@dataclass(slots=True)
+class DeviceScalars:
+    """The device's own state besides its entries (what the C table keeps per slave)."""
+
+    t_ns: int = 0
+    power: int = 0
+    previous_cw: int = 0
+    last_sample: int = 0
+    has_last: bool = False
+
+
+@dataclass(slots=True)
+class FlatDevice:
+    """One device as tables (see the module docstring); ``rows`` per kind."""
+
+    device: Device
+    kind: int
+    version: int  # the od.version the tables were made for
+    slots: tuple[tuple[Entry, int, int], ...]  # entry, offset in vals, bytes
+    vals: bytearray
+    out_map: array[int]  # rows of 4
+    in_map: array[int]
+    channels: array[int]  # digital IO rows of 6, analog rows of 6
+    phases: array[float]  # analog, one per channel
+    cyclic: tuple[int, ...]  # CiA 402: offsets of the cyclic entries in vals
+    out_bytes: int
+    in_bytes: int
+    period_ns: int = 0
+    scale: float = 0.0
+
+    def load(self) -> DeviceScalars | None:
+        """The entries' values into ``vals`` and the device's scalars; ``None`` when the
+        tables no longer fit the device (its mapping or a value's length changed)."""
+        device = self.device
+        if device.od.version != self.version:
+            return None
+        vals = self.vals
+        for entry, offset, size in self.slots:
+            value = entry.value
+            if len(value) != size:
+                return None
+            vals[offset : offset + size] = value
+        scalars = DeviceScalars(t_ns=device.t_ns)
+        if isinstance(device, Cia402Drive):
+            scalars.power = int(device.power)
+            scalars.previous_cw = device._previous_cw
+            if scalars.power not in _POWER_STATES or not 0 <= scalars.previous_cw <= 0xFFFF:
+                return None
+        elif isinstance(device, AnalogInput):
+            last = getattr(device, "_last_sample", None)
+            if last is not None:
+                scalars.last_sample, scalars.has_last = last, True
+        if not all(_bounded(v) for v in (scalars.t_ns, scalars.last_sample)):
+            return None
+        return scalars
+
+    def store(self, scalars: DeviceScalars) -> None:
+        """Give the values and scalars back to the device (the Python objects hold the
+        state again)."""
+        device = self.device
+        data = bytes(self.vals)
+        for entry, offset, size in self.slots:
+            entry.value = data[offset : offset + size]
+        device.t_ns = scalars.t_ns
+        device._rest = None  # its inputs cache was made before the core's cycles
+        if isinstance(device, Cia402Drive):
+            device.power = Cia402State(scalars.power)
+            device._previous_cw = scalars.previous_cw
+        elif isinstance(device, AnalogInput) and scalars.has_last:
+            device._last_sample = scalars.last_sample
+
+
+def flatten(device: Device) -> FlatDevice | None:
+    """The device as tables, or ``None`` when only Python runs it (see the module)."""
+    kind = _kind(device)
+    if kind is None:
+        return None
+    try:
+        return _Builder(device, kind).build()
+    except (_NotFlat, LolaError):
+        return None
+
+
+class _NotFlat(Exception):
+    """The core cannot hold this device's cycle."""
+
+
+def _kind(device: Device) -> int | None:
+    cls = type(device)
+    kind = _STEPS.get(getattr(cls, "step", None))  # type: ignore[arg-type]
+    if kind is None or any(getattr(cls, m) is not getattr(Device, m) for m in _BASE_METHODS):
+        return None
+    reference = _KIND_CLASS.get(kind)
+    if reference is not None:
+        for name in _KIND_METHODS[kind]:
+            if getattr(cls, name) is not getattr(reference, name):
+                return None
+    return kind
+
+
+class _Builder:
+    def __init__(self, device: Device, kind: int) -> None:
+        self.device = device
+        self.kind = kind
+        self.slots: dict[int, tuple[Entry, int, int]] = {}
+        self.size = 0
+
+    def slot(self, entry: Entry, size: int | None = None) -> int:
+        """The entry's offset in vals (one slot per entry); ``size``: the length the
+        cycle writes, which must be the value's."""
+        if type(entry.value) not in (bytes, bytearray):
+            raise _NotFlat
+        if size is not None and len(entry.value) != size:
+            raise _NotFlat  # the cycle would change the value's length
+        known = self.slots.get(id(entry))
+        if known is None:
+            known = (entry, self.size, len(entry.value))
+            self.slots[id(entry)] = known
+            self.size += known[2]
+        return known[1]
+
+    def build(self) -> FlatDevice:
+        device = self.device
+        out_bytes, in_bytes = device.process_data_bytes()
+        out_map = self._map(Direction.OUTPUT, writes=True)
+        in_map = self._map(Direction.INPUT, writes=False)
+        channels, phases = array("q"), array("d")
+        cyclic: tuple[int, ...] = ()
+        period_ns, scale = 0, 0.0
+        if self.kind == KIND_CIA402:
+            assert isinstance(device, Cia402Drive)
+            entries = device._entries()
+            cyclic = tuple(
+                self.slot(entry, size)
+                for entry, size in zip(entries.values(), CYCLIC_BYTES, strict=True)
+            )
+        elif self.kind == KIND_DIGITAL_IO:
+            assert isinstance(device, DigitalIo)
+            channels = self._digital_channels(device)
+        elif self.kind == KIND_ANALOG:
+            assert isinstance(device, AnalogInput)
+            channels, phases = self._analog_channels(device)
+            period_ns, scale = device.sample_period_ns, float(device.scale)
+            if type(period_ns) is not int or not 0 < period_ns < VALUE_LIMIT:
+                raise _NotFlat
+        slots = tuple(sorted(self.slots.values(), key=lambda s: s[1]))
+        return FlatDevice(
+            device=device,
+            kind=self.kind,
+            version=device.od.version,
+            slots=slots,
+            vals=bytearray(self.size),
+            out_map=out_map,
+            in_map=in_map,
+            channels=channels,
+            phases=phases,
+            cyclic=cyclic,
+            out_bytes=out_bytes,
+            in_bytes=in_bytes,
+            period_ns=period_ns,
+            scale=scale,
+        )
+
+    def _map(self, direction: Direction, *, writes: bool) -> array[int]:
+        """Rows of the mapping; the byte path of base.py is the bit path when every
+        entry's value has the mapped length, which is checked here."""
+        device = self.device
+        byte_layout = device._byte_layout(direction)
+        if byte_layout is not None:
+            for entry, _offset, size in byte_layout:
+                if entry is not None and len(entry.value) != size:
+                    raise _NotFlat
+        rows = array("q")
+        bit = 0
+        for _index, _sub, bits, entry in device._layout(direction):
+            if entry is not None:
+                written = max(1, (bits + 7) // 8) if writes else None
+                rows.extend((bit, bits, self.slot(entry, written), len(entry.value)))
+            bit += bits
+        return rows
+
+    def _digital_channels(self, device: DigitalIo) -> array[int]:
+        rows = array("q")
+        for i, entry, source, bits in device._channels():
+            if bits > 64:
+                raise _NotFlat
+            size = max(1, (bits + 7) // 8)
+            at = self.slot(entry, size)
+            if source is None:
+                rows.extend((i, at, size, bits, -1, 0))
+            else:
+                rows.extend((i, at, size, bits, self.slot(source), len(source.value)))
+        return rows
+
+    def _analog_channels(self, device: AnalogInput) -> tuple[array[int], array[float]]:
+        rows, phases = array("q"), array("d")
+        f32, f64 = _FLOAT_PACK[DataType.REAL32], _FLOAT_PACK[DataType.REAL64]
+        for entry, phase, pack, full, offset, mask, size in device._channels():
+            if pack is None:
+                kind = 0
+                if mask > _MASK64 or size > 8:
+                    raise _NotFlat
+            else:
+                kind, size = (1, 4) if pack is f32 else (2, 8) if pack is f64 else (-1, 0)
+                if kind < 0:
+                    raise _NotFlat
+            at = self.slot(entry, size)
+            signed_mask = mask - (1 << 64) if mask >= 1 << 63 else mask
+            rows.extend((at, size, kind, full, offset, signed_mask))
+            phases.append(phase)
+        return rows, phases
+
+
+def _bounded(value: int) -> bool:
+    return -VALUE_LIMIT < value < VALUE_LIMIT
+
+
+__all__ = [
+    "KIND_ANALOG",
+    "KIND_CIA402",
+    "KIND_DIGITAL_IO",
+    "KIND_GENERIC",
+    "DeviceScalars",
+    "FlatDevice",
+    "flatten",
+]
