@@ -1,0 +1,668 @@
+/* The chain's cyclic work in C: frame plans, DC time loops, watchdogs and device cycles,
+ * for lolacli/emulator/core.py (loaded with ctypes).
+ *
+ * The Python code is the reference and this file follows it statement for statement:
+ *   - FramePlan.run and the work it defers (lolacli/emulator/plan.py),
+ *   - system_time_loop, Esc.system_time_ns, Esc.check_watchdog, Esc.cycle
+ *     (lolacli/emulator/esc.py),
+ *   - Device.cycle / unpack_outputs / pack_inputs (lolacli/devices/base.py), the steps of
+ *     Cia402Drive (devices/cia402.py), DigitalIo and AnalogInput (devices/io.py).
+ * The tables it runs on are built from the Python objects by core.py and
+ * lolacli/devices/flat.py; tests/emulator/test_core.py and tests/devices/test_flat.py
+ * compare the two implementations bit for bit.
+ *
+ * Safety: every table is checked once, when it is built (lolacli_core_check_slave and
+ * lolacli_core_check_plan walk it as the executors do and refuse any index or range
+ * outside its buffer); the executors then trust the tables. The wrapper bounds every time
+ * (|t| < 2^62) and every state value it loads (|x| < 2^62), so sums of two of them never
+ * overflow; products of a time with a rate are taken in 128 bits, and the DC arithmetic
+ * is done modulo 2^64, which is what Python's masks give.
+ */
+#include <Python.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#ifndef __SIZEOF_INT128__
+#error "the chain core needs 128-bit integers (gcc or clang on a 64-bit target)"
+#endif
+
+typedef int64_t i64;
+typedef uint64_t u64;
+typedef __int128 i128;
+
+#define ABI_VERSION 3
+#define MEMORY_BYTES 65536
+#define AL_STATUS 0x0130
+#define AL_STATE_MASK 0x0F
+#define AL_SAFEOP 4
+#define AL_OP 8
+#define DC_SYSTEM_TIME_OFFSET 0x0920
+#define DC_SYSTEM_TIME_DIFFERENCE 0x092C
+#define MAX_CORRECTION_NS 1000
+#define NS_PER_S 1000000000
+#define LIMIT ((i64)1 << 62)
+#define PI 3.141592653589793 /* math.pi, the same double */
+
+/* device kinds (lolacli/devices/flat.py) */
+enum { K_NONE = 0, K_PYTHON = 1, K_GENERIC = 2, K_CIA402 = 3, K_DIGITAL_IO = 4, K_ANALOG = 5 };
+
+/* CiA 402: the cyclic entries (Cia402Drive._entries order) and their sizes */
+enum { E_CW, E_SW, E_MODES, E_MODES_DISPLAY, E_TARGET, E_POSITION, E_VELOCITY,
+       E_TARGET_VELOCITY, E_MAX_VELOCITY, E_ERROR, N_CYCLIC };
+static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2};
+
+/* rows */
+#define MAP_WORDS 4     /* image bit, bits, value offset, value bytes */
+#define DIO_WORDS 6     /* position, input offset, input bytes, bits, source offset (-1), source bytes */
+#define ANALOG_WORDS 6  /* offset, bytes, type (0 integer, 1 REAL32, 2 REAL64), full, offset added, mask */
+
+/* One slave: its ESC's cyclic state and its device's. Field order and types are mirrored
+ * by core.py's SlaveTable (ctypes); lolacli_core_abi lets it check the layout. */
+typedef struct {
+    i64 owned;               /* 1: this table holds the state; 0: the Python objects do */
+    uint8_t *mem;            /* the ESC's memory, MEMORY_BYTES */
+    i64 clk_start, clk_drift, clk_corr;
+    i64 outputs_valid, last_outputs_ns, now_ns;
+    i64 datagrams, cycles;   /* counted here since the state was last handed back */
+    i64 wd_timeout;          /* process-data watchdog (ns), < 0: none */
+    i64 kind;
+    i64 out_start, out_bytes, in_start, in_bytes;
+    uint8_t *vals; i64 vals_len;
+    i64 *omap; i64 omap_n;
+    i64 *imap; i64 imap_n;
+    i64 *chan; i64 chan_n;
+    double *phase;
+    i64 dev_t_ns, power, prev_cw, last_sample, has_last, period;
+    double scale;
+    i64 e[N_CYCLIC];
+} slave_t;
+
+/* One frame plan: the program core.py compiles from a FramePlan, and its buffers. */
+typedef struct {
+    slave_t *slaves; i64 n_slaves;
+    i64 *prog; i64 prog_len;
+    uint8_t *buf; i64 buf_len;     /* the frame, answered in place */
+    uint8_t *snap; i64 snap_len;   /* datagram copies for deferred writes, BRD caches */
+    i64 *pend; i64 pend_len;       /* [0] work pending, [1] its time, then DC values, caches */
+} plan_t;
+
+/* program header */
+enum { H_MAGIC, H_FRAME_LEN, H_COUNT_K, H_COUNT_DEFERRED, H_N_COUNT, H_N_WATCH, H_WATCH,
+       H_N_ADP, H_ADP, H_N_OPS, H_OPS, H_WORDS = 16 };
+#define MAGIC 0x4C4F4C41504C414ELL /* "LOLAPLAN" */
+enum { OP_LOGICAL = 1, OP_BRD = 2, OP_DC = 3 };
+/* op records: [type, words, data offset, data bytes, wkc offset, ...] */
+enum { L_FIXED_WKC = 5, L_DEFERRED, L_SNAP, L_N_WRITES, L_N_READS, L_N_EVENTS, L_ROWS };
+enum { B_LO = 5, B_N, B_CACHE, B_CACHE_SNAP, B_CACHE_FLAG, B_ROWS };
+enum { D_COUNT = 5, D_DEFERRED, D_N_SEGMENTS, D_ROWS };
+#define COPY_WORDS 4     /* slave, memory offset, datagram offset, bytes */
+#define EVENT_WORDS 2    /* slave, port 0 offset */
+#define SEGMENT_WORDS 4  /* reference slave (-1: none), its port 0 offset, others, value slot */
+#define OTHER_WORDS 3    /* slave, port 0 offset, offset minus delay registers */
+
+/* ------------------------------------------------------------------ arithmetic */
+
+static inline i128 floordiv(i128 a, i128 b) {
+    i128 q = a / b;
+    if (a % b != 0 && ((a < 0) != (b < 0))) q -= 1;
+    return q;
+}
+
+static inline i128 floormod(i128 a, i128 b) { return a - floordiv(a, b) * b; }
+
+static inline i64 half_floor(i64 x) { return (x - (x & 1)) / 2; } /* Python's x >> 1 */
+
+static inline u64 get_le(const uint8_t *p, i64 n) {
+    u64 v = 0;
+    for (i64 i = n - 1; i >= 0; i--) v = (v << 8) | p[i];
+    return v;
+}
+
+static inline void put_le(uint8_t *p, i64 n, u64 v) {
+    for (i64 i = 0; i < n; i++) {
+        p[i] = (uint8_t)(v & 0xFF);
+        v >>= 8;
+    }
+}
+
+static inline i64 wrap32(i128 v) { return (i64)(int32_t)(uint32_t)(u64)v; }
+
+/* ------------------------------------------------------------------ DC */
+
+/* DcClock.local_ns + the system time offset register: Esc.system_time_ns, mod 2^64 */
+static u64 system_time(const slave_t *s, i64 t) {
+    i128 drift = floordiv((i128)t * s->clk_drift, NS_PER_S);
+    u64 offset = get_le(s->mem + DC_SYSTEM_TIME_OFFSET, 8);
+    return (u64)t + (u64)drift + (u64)s->clk_start + (u64)s->clk_corr + offset;
+}
+
+/* esc.system_time_loop for the others of one segment */
+static void time_loop(slave_t *slaves, const i64 *rows, i64 n, u64 value, i64 width, i64 t) {
+    u64 half = (u64)1 << (width - 1);
+    u64 mask = width == 64 ? ~(u64)0 : ((u64)1 << width) - 1;
+    u64 base = (u64)t - value + half;
+    for (i64 k = 0; k < n; k++) {
+        const i64 *row = rows + k * OTHER_WORDS;
+        slave_t *s = &slaves[row[0]];
+        i64 offset_ns = row[1];
+        u64 x = base + (u64)offset_ns + (u64)s->clk_start + (u64)s->clk_corr + (u64)row[2];
+        if (s->clk_drift) x += (u64)floordiv((i128)(t + offset_ns) * s->clk_drift, NS_PER_S);
+        i64 diff = width == 64 ? (i64)((x & mask) - half) : (i64)(x & mask) - (i64)half;
+        uint8_t *reg = s->mem + DC_SYSTEM_TIME_DIFFERENCE;
+        if (diff < 0) {
+            put_le(reg, 4, (u64)((diff > -0x7FFFFFFF ? -diff : 0x7FFFFFFF) | 0x80000000LL));
+            s->clk_corr -= diff > -2 * MAX_CORRECTION_NS ? half_floor(diff) : -MAX_CORRECTION_NS;
+        } else {
+            put_le(reg, 4, (u64)(diff < 0x7FFFFFFF ? diff : 0x7FFFFFFF));
+            s->clk_corr -= diff < 2 * MAX_CORRECTION_NS ? half_floor(diff) : MAX_CORRECTION_NS;
+        }
+    }
+}
+
+/* ------------------------------------------------------------------ devices */
+
+/* OR ``bits`` bits of src (LSB first, zero past src_len bytes) into img at bit ``at``
+ * (Device.pack_inputs: img starts zeroed, mapped ranges do not overlap) */
+static void put_bits(uint8_t *img, i64 at, const uint8_t *src, i64 src_len, i64 bits) {
+    if ((at & 7) == 0 && (bits & 7) == 0 && bits / 8 <= src_len) {
+        memcpy(img + at / 8, src, (size_t)(bits / 8));
+        return;
+    }
+    i64 have = 8 * src_len < bits ? 8 * src_len : bits;
+    for (i64 b = 0; b < have; b++)
+        if ((src[b >> 3] >> (b & 7)) & 1) img[(at + b) >> 3] |= (uint8_t)(1 << ((at + b) & 7));
+}
+
+/* dst (dst_len bytes) = ``bits`` bits of img from bit ``at``, zero-extended
+ * (Device.unpack_outputs) */
+static void get_bits(uint8_t *dst, i64 dst_len, const uint8_t *img, i64 at, i64 bits) {
+    memset(dst, 0, (size_t)dst_len);
+    if ((at & 7) == 0 && (bits & 7) == 0) {
+        memcpy(dst, img + at / 8, (size_t)(bits / 8));
+        return;
+    }
+    for (i64 b = 0; b < bits; b++)
+        if ((img[(at + b) >> 3] >> ((at + b) & 7)) & 1) dst[b >> 3] |= (uint8_t)(1 << (b & 7));
+}
+
+/* CiA 402-2 power states (Cia402State) and commands (Command) */
+enum { NOT_READY = 0x0000, SWITCH_ON_DISABLED = 0x0040, READY_TO_SWITCH_ON = 0x0021,
+       SWITCHED_ON = 0x0023, OPERATION_ENABLED = 0x0027, QUICK_STOP_ACTIVE = 0x0007,
+       FAULT_REACTION_ACTIVE = 0x000F, FAULT = 0x0008 };
+enum { C_NONE, C_SHUTDOWN, C_SWITCH_ON, C_ENABLE_OPERATION, C_DISABLE_VOLTAGE, C_QUICK_STOP,
+       C_DISABLE_OPERATION, C_FAULT_RESET };
+
+static int decode_controlword(i64 cw, i64 previous) {
+    if ((cw & 0x80) && !(previous & 0x80)) return C_FAULT_RESET;
+    if ((cw & 0x02) == 0) return C_DISABLE_VOLTAGE;
+    if ((cw & 0x06) == 0x02) return C_QUICK_STOP;
+    if ((cw & 0x07) == 0x06) return C_SHUTDOWN;
+    if ((cw & 0x0F) == 0x07) return (previous & 0x0F) != 0x0F ? C_SWITCH_ON : C_DISABLE_OPERATION;
+    if ((cw & 0x0F) == 0x0F) return C_ENABLE_OPERATION;
+    return C_NONE;
+}
+
+static i64 next_state(i64 state, int command) {
+    if (state == NOT_READY) return SWITCH_ON_DISABLED;
+    if (state == FAULT_REACTION_ACTIVE) return FAULT;
+    switch (state) {
+    case SWITCH_ON_DISABLED:
+        if (command == C_SHUTDOWN) return READY_TO_SWITCH_ON;
+        break;
+    case READY_TO_SWITCH_ON:
+        if (command == C_SWITCH_ON) return SWITCHED_ON;
+        if (command == C_ENABLE_OPERATION) return OPERATION_ENABLED;
+        if (command == C_DISABLE_VOLTAGE || command == C_QUICK_STOP) return SWITCH_ON_DISABLED;
+        break;
+    case SWITCHED_ON:
+        if (command == C_ENABLE_OPERATION) return OPERATION_ENABLED;
+        if (command == C_SHUTDOWN) return READY_TO_SWITCH_ON;
+        if (command == C_DISABLE_VOLTAGE || command == C_QUICK_STOP) return SWITCH_ON_DISABLED;
+        break;
+    case OPERATION_ENABLED:
+        if (command == C_DISABLE_OPERATION || command == C_SWITCH_ON) return SWITCHED_ON;
+        if (command == C_SHUTDOWN) return READY_TO_SWITCH_ON;
+        if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
+        if (command == C_QUICK_STOP) return QUICK_STOP_ACTIVE;
+        break;
+    case QUICK_STOP_ACTIVE:
+        if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
+        if (command == C_ENABLE_OPERATION) return OPERATION_ENABLED;
+        break;
+    case FAULT:
+        if (command == C_FAULT_RESET) return SWITCH_ON_DISABLED;
+        break;
+    }
+    return state;
+}
+
+static i64 status_bits(i64 state) {
+    i64 status = state | 0x0200;
+    if (state == READY_TO_SWITCH_ON || state == SWITCHED_ON || state == OPERATION_ENABLED ||
+        state == QUICK_STOP_ACTIVE)
+        status |= 0x0010;
+    if (state == OPERATION_ENABLED) status |= 0x1000;
+    return status;
+}
+
+static void cia402_step(slave_t *s, i64 t) {
+    uint8_t *v = s->vals;
+    const i64 *e = s->e;
+    i64 cw = (i64)get_le(v + e[E_CW], 2);
+    i64 previous = s->prev_cw;
+    s->prev_cw = cw;
+    i64 power = s->power = next_state(s->power, decode_controlword(cw, previous));
+    if (power == SWITCH_ON_DISABLED && get_le(v + e[E_ERROR], 2) != 0) put_le(v + e[E_ERROR], 2, 0);
+    v[e[E_MODES_DISPLAY]] = v[e[E_MODES]];
+    i64 dt = s->dev_t_ns ? t - s->dev_t_ns : 0;
+    i64 mode = (int8_t)v[e[E_MODES]];
+    if (power != OPERATION_ENABLED) {
+        put_le(v + e[E_VELOCITY], 4, 0);
+    } else {
+        i128 actual = (int32_t)(uint32_t)get_le(v + e[E_POSITION], 4);
+        i128 target;
+        if (mode == 9) { /* CSV */
+            i128 velocity = (int32_t)(uint32_t)get_le(v + e[E_TARGET_VELOCITY], 4);
+            target = actual + floordiv(velocity * dt, NS_PER_S);
+        } else {
+            target = (int32_t)(uint32_t)get_le(v + e[E_TARGET], 4);
+            i128 limit = (i128)get_le(v + e[E_MAX_VELOCITY], 4);
+            if (limit && dt) {
+                i128 step = floordiv(limit * dt, NS_PER_S);
+                if (step < 1) step = 1;
+                i128 move = target - actual;
+                if (move > step) move = step;
+                if (move < -step) move = -step;
+                target = actual + move;
+            }
+        }
+        i128 velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
+        put_le(v + e[E_POSITION], 4, (u64)wrap32(target));
+        put_le(v + e[E_VELOCITY], 4, (u64)wrap32(velocity));
+    }
+    i64 status = status_bits(power);
+    if (power == OPERATION_ENABLED && memcmp(v + e[E_POSITION], v + e[E_TARGET], 4) == 0)
+        status |= 0x0400;
+    put_le(v + e[E_SW], 2, (u64)status);
+}
+
+static inline u64 low_mask(i64 bits) { return bits >= 64 ? ~(u64)0 : ((u64)1 << bits) - 1; }
+
+static void digital_io_step(slave_t *s, i64 t) {
+    i64 pattern = (i64)1 << (i64)floormod(floordiv(t, 10000000), 8);
+    for (i64 k = 0; k < s->chan_n; k++) {
+        const i64 *row = s->chan + k * DIO_WORDS;
+        i64 bits = row[3];
+        u64 value;
+        if (row[4] >= 0) {
+            i64 n = row[5] < 8 ? row[5] : 8;
+            value = get_le(s->vals + row[4], n);
+        } else {
+            value = bits == 1 ? (u64)((pattern >> (row[0] % 8)) & 1) : (u64)pattern;
+        }
+        put_le(s->vals + row[1], row[2], value & low_mask(bits));
+    }
+}
+
+static void analog_step(slave_t *s, i64 t) {
+    i64 sample = (i64)floordiv(t, s->period);
+    if (s->has_last && sample == s->last_sample) return;
+    s->last_sample = sample;
+    s->has_last = 1;
+    double angle = 2 * PI * ((double)t / 1e9);
+    for (i64 k = 0; k < s->chan_n; k++) {
+        const i64 *row = s->chan + k * ANALOG_WORDS;
+        double x = sin(angle + s->phase[k]);
+        uint8_t *at = s->vals + row[0];
+        if (row[2] == 1) {
+            float f = (float)(x * s->scale);
+            memcpy(at, &f, 4);
+        } else if (row[2] == 2) {
+            double d = x * s->scale;
+            memcpy(at, &d, 8);
+        } else {
+            i64 r = (i64)rint(x * (double)row[3] * 0.5);
+            put_le(at, row[1], ((u64)r + (u64)row[4]) & (u64)row[5]);
+        }
+    }
+}
+
+/* Esc.cycle + Device.cycle for one slave whose table holds its state */
+static void slave_cycle(slave_t *s, i64 t) {
+    int state = s->mem[AL_STATUS] & AL_STATE_MASK;
+    if (state != AL_SAFEOP && state != AL_OP) return;
+    s->cycles += 1;
+    if (state == AL_OP && s->out_bytes) {
+        const uint8_t *image = s->mem + s->out_start;
+        for (i64 k = 0; k < s->omap_n; k++) {
+            const i64 *row = s->omap + k * MAP_WORDS;
+            get_bits(s->vals + row[2], row[3], image, row[0], row[1]);
+        }
+    }
+    if (s->kind == K_CIA402) cia402_step(s, t);
+    else if (s->kind == K_DIGITAL_IO) digital_io_step(s, t);
+    else if (s->kind == K_ANALOG) analog_step(s, t);
+    s->dev_t_ns = t;
+    if (s->in_bytes) {
+        uint8_t *image = s->mem + s->in_start;
+        memset(image, 0, (size_t)s->in_bytes);
+        for (i64 k = 0; k < s->imap_n; k++) {
+            const i64 *row = s->imap + k * MAP_WORDS;
+            put_bits(image, row[0], s->vals + row[2], row[3], row[1]);
+        }
+    }
+}
+
+/* The application cycle of the first n slaves (Chain.run_deferred_cycles), for those
+ * whose tables hold their state and whose device runs here; the rest run in Python. */
+void lolacli_core_cycles(slave_t *slaves, i64 n, i64 t) {
+    for (i64 i = 0; i < n; i++) {
+        slave_t *s = &slaves[i];
+        if (s->owned && s->kind >= K_GENERIC) slave_cycle(s, t);
+    }
+}
+
+/* Esc.check_watchdog without its effect: the first of the first n slaves (held here)
+ * whose process-data watchdog would expire at t, or -1. */
+i64 lolacli_core_watchdog(slave_t *slaves, i64 n, i64 t) {
+    for (i64 i = 0; i < n; i++) {
+        slave_t *s = &slaves[i];
+        if (s->owned && s->mem[AL_STATUS] == AL_OP && s->wd_timeout >= 0 &&
+            t - s->last_outputs_ns > s->wd_timeout)
+            return i;
+    }
+    return -1;
+}
+
+/* ------------------------------------------------------------------ frame plans */
+
+static void events(slave_t *slaves, const i64 *rows, i64 n, i64 t) {
+    for (i64 k = 0; k < n; k++) {
+        slave_t *s = &slaves[rows[k * EVENT_WORDS]];
+        s->now_ns = t + rows[k * EVENT_WORDS + 1];
+        s->outputs_valid = 1;
+        s->last_outputs_ns = s->now_ns;
+    }
+}
+
+static void copies_in(slave_t *slaves, const i64 *rows, i64 n, const uint8_t *data) {
+    for (i64 k = 0; k < n; k++) {
+        const i64 *row = rows + k * COPY_WORDS;
+        memcpy(slaves[row[0]].mem + row[1], data + row[2], (size_t)row[3]);
+    }
+}
+
+static void count(plan_t *p) {
+    const i64 *h = p->prog;
+    for (i64 i = 0; i < h[H_N_COUNT]; i++) p->slaves[i].datagrams += h[H_COUNT_K];
+}
+
+/* FramePlan.run: the frame answered in p->buf; what waits for later is marked in p->pend.
+ * Returns 1 when a slave's watchdog would expire (Python then runs the checks). */
+i64 lolacli_core_answer(plan_t *p, const uint8_t *frame, i64 frame_len, i64 t) {
+    const i64 *h = p->prog;
+    if (frame_len != h[H_FRAME_LEN] || p->pend[0]) return -1;
+    uint8_t *buf = p->buf;
+    slave_t *slaves = p->slaves;
+    memcpy(buf, frame, (size_t)frame_len);
+    i64 pending = 0;
+    if (h[H_COUNT_DEFERRED]) pending = 1;
+    else count(p);
+    const i64 *op = p->prog + h[H_OPS];
+    for (i64 k = 0; k < h[H_N_OPS]; k++, op += op[1]) {
+        uint8_t *data = buf + op[2];
+        i64 length = op[3];
+        i64 added = 0;
+        if (op[0] == OP_LOGICAL) {
+            const i64 *writes = op + L_ROWS;
+            const i64 *reads = writes + op[L_N_WRITES] * COPY_WORDS;
+            const i64 *evs = reads + op[L_N_READS] * COPY_WORDS;
+            if (op[L_DEFERRED]) {
+                memcpy(p->snap + op[L_SNAP], data, (size_t)length);
+                pending = 1;
+            } else {
+                copies_in(slaves, writes, op[L_N_WRITES], data);
+                events(slaves, evs, op[L_N_EVENTS], t);
+            }
+            for (i64 r = 0; r < op[L_N_READS]; r++) {
+                const i64 *row = reads + r * COPY_WORDS;
+                memcpy(data + row[2], slaves[row[0]].mem + row[1], (size_t)row[3]);
+            }
+            added = op[L_FIXED_WKC];
+        } else if (op[0] == OP_BRD) {
+            uint8_t *merged = p->snap + op[B_CACHE_SNAP];
+            if (!(op[B_CACHE] && p->pend[op[B_CACHE_FLAG]])) {
+                memset(merged, 0, (size_t)length);
+                for (i64 r = 0; r < op[B_N]; r++) {
+                    const uint8_t *src = slaves[op[B_ROWS + r]].mem + op[B_LO];
+                    for (i64 b = 0; b < length; b++) merged[b] |= src[b];
+                }
+                if (op[B_CACHE]) p->pend[op[B_CACHE_FLAG]] = 1;
+            }
+            for (i64 b = 0; b < length; b++) data[b] |= merged[b];
+            added = op[B_N];
+        } else { /* OP_DC */
+            const i64 *seg = op + D_ROWS;
+            const i64 *others = seg + op[D_N_SEGMENTS] * SEGMENT_WORDS;
+            u64 value = get_le(data, length);
+            for (i64 g = 0; g < op[D_N_SEGMENTS]; g++, seg += SEGMENT_WORDS) {
+                if (seg[0] >= 0) {
+                    put_le(data, length, system_time(&slaves[seg[0]], t + seg[1]));
+                    value = get_le(data, length);
+                }
+                if (seg[2] == 0) continue;
+                if (op[D_DEFERRED]) {
+                    p->pend[seg[3]] = (i64)value;
+                    pending = 1;
+                } else {
+                    time_loop(slaves, others, seg[2], value, 8 * length, t);
+                }
+                others += seg[2] * OTHER_WORDS;
+            }
+            added = op[D_COUNT];
+        }
+        if (added) {
+            uint8_t *w = buf + op[4];
+            put_le(w, 2, (get_le(w, 2) + (u64)added) & 0xFFFF);
+        }
+    }
+    const i64 *adp = p->prog + h[H_ADP];
+    for (i64 k = 0; k < h[H_N_ADP]; k++) put_le(buf + adp[2 * k], 2, (u64)adp[2 * k + 1]);
+    buf[6] |= 0x02; /* SOURCE_MAC_LOCAL_BIT */
+    if (pending) {
+        p->pend[0] = 1;
+        p->pend[1] = t;
+    }
+    const i64 *watch = p->prog + h[H_WATCH];
+    for (i64 k = 0; k < h[H_N_WATCH]; k++) {
+        slave_t *s = &slaves[watch[k]];
+        if (s->mem[AL_STATUS] == AL_OP && s->wd_timeout >= 0 && t - s->last_outputs_ns > s->wd_timeout)
+            return 1;
+    }
+    return 0;
+}
+
+/* The work FramePlan.run left in the chain's deferred list, in its order: the datagram
+ * counters, then per op the writes from the datagram copy with their outputs events and
+ * the DC time loops. */
+void lolacli_core_finish(plan_t *p) {
+    if (!p->pend[0]) return;
+    const i64 *h = p->prog;
+    i64 t = p->pend[1];
+    slave_t *slaves = p->slaves;
+    p->pend[0] = 0;
+    if (h[H_COUNT_DEFERRED]) count(p);
+    const i64 *op = p->prog + h[H_OPS];
+    for (i64 k = 0; k < h[H_N_OPS]; k++, op += op[1]) {
+        if (op[0] == OP_LOGICAL && op[L_DEFERRED]) {
+            const i64 *writes = op + L_ROWS;
+            const i64 *evs = writes + (op[L_N_WRITES] + op[L_N_READS]) * COPY_WORDS;
+            copies_in(slaves, writes, op[L_N_WRITES], p->snap + op[L_SNAP]);
+            events(slaves, evs, op[L_N_EVENTS], t);
+        } else if (op[0] == OP_DC && op[D_DEFERRED]) {
+            const i64 *seg = op + D_ROWS;
+            const i64 *others = seg + op[D_N_SEGMENTS] * SEGMENT_WORDS;
+            for (i64 g = 0; g < op[D_N_SEGMENTS]; g++, seg += SEGMENT_WORDS) {
+                if (seg[2] == 0) continue;
+                time_loop(slaves, others, seg[2], (u64)p->pend[seg[3]], 8 * op[3], t);
+                others += seg[2] * OTHER_WORDS;
+            }
+        }
+    }
+}
+
+/* ------------------------------------------------------------------ checks */
+
+static int within(i64 at, i64 n, i64 size) { return at >= 0 && n >= 0 && at <= size - n; }
+static int bounded(i64 x) { return x > -LIMIT && x < LIMIT; }
+
+/* 0 when the slave's tables are safe to run (and its values within the bounds the
+ * arithmetic assumes), else a code naming the first problem. */
+i64 lolacli_core_check_slave(const slave_t *s) {
+    if (!s->mem) return 1;
+    if (!bounded(s->clk_start) || !bounded(s->clk_drift) || !bounded(s->clk_corr) ||
+        !bounded(s->last_outputs_ns) || !bounded(s->now_ns) || !bounded(s->wd_timeout))
+        return 2;
+    if (s->kind < K_NONE || s->kind > K_ANALOG) return 3;
+    if (s->kind < K_GENERIC) return 0;
+    if (!within(s->out_start, s->out_bytes, MEMORY_BYTES) ||
+        !within(s->in_start, s->in_bytes, MEMORY_BYTES))
+        return 4;
+    if (s->vals_len < 0 || (s->vals_len && !s->vals) || !bounded(s->dev_t_ns)) return 5;
+    if (s->omap_n < 0 || s->imap_n < 0 || s->chan_n < 0) return 6;
+    if ((s->omap_n && !s->omap) || (s->imap_n && !s->imap) || (s->chan_n && !s->chan)) return 6;
+    for (i64 k = 0; k < s->omap_n; k++) {
+        const i64 *row = s->omap + k * MAP_WORDS;
+        i64 want = row[1] > 0 ? (row[1] + 7) / 8 : 1;
+        if (row[1] < 0 || !within(row[0], row[1], 8 * s->out_bytes) || row[3] != want ||
+            !within(row[2], row[3], s->vals_len))
+            return 7;
+    }
+    for (i64 k = 0; k < s->imap_n; k++) {
+        const i64 *row = s->imap + k * MAP_WORDS;
+        if (row[1] < 0 || !within(row[0], row[1], 8 * s->in_bytes) ||
+            !within(row[2], row[3], s->vals_len))
+            return 8;
+    }
+    if (s->kind == K_CIA402) {
+        for (int k = 0; k < N_CYCLIC; k++)
+            if (!within(s->e[k], CYCLIC_BYTES[k], s->vals_len)) return 9;
+        if (s->prev_cw < 0 || s->prev_cw > 0xFFFF) return 10;
+        switch (s->power) {
+        case NOT_READY: case SWITCH_ON_DISABLED: case READY_TO_SWITCH_ON: case SWITCHED_ON:
+        case OPERATION_ENABLED: case QUICK_STOP_ACTIVE: case FAULT_REACTION_ACTIVE: case FAULT:
+            break;
+        default:
+            return 10;
+        }
+    } else if (s->kind == K_DIGITAL_IO) {
+        for (i64 k = 0; k < s->chan_n; k++) {
+            const i64 *row = s->chan + k * DIO_WORDS;
+            i64 want = row[3] > 0 ? (row[3] + 7) / 8 : 1;
+            if (row[0] < 0 || row[3] < 0 || row[3] > 64 || row[2] != want ||
+                !within(row[1], row[2], s->vals_len))
+                return 11;
+            if (row[4] != -1 && !within(row[4], row[5], s->vals_len)) return 11;
+        }
+    } else if (s->kind == K_ANALOG) {
+        if (s->period <= 0 || !bounded(s->period) || !bounded(s->last_sample)) return 12;
+        if (s->chan_n && !s->phase) return 12;
+        for (i64 k = 0; k < s->chan_n; k++) {
+            const i64 *row = s->chan + k * ANALOG_WORDS;
+            i64 want = row[2] == 1 ? 4 : row[2] == 2 ? 8 : row[1];
+            if (row[2] < 0 || row[2] > 2 || row[1] != want || row[1] < 1 || row[1] > 8 ||
+                !within(row[0], row[1], s->vals_len))
+                return 13;
+        }
+    }
+    return 0;
+}
+
+/* 0 when the plan's program only reaches inside its buffers and slaves, else a code. */
+i64 lolacli_core_check_plan(const plan_t *p) {
+    const i64 *h = p->prog;
+    i64 n = p->prog_len;
+    if (n < H_WORDS || h[H_MAGIC] != MAGIC) return 1;
+    if (h[H_FRAME_LEN] < 16 || h[H_FRAME_LEN] != p->buf_len || p->pend_len < 2) return 2;
+    if (h[H_N_COUNT] < 0 || h[H_N_COUNT] > p->n_slaves || !bounded(h[H_COUNT_K])) return 3;
+    if (!within(h[H_WATCH], h[H_N_WATCH], n) || !within(h[H_ADP], 2 * h[H_N_ADP], n)) return 4;
+    for (i64 k = 0; k < h[H_N_WATCH]; k++)
+        if (h[h[H_WATCH] + k] < 0 || h[h[H_WATCH] + k] >= p->n_slaves) return 4;
+    for (i64 k = 0; k < h[H_N_ADP]; k++)
+        if (!within(h[h[H_ADP] + 2 * k], 2, p->buf_len)) return 4;
+    i64 at = h[H_OPS];
+    if (h[H_N_OPS] < 0 || at < H_WORDS) return 5;
+    for (i64 k = 0; k < h[H_N_OPS]; k++) {
+        if (!within(at, 5, n)) return 5;
+        const i64 *op = h + at;
+        i64 words = op[1];
+        if (words < 5 || !within(at, words, n)) return 5;
+        i64 data = op[2], length = op[3];
+        if (!within(data, length, p->buf_len) || !within(op[4], 2, p->buf_len)) return 6;
+        if (op[0] == OP_LOGICAL) {
+            if (words < L_ROWS) return 7;
+            i64 nw = op[L_N_WRITES], nr = op[L_N_READS], ne = op[L_N_EVENTS];
+            if (nw < 0 || nr < 0 || ne < 0 || !bounded(op[L_FIXED_WKC])) return 7;
+            if (words != L_ROWS + (nw + nr) * COPY_WORDS + ne * EVENT_WORDS) return 7;
+            if (op[L_DEFERRED] && !within(op[L_SNAP], length, p->snap_len)) return 7;
+            for (i64 r = 0; r < nw + nr; r++) {
+                const i64 *row = op + L_ROWS + r * COPY_WORDS;
+                if (row[0] < 0 || row[0] >= p->n_slaves || !within(row[1], row[3], MEMORY_BYTES) ||
+                    !within(row[2], row[3], length))
+                    return 8;
+            }
+            for (i64 r = 0; r < ne; r++) {
+                const i64 *row = op + L_ROWS + (nw + nr) * COPY_WORDS + r * EVENT_WORDS;
+                if (row[0] < 0 || row[0] >= p->n_slaves || !bounded(row[1])) return 8;
+            }
+        } else if (op[0] == OP_BRD) {
+            if (words < B_ROWS || words != B_ROWS + op[B_N] || op[B_N] < 0) return 9;
+            if (!within(op[B_LO], length, MEMORY_BYTES) || !within(op[B_CACHE_SNAP], length, p->snap_len))
+                return 9;
+            if (op[B_CACHE] && (op[B_CACHE_FLAG] < 2 || op[B_CACHE_FLAG] >= p->pend_len)) return 9;
+            for (i64 r = 0; r < op[B_N]; r++)
+                if (op[B_ROWS + r] < 0 || op[B_ROWS + r] >= p->n_slaves) return 9;
+        } else if (op[0] == OP_DC) {
+            if (words < D_ROWS || (length != 4 && length != 8) || op[D_N_SEGMENTS] < 0) return 10;
+            i64 others = 0;
+            for (i64 g = 0; g < op[D_N_SEGMENTS]; g++) {
+                if (!within(D_ROWS + g * SEGMENT_WORDS, SEGMENT_WORDS, words)) return 10;
+                const i64 *seg = op + D_ROWS + g * SEGMENT_WORDS;
+                if (seg[0] < -1 || seg[0] >= p->n_slaves || !bounded(seg[1]) || seg[2] < 0) return 10;
+                if (seg[2] && (seg[3] < 2 || seg[3] >= p->pend_len)) return 10;
+                others += seg[2];
+            }
+            if (words != D_ROWS + op[D_N_SEGMENTS] * SEGMENT_WORDS + others * OTHER_WORDS) return 10;
+            const i64 *row = op + D_ROWS + op[D_N_SEGMENTS] * SEGMENT_WORDS;
+            for (i64 r = 0; r < others; r++, row += OTHER_WORDS)
+                if (row[0] < 0 || row[0] >= p->n_slaves || !bounded(row[1])) return 11;
+        } else {
+            return 12;
+        }
+        at += words;
+    }
+    return 0;
+}
+
+/* Layout check for core.py: the sizes and a few offsets of the structs. */
+i64 lolacli_core_abi(i64 what) {
+    switch (what) {
+    case 0: return ABI_VERSION;
+    case 1: return (i64)sizeof(slave_t);
+    case 2: return (i64)offsetof(slave_t, scale);
+    case 3: return (i64)offsetof(slave_t, e);
+    case 4: return (i64)sizeof(plan_t);
+    }
+    return -1;
+}
+
+/* An importable module, so that the build and the package data find it; the functions
+ * above are called through ctypes. */
+static struct PyModuleDef ccore_module = {
+    PyModuleDef_HEAD_INIT, "_ccore",
+    "C core of the emulated chain's cyclic work (called through ctypes by lolacli.emulator.core).",
+    -1, NULL, NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__ccore(void) { return PyModule_Create(&ccore_module); }

@@ -1,0 +1,540 @@
+"""The chain's cyclic work compiled: frame plans, DC loops, watchdogs and device cycles in C.
+
+The C kernel (``_ccore.c``, built at install time when a C compiler is present) runs the
+work of a planned frame (:class:`~lolacli.emulator.plan.FramePlan`: its answer and the
+work it defers), the process-data watchdog checks and the application cycles of the
+devices, on tables made here from the chain's Python objects. The Python code (plan.py,
+esc.py, the device classes) stays the reference: without the kernel, or for anything the
+tables do not describe, the chain runs it; tests compare the two bit for bit.
+
+Who holds the state. ESC memory is shared: the kernel reads and writes each slave's
+bytearray in place. The rest of a slave's cyclic state — its ESC's DC clock correction,
+outputs-valid flag and time, datagram and cycle counters, and its device's entry values
+and scalars (:mod:`lolacli.devices.flat`) — is held either by the Python objects or by the
+kernel's table for that slave. :meth:`ChainCore.acquire` moves it into the tables before
+compiled work runs; :meth:`ChainCore.release` gives it back before Python code touches a
+slave (the chain releases the slaves a general-path frame addresses, and all of them when
+``Chain.slaves`` is read). A slave whose device the tables cannot describe keeps its
+device in Python (its cycle runs there) while the kernel holds its ESC's scalars.
+
+The kernel trusts its tables; they are checked once when built (``lolacli_core_check_*``
+walk them as the executors do), and every time passed in is bounded here.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.util
+from array import array
+from collections.abc import Iterable
+from functools import lru_cache
+from typing import TYPE_CHECKING, Any
+
+from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
+from lolacli.emulator.esc import system_time_loop
+from lolacli.emulator.plan import FramePlan, _Brd, _DcDistribution, _Logical
+from lolacli.emulator.registers import MEMORY_BYTES
+
+if TYPE_CHECKING:
+    from lolacli.devices.base import Device
+    from lolacli.emulator.esc import Esc
+
+ABI_VERSION = 3
+K_NONE, K_PYTHON, K_GENERIC = 0, 1, 2
+_I64 = ctypes.c_int64
+_VP = ctypes.c_void_p
+_MASK64 = (1 << 64) - 1
+
+# program layout (see _ccore.c)
+MAGIC = 0x4C4F4C41504C414E
+H_MAGIC, H_FRAME_LEN, H_COUNT_K, H_COUNT_DEFERRED, H_N_COUNT = 0, 1, 2, 3, 4
+H_N_WATCH, H_WATCH, H_N_ADP, H_ADP, H_N_OPS, H_OPS = 5, 6, 7, 8, 9, 10
+H_WORDS = 16
+OP_LOGICAL, OP_BRD, OP_DC = 1, 2, 3
+PEND_FIRST_SLOT = 2  # pend[0]: work pending, pend[1]: its time
+
+
+class SlaveTable(ctypes.Structure):
+    """``slave_t`` of _ccore.c: one slave's cyclic state while the kernel holds it."""
+
+    _fields_ = [
+        ("owned", _I64),
+        ("mem", _VP),
+        ("clk_start", _I64),
+        ("clk_drift", _I64),
+        ("clk_corr", _I64),
+        ("outputs_valid", _I64),
+        ("last_outputs_ns", _I64),
+        ("now_ns", _I64),
+        ("datagrams", _I64),
+        ("cycles", _I64),
+        ("wd_timeout", _I64),
+        ("kind", _I64),
+        ("out_start", _I64),
+        ("out_bytes", _I64),
+        ("in_start", _I64),
+        ("in_bytes", _I64),
+        ("vals", _VP),
+        ("vals_len", _I64),
+        ("omap", _VP),
+        ("omap_n", _I64),
+        ("imap", _VP),
+        ("imap_n", _I64),
+        ("chan", _VP),
+        ("chan_n", _I64),
+        ("phase", _VP),
+        ("dev_t_ns", _I64),
+        ("power", _I64),
+        ("prev_cw", _I64),
+        ("last_sample", _I64),
+        ("has_last", _I64),
+        ("period", _I64),
+        ("scale", ctypes.c_double),
+        ("e", _I64 * 10),
+    ]
+
+
+class PlanTable(ctypes.Structure):
+    """``plan_t`` of _ccore.c."""
+
+    _fields_ = [
+        ("slaves", _VP),
+        ("n_slaves", _I64),
+        ("prog", _VP),
+        ("prog_len", _I64),
+        ("buf", _VP),
+        ("buf_len", _I64),
+        ("snap", _VP),
+        ("snap_len", _I64),
+        ("pend", _VP),
+        ("pend_len", _I64),
+    ]
+
+
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL | None:
+    spec = importlib.util.find_spec("lolacli.emulator._ccore")
+    if spec is None or spec.origin is None:
+        return None
+    try:
+        lib = ctypes.CDLL(spec.origin)
+        lib.lolacli_core_abi.argtypes = [_I64]
+        lib.lolacli_core_abi.restype = _I64
+        lib.lolacli_core_answer.argtypes = [_VP, ctypes.c_char_p, _I64, _I64]
+        lib.lolacli_core_answer.restype = _I64
+        lib.lolacli_core_finish.argtypes = [_VP]
+        lib.lolacli_core_finish.restype = None
+        lib.lolacli_core_cycles.argtypes = [_VP, _I64, _I64]
+        lib.lolacli_core_cycles.restype = None
+        lib.lolacli_core_watchdog.argtypes = [_VP, _I64, _I64]
+        lib.lolacli_core_watchdog.restype = _I64
+        lib.lolacli_core_check_slave.argtypes = [_VP]
+        lib.lolacli_core_check_slave.restype = _I64
+        lib.lolacli_core_check_plan.argtypes = [_VP]
+        lib.lolacli_core_check_plan.restype = _I64
+    except (OSError, AttributeError):
+        return None  # not built, or a stale build without these functions
+    layout = (
+        ABI_VERSION,
+        ctypes.sizeof(SlaveTable),
+        SlaveTable.scale.offset,
+        SlaveTable.e.offset,
+        ctypes.sizeof(PlanTable),
+    )
+    if tuple(lib.lolacli_core_abi(i) for i in range(len(layout))) != layout:
+        return None
+    return lib
+
+
+def core_available() -> bool:
+    """Whether the C kernel was built (``pip install`` with a C compiler) and fits this
+    module (a stale build from an older checkout does not)."""
+    return _library() is not None
+
+
+def _bounded(value: object) -> bool:
+    return type(value) is int and -VALUE_LIMIT < value < VALUE_LIMIT
+
+
+def _signed64(value: int) -> int:
+    return ((value + (1 << 63)) & _MASK64) - (1 << 63)
+
+
+def _address(buffer: bytearray | array[Any], keep: list[Any]) -> int:
+    """The address of a buffer the kernel writes, kept exported (so it cannot move)."""
+    if isinstance(buffer, array):
+        keep.append(buffer)
+        return int(buffer.buffer_info()[0]) if len(buffer) else 0
+    if not buffer:
+        return 0
+    pin = (ctypes.c_char * len(buffer)).from_buffer(buffer)
+    keep.append(pin)
+    return ctypes.addressof(pin)
+
+
+class ChainCore:
+    """The kernel's tables for the slaves of one chain (all of them, in line order)."""
+
+    def __init__(self, escs: list[Esc]) -> None:
+        lib = _library()
+        if lib is None:
+            raise RuntimeError("the chain's C core (lolacli.emulator._ccore) is not built")
+        if any(len(esc.mem) != MEMORY_BYTES for esc in escs):
+            raise RuntimeError("an ESC memory is not 64 KiB")
+        self._lib = lib
+        self.escs = escs
+        n = len(escs)
+        self._table = (SlaveTable * max(1, n))()
+        self.address = ctypes.addressof(self._table)
+        self._mem_pins = [(ctypes.c_char * MEMORY_BYTES).from_buffer(esc.mem) for esc in escs]
+        self._flat: list[FlatDevice | None] = [None] * n
+        self._device_pins: list[tuple[FlatDevice | None, list[Any]]] = [(None, [])] * n
+        self.released: set[int] = set(range(n))  # the Python objects hold these
+        self._python_cycles: dict[int, list[Esc]] = {}
+        self._index = {id(esc): i for i, esc in enumerate(escs)}
+
+    # ------------------------------------------------------------ ownership
+    def acquire(self) -> bool:
+        """Take every released slave's state into the tables; ``False`` (and everything
+        given back) when one cannot be held (a value beyond what the kernel computes with)."""
+        if not self.released:
+            return True
+        for i in sorted(self.released):
+            if not self._load(i):
+                self.release()
+                return False
+            self.released.discard(i)
+        self._python_cycles.clear()
+        return True
+
+    def release(self, positions: Iterable[int] | None = None) -> None:
+        """Give the state of the slaves at these 0-based positions (all: ``None``) back
+        to the Python objects."""
+        n = len(self.escs)
+        if positions is None:
+            if len(self.released) == n:
+                return
+            positions = range(n)
+        stored = False
+        for i in positions:
+            if i not in self.released and 0 <= i < n:
+                self._store(i)
+                self.released.add(i)
+                stored = True
+        if stored:
+            self._python_cycles.clear()
+
+    def _load(self, i: int) -> bool:
+        esc, row = self.escs[i], self._table[i]
+        clock = esc.clock
+        scalars = (clock.start_ns, clock.drift_ppb, clock.correction_ns)
+        times = (esc._last_outputs_ns, esc._now_ns)
+        watchdog = esc._watchdog_ns  # what check_watchdog would use
+        if watchdog == -1:
+            watchdog = esc.watchdog_timeout_ns()
+        watchdog = -1 if watchdog is None else watchdog
+        if not all(_bounded(v) for v in (*scalars, *times, watchdog)):
+            return False
+        row.mem = ctypes.addressof(self._mem_pins[i])
+        row.clk_start, row.clk_drift, row.clk_corr = scalars
+        row.outputs_valid = 1 if esc.outputs_valid else 0
+        row.last_outputs_ns, row.now_ns = times
+        row.datagrams = row.cycles = 0
+        row.wd_timeout = watchdog
+        row.kind = self._load_device(i, row)
+        if self._lib.lolacli_core_check_slave(self.address + i * ctypes.sizeof(SlaveTable)):
+            if row.kind < K_GENERIC:
+                return False
+            row.kind = K_PYTHON  # the device part did not pass: Python runs the device
+            if self._lib.lolacli_core_check_slave(self.address + i * ctypes.sizeof(SlaveTable)):
+                return False
+        row.owned = 1
+        return True
+
+    def _load_device(self, i: int, row: SlaveTable) -> int:
+        """The device's tables into the row; its kind (K_PYTHON: Python runs it)."""
+        esc = self.escs[i]
+        if esc.app is None:
+            return K_NONE
+        device = _device_of(esc.app)
+        if device is None:
+            return K_PYTHON
+        flat = self._flat[i]
+        loaded = flat.load() if flat is not None else None
+        if loaded is None:
+            flat = self._flat[i] = flatten(device)
+            loaded = flat.load() if flat is not None else None
+        if flat is None or loaded is None:
+            return K_PYTHON
+        try:
+            out_start, in_start = esc._process_data_starts()
+        except (IndexError, AttributeError):
+            return K_PYTHON
+        pinned, keep = self._device_pins[i]
+        if pinned is not flat:
+            keep = []
+            row.vals = _address(flat.vals, keep)
+            row.omap = _address(flat.out_map, keep)
+            row.imap = _address(flat.in_map, keep)
+            row.chan = _address(flat.channels, keep)
+            row.phase = _address(flat.phases, keep)
+            self._device_pins[i] = (flat, keep)
+        row.vals_len = len(flat.vals)
+        row.omap_n, row.imap_n = len(flat.out_map) // 4, len(flat.in_map) // 4
+        row.chan_n = len(flat.channels) // 6
+        row.out_start, row.out_bytes = out_start, flat.out_bytes
+        row.in_start, row.in_bytes = in_start, flat.in_bytes
+        row.dev_t_ns, row.power, row.prev_cw = loaded.t_ns, loaded.power, loaded.previous_cw
+        row.last_sample, row.has_last = loaded.last_sample, int(loaded.has_last)
+        row.period, row.scale = flat.period_ns, flat.scale
+        for k, offset in enumerate(flat.cyclic):
+            row.e[k] = offset
+        return flat.kind
+
+    def _store(self, i: int) -> None:
+        esc, row = self.escs[i], self._table[i]
+        esc.clock.correction_ns = row.clk_corr
+        esc.outputs_valid = bool(row.outputs_valid)
+        esc._last_outputs_ns, esc._now_ns = row.last_outputs_ns, row.now_ns
+        esc.counters.datagrams += row.datagrams
+        esc.counters.cycles += row.cycles
+        row.datagrams = row.cycles = 0
+        flat = self._flat[i]
+        if row.kind >= K_GENERIC and flat is not None:
+            flat.store(
+                DeviceScalars(
+                    row.dev_t_ns, row.power, row.prev_cw, row.last_sample, bool(row.has_last)
+                )
+            )
+        row.owned = 0
+
+    def held_devices(self) -> list[int]:
+        """Positions whose device cycle runs in the kernel (for tests and reports)."""
+        return [
+            i
+            for i in range(len(self.escs))
+            if i not in self.released and self._table[i].kind >= K_GENERIC
+        ]
+
+    # ------------------------------------------------------------- the work
+    def cycles(self, n: int, t_ns: int) -> None:
+        """The application cycle of the first ``n`` slaves at ``t_ns`` (``Esc.cycle``)."""
+        if not _bounded(t_ns):
+            self.release()
+            for esc in self.escs[:n]:
+                esc.cycle(t_ns)
+            return
+        self._lib.lolacli_core_cycles(self.address, n, t_ns)
+        python = self._python_cycles.get(n)
+        if python is None:
+            python = self._python_cycles[n] = [
+                esc
+                for i, esc in enumerate(self.escs[:n])
+                if i in self.released or self._table[i].kind < K_GENERIC
+            ]
+        for esc in python:
+            esc.cycle(t_ns)
+
+    def check_watchdogs(self, n: int, t_ns: int) -> None:
+        """``Esc.check_watchdog`` of the first ``n`` slaves; the kernel looks at those it
+        holds, and when one would expire all go back to Python, which runs the checks."""
+        if _bounded(t_ns) and self._lib.lolacli_core_watchdog(self.address, n, t_ns) < 0:
+            for i in sorted(self.released):
+                if i < n:
+                    self.escs[i].check_watchdog(t_ns)
+            return
+        self.release()
+        for esc in self.escs[:n]:
+            esc.check_watchdog(t_ns)
+
+    def compile(self, plan: FramePlan) -> CompiledPlan | None:
+        """The plan as a kernel program, or ``None`` when the kernel does not run it (the
+        chain runs ``plan.run``)."""
+        try:
+            return CompiledPlan(self, plan)
+        except _NotCompiled:
+            return None
+
+
+def _device_of(app: object) -> Device | None:
+    """The device behind a stock SlaveApplication (other applications run in Python)."""
+    from lolacli.emulator.slave import SlaveApplication
+
+    if type(app) is not SlaveApplication:
+        return None
+    return app.device
+
+
+class _NotCompiled(Exception):
+    """The kernel does not run this plan."""
+
+
+class CompiledPlan:
+    """One FramePlan as a kernel program with its buffers."""
+
+    def __init__(self, core: ChainCore, plan: FramePlan) -> None:
+        self.core = core
+        self.plan = plan
+        self._lib = core._lib
+        self._snap_len = 0
+        self._pend_len = PEND_FIRST_SLOT
+        self._slots: list[tuple[int, list[int]]] = []  # per op: snapshot offset, DC slots
+        program = self._program(plan)
+        self.buf = bytearray(len(plan.buf))
+        self.snap = bytearray(self._snap_len)
+        self.pend = array("q", bytes(8 * self._pend_len))
+        self._keep: list[Any] = []
+        self.table = PlanTable(
+            slaves=core.address,
+            n_slaves=len(core.escs),
+            prog=_address(program, self._keep),
+            prog_len=len(program),
+            buf=_address(self.buf, self._keep),
+            buf_len=len(self.buf),
+            snap=_address(self.snap, self._keep),
+            snap_len=len(self.snap),
+            pend=_address(self.pend, self._keep),
+            pend_len=len(self.pend),
+        )
+        self.address = ctypes.addressof(self.table)
+        if self._lib.lolacli_core_check_plan(self.address):
+            raise _NotCompiled
+        self.item = (self.finish, ())
+
+    # ------------------------------------------------------------- running
+    def answer(self, frame: bytes, t_ns: int, deferred: list[Any]) -> tuple[bytes, bool] | None:
+        """``FramePlan.run`` in the kernel: the returned frame, and whether a slave's
+        watchdog would expire now (the chain then runs the checks in Python). Work for
+        after the answer goes into ``deferred`` as the Python plan's does. ``None``: the
+        kernel cannot take this one (time out of range, a slave it cannot hold)."""
+        if not _bounded(t_ns) or not self.core.acquire():
+            return None
+        if self.pend[0]:
+            self.finish()  # the chain runs deferred work before the next frame: not reached
+        if type(frame) is not bytes:
+            frame = bytes(frame)
+        code = self._lib.lolacli_core_answer(self.address, frame, len(frame), t_ns)
+        if code < 0:
+            return None
+        if self.pend[0]:
+            deferred.append(self.item)
+        return bytes(self.buf), code == 1
+
+    def finish(self) -> None:
+        """The work the last answer left (datagram counters, writes with their outputs
+        events, DC time loops), in the plan's order."""
+        if not self.pend[0]:
+            return
+        if self.core.acquire():
+            self._lib.lolacli_core_finish(self.address)
+        else:
+            self._finish_in_python()
+
+    def _finish_in_python(self) -> None:
+        """The same work through the Python plan (a slave the kernel could not take)."""
+        t_ns, plan = self.pend[1], self.plan
+        self.pend[0] = 0
+        if plan.deferred is not None:
+            plan.count()
+        for op, (snap_at, slots) in zip(plan.ops, self._slots, strict=True):
+            if isinstance(op, _Logical) and op.deferred is not None:
+                op.snapshot[:] = self.snap[snap_at : snap_at + len(op.snapshot)]
+                op.write_later(t_ns)
+            elif isinstance(op, _DcDistribution) and op.deferred is not None:
+                for (_reference, _port0, others), slot in zip(op.segments, slots, strict=True):
+                    if others:
+                        value = self.pend[slot] & _MASK64
+                        system_time_loop(others, value, 8 * op.length, t_ns)
+
+    # ------------------------------------------------------------- compiling
+    def _program(self, plan: FramePlan) -> array[int]:
+        index = self.core._index
+        prog = array("q", bytes(8 * H_WORDS))
+        prog[H_MAGIC] = MAGIC
+        prog[H_FRAME_LEN] = len(plan.buf)
+        prog[H_COUNT_K] = plan.datagrams_per_slave
+        prog[H_COUNT_DEFERRED] = 1 if plan.deferred is not None else 0
+        counted = [index.get(id(esc), -1) for esc in plan.escs]
+        if counted != list(range(len(counted))):
+            raise _NotCompiled  # the plan's slaves are not the line's first ones
+        prog[H_N_COUNT] = len(counted)
+        prog[H_WATCH], prog[H_N_WATCH] = len(prog), len(plan.watchdog_slaves)
+        prog.extend(index[id(esc)] for esc in plan.watchdog_slaves)
+        prog[H_ADP], prog[H_N_ADP] = len(prog), len(plan.adp_fixes)
+        for at, adp in plan.adp_fixes:
+            prog.extend((at, adp))
+        prog[H_OPS], prog[H_N_OPS] = len(prog), len(plan.ops)
+        for op in plan.ops:
+            if isinstance(op, _Logical):
+                record = self._logical(op)
+            elif isinstance(op, _Brd):
+                record = self._brd(op, counted)
+            elif isinstance(op, _DcDistribution):
+                record = self._dc(op)
+            else:
+                raise _NotCompiled
+            prog.extend(record)
+        return prog
+
+    def _logical(self, op: _Logical) -> list[int]:
+        if op.ordered or any(esc.pending_op for esc, _, _ in op.events):
+            raise _NotCompiled  # slave-major order, or an outputs event that enters OP
+        index = self.core._index
+        writes: list[int] = []
+        reads: list[int] = []
+        for step in op.steps:
+            i = index[id(step.esc)]
+            for (_t, _s, a, b), (p, _q) in zip(step.writes or (), step.write_memory, strict=True):
+                writes += (i, p, a, b - a)
+            for (_t, _s, a, b), (p, _q) in zip(step.reads or (), step.read_memory, strict=True):
+                reads += (i, p, a, b - a)
+        events = [v for esc, port0, _n in op.events for v in (index[id(esc)], port0)]
+        length = len(op.data)
+        snap_at = -1
+        if op.deferred is not None:
+            snap_at, self._snap_len = self._snap_len, self._snap_len + length
+        self._slots.append((snap_at, []))
+        head = [OP_LOGICAL, 0, op.wkc_offset - length, length, op.wkc_offset, op.fixed_wkc]
+        head += [1 if op.deferred is not None else 0, max(snap_at, 0)]
+        head += [len(writes) // 4, len(reads) // 4, len(events) // 2]
+        record = head + writes + reads + events
+        record[1] = len(record)
+        return record
+
+    def _brd(self, op: _Brd, slaves: list[int]) -> list[int]:
+        cache_at, self._snap_len = self._snap_len, self._snap_len + op.length
+        flag = 0
+        if op.epoch_cell is not None:
+            flag, self._pend_len = self._pend_len, self._pend_len + 1
+        self._slots.append((cache_at, []))
+        record = [OP_BRD, 0, op.wkc_offset - op.length, op.length, op.wkc_offset, op.lo]
+        record += [len(slaves), 1 if flag else 0, cache_at, flag, *slaves]
+        record[1] = len(record)
+        return record
+
+    def _dc(self, op: _DcDistribution) -> list[int]:
+        index = self.core._index
+        by_mem = {id(esc.mem): i for i, esc in enumerate(self.core.escs)}
+        segments: list[int] = []
+        others: list[int] = []
+        slots: list[int] = []
+        for reference, port0_ns, members in op.segments:
+            slot = 0
+            if members:
+                slot, self._pend_len = self._pend_len, self._pend_len + 1
+            slots.append(slot)
+            ref = -1 if reference is None else index[id(reference)]
+            segments += (ref, port0_ns if reference is not None else 0, len(members), slot)
+            for mem, clock, offset_ns, registers_ns in members:
+                i = by_mem[id(mem)]
+                if self.core.escs[i].clock is not clock:
+                    raise _NotCompiled
+                others += (i, offset_ns, _signed64(registers_ns))
+        self._slots.append((-1, slots))
+        record = [OP_DC, 0, op.wkc_offset - op.length, op.length, op.wkc_offset, op.count]
+        record += [1 if op.deferred is not None else 0, len(op.segments), *segments, *others]
+        record[1] = len(record)
+        return record
+
+
+__all__ = ["ChainCore", "CompiledPlan", "core_available"]
