@@ -15,12 +15,22 @@ loops of the non-reference slaves, a plan's writes into the slaves' memories) wa
 
 from __future__ import annotations
 
+import os
 import random
 import struct
 from dataclasses import dataclass, field
+from typing import Any
 
+from lolacli.emulator.core import ChainCore, core_available
 from lolacli.emulator.esc import Esc, PortTimes
-from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
+from lolacli.emulator.plan import (
+    NOT_COMPILED,
+    Deferred,
+    FramePlan,
+    Key,
+    layout_key,
+    make_plan,
+)
 from lolacli.emulator.registers import AlStatusCode
 from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
@@ -168,6 +178,25 @@ class _Slot:
 
 
 PLAN_CACHE_SIZE = 32
+ENGINES = ("c", "python")
+ENGINE_VARIABLE = "LOLACLI_CHAIN_ENGINE"
+
+
+def chain_engine(engine: str | None = None) -> str:
+    """The engine a chain runs its cyclic work with: ``engine``, else the environment's
+    ``LOLACLI_CHAIN_ENGINE``, else ``c`` when the C core is built and ``python`` when not.
+    UsageError for an unknown name or ``c`` without the C core."""
+    chosen = engine or os.environ.get(ENGINE_VARIABLE) or ""
+    if not chosen:
+        return "c" if core_available() else "python"
+    if chosen not in ENGINES:
+        raise UsageError(f"chain engine {chosen!r}: expected one of {', '.join(ENGINES)}")
+    if chosen == "c" and not core_available():
+        raise UsageError(
+            "chain engine 'c': the C core (lolacli.emulator._ccore) is not built; "
+            "reinstall with a C compiler, or use 'python'"
+        )
+    return chosen
 
 
 class Chain:
@@ -175,7 +204,12 @@ class Chain:
 
     A frame layout seen ``plan_after`` times gets a :class:`~lolacli.emulator.plan.FramePlan`
     (0: never), the fast path for cyclic frames; it gives the same bytes as the general
-    path."""
+    path.
+
+    ``engine`` (see :func:`chain_engine`): with ``c`` the planned frames, their deferred
+    work, the watchdogs and the device cycles run in the C core (:mod:`.core`), which holds
+    the slaves' cyclic state between frames and gives it back before Python code touches
+    it; ``python`` runs the reference code only."""
 
     plan_after = 2
 
@@ -185,8 +219,11 @@ class Chain:
         *,
         timing: ChainTiming | None = None,
         faults: Faults | None = None,
+        engine: str | None = None,
     ) -> None:
-        self.slaves = slaves
+        self._slaves = slaves
+        self.engine = chain_engine(engine)
+        self._core = ChainCore(slaves) if self.engine == "c" else None
         self.timing = timing or ChainTiming()
         self.faults = faults or Faults()
         self.stats = ChainStats()
@@ -202,6 +239,14 @@ class Chain:
         self._held: int | None = None  # a late application cycle's time
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
+
+    @property
+    def slaves(self) -> list[Esc]:
+        """The slaves in line order, their Python state up to date (the C core gives back
+        what it holds first; keep no slave or device across frames, read them here)."""
+        if self._core is not None:
+            self._core.release()
+        return self._slaves
 
     def use_sii(self, position: int, image: bytes) -> None:
         """Give the slave at 1-based ``position`` another SII image, then power it on again
@@ -303,6 +348,8 @@ class Chain:
         times = self._port_offsets
         logical = any(s.cmd in LOGICAL for s in slots)
         self._address(slots)
+        if self._core is not None:  # Python processes the frame: the slaves' state back
+            self._core.release(_addressed(slots))
         datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
         if not self._active:
             self.stats.dropped += 1  # the link is down at the master: nothing comes back
@@ -375,9 +422,20 @@ class Chain:
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
-        reply = plan.run(frame, t_ns)
-        for esc in plan.watchdog_slaves:
-            esc.check_watchdog(t_ns)
+        compiled = self._compiled(plan)
+        answer = compiled.answer(frame, t_ns, self._deferred_dc) if compiled else None
+        expired = True  # the Python checks run (the C core found one expiring, or ran not)
+        if answer is None:
+            if self._core is not None:
+                self._core.release()
+            reply = plan.run(frame, t_ns)
+        else:
+            reply, expired = answer
+            if expired and self._core is not None:
+                self._core.release()
+        if expired:
+            for esc in plan.watchdog_slaves:
+                esc.check_watchdog(t_ns)
         if plan.logical:
             self._deferred_t_ns = t_ns
             self.stats.logical_frames += 1
@@ -388,6 +446,14 @@ class Chain:
         self.stats.replies += 1
         self.stats.planned_frames += 1
         return reply, plan.delay_ns
+
+    def _compiled(self, plan: FramePlan) -> Any:
+        """The C core's program for ``plan`` (made on first use), or None."""
+        if self._core is None:
+            return None
+        if plan.compiled is NOT_COMPILED:
+            plan.compiled = self._core.compile(plan)
+        return plan.compiled
 
     def _lost_on_cable(self) -> None:
         """A dropped frame: destroyed between the master and the first slave (see Faults)."""
@@ -418,6 +484,9 @@ class Chain:
         self._due_link_loss(t_ns)
         if self._deferred_dc:
             self._run_deferred_dc()
+        if self._core is not None:
+            self._core.check_watchdogs(len(self._active), t_ns)
+            return
         for esc in self._active:
             esc.check_watchdog(t_ns)
 
@@ -434,8 +503,7 @@ class Chain:
         if t_ns is None:
             return
         self._deferred_t_ns = None
-        for esc in self._active:
-            esc.cycle(t_ns)
+        self._cycles(t_ns)
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending
@@ -452,8 +520,15 @@ class Chain:
     def _run_held(self) -> None:
         t_ns, self._held = self._held, None
         if t_ns is not None:
-            for esc in self._active:
-                esc.cycle(t_ns)
+            self._cycles(t_ns)
+
+    def _cycles(self, t_ns: int) -> None:
+        """One application cycle in every slave the frames reach."""
+        if self._core is not None:
+            self._core.cycles(len(self._active), t_ns)
+            return
+        for esc in self._active:
+            esc.cycle(t_ns)
 
     def _run_deferred_dc(self) -> None:
         for work, args in self._deferred_dc:
@@ -499,3 +574,10 @@ class Chain:
             slots.append(_Slot(pos, d.cmd, len(d.data), d.adp, d.ado))
             pos += DATAGRAM_HEADER_BYTES + len(d.data) + WKC_BYTES
         return slots
+
+
+def _addressed(slots: list[_Slot]) -> set[int] | None:
+    """Positions a frame's datagrams reach; ``None``: all (broadcast, logical, xRMW)."""
+    if any(slot.target is None for slot in slots):
+        return None
+    return {slot.target for slot in slots if slot.target is not None and slot.target >= 0}

@@ -51,6 +51,7 @@ _DC = frozenset({Command.ARMW, Command.FRMW})
 PLANNABLE = _LOGICAL | _DC | {Command.BRD}
 
 Key = tuple[int, ...]
+NOT_COMPILED = object()  # FramePlan.compiled before the chain's core looked at the plan
 
 
 def layout_key(frame: bytes) -> Key | None:
@@ -153,6 +154,7 @@ class FramePlan:
         self.epoch = epoch
         self.delay_ns = delay_ns
         self.deferred = deferred
+        self.compiled: Any = NOT_COMPILED  # the chain's C core's program for it, or None
         self.buf = bytearray(key[0])
         view = memoryview(self.buf)
         self.slaves = [(esc, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]

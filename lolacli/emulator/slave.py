@@ -53,14 +53,16 @@ def build_chain(
     timing: ChainTiming | None = None,
     faults: Faults | None = None,
     drift_ppb: int = 0,
+    engine: str | None = None,
 ) -> Chain:
     """All slaves of ``eni`` in line order. ``drift_ppb`` spreads clock rates along the
-    line (slave i runs ``i × drift_ppb`` fast) so DC has something to correct."""
+    line (slave i runs ``i × drift_ppb`` fast) so DC has something to correct; ``engine``
+    as :func:`~lolacli.emulator.chain.chain_engine` takes it."""
     slaves = [
         build_slave(s, drift_ppb=i * drift_ppb, start_ns=i * 1_234_567)
         for i, s in enumerate(eni.slaves)
     ]
-    return Chain(slaves, timing=timing, faults=faults)
+    return Chain(slaves, timing=timing, faults=faults, engine=engine)
 
 
 def device_of(esc: Esc) -> Device | None:
