@@ -1,0 +1,637 @@
+"""The chain's C core gives the same bytes and the same state as the Python reference.
+
+Two chains of one ENI get the same frames at the same times: one runs its planned frames,
+their deferred work, the watchdogs and the device cycles in the C core (engine ``c``), the
+other the Python reference (engine ``python``); both answer through frame plans. The
+replies are compared frame by frame, and every slave's memory, DC clock, counters, outputs
+state and device state (every object-dictionary value, CiA 402 power state and last
+controlword, device time, last analog sample) every few dozen frames and at the end.
+
+The script covers bring-up through the ENI's InitCmds, the CiA 402 state machine (enable,
+CSP following with and without the 0x607F rate limit, CSV, disable operation, quick stop,
+fault and fault reset, random controlwords), AL state changes (one slave to SAFEOP and back,
+waiting for outputs), SM watchdog expiry (AL 0x001B) and recovery, SDO traffic and a PDO
+remap, held cycles, link loss, dropped and damaged frames, time gaps and times the core
+does not take; on the examples and on every corpus ENI, with the ENI's own cyclic frame
+(mostly the general path) and with its plannable part (the C core's path).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import random
+import struct
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from lolacli.emulator import core as core_module
+from lolacli.emulator.chain import Chain, Faults, chain_engine
+from lolacli.emulator.core import ChainCore, CompiledPlan, core_available
+from lolacli.emulator.esc import Esc
+from lolacli.emulator.plan import layout_key
+from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.slave import build_chain, device_of
+from lolacli.eni.model import Eni
+from lolacli.errors import UsageError, WireError
+from lolacli.files import load_eni
+from lolacli.wire.commands import Command as C
+from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
+from tests.emulator.bus import EXAMPLES, Bus
+from tests.emulator.test_plan import _random_frame
+
+CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
+CORPUS_ENIS = sorted((CORPUS / "eni").glob("*.xml")) if (CORPUS / "eni").is_dir() else []
+PERIOD_NS = 500_000
+PLANNABLE = {C.LRD, C.LWR, C.LRW, C.BRD, C.ARMW}
+# corpus ENIs whose plannable cyclic frame the C core runs (the others read the mailbox
+# state through a bit-wise FMMU, which the frame plan leaves to the ESC's own code)
+COMPILED_CORPUS = {
+    "rocos-ethercat__bcr_eni.xml",
+    "rocos-ethercat__eni.xml",
+    "rocos-ethercat__eni1.xml",
+    "rocos-ethercat__eni4.xml",
+    "rocos-ethercat__eni7.xml",
+    "rocos-ethercat__eni_tech6.xml",
+}
+
+needs_core = pytest.mark.skipif(not core_available(), reason="C core not built")
+pytestmark = needs_core
+
+
+class Twin:
+    """Looks like a chain to :class:`Bus`; every frame goes through both engines."""
+
+    def __init__(
+        self,
+        eni: Eni,
+        *,
+        seed: int = 7,
+        drift_ppb: int = 20,
+        clock_spread_ns: int | None = None,
+        faults: dict[str, float] | None = None,
+    ) -> None:
+        def chain(engine: str) -> Chain:
+            f = Faults(seed=seed, **(faults or {}))
+            return build_chain(eni, drift_ppb=drift_ppb, engine=engine, faults=f)
+
+        self.c = chain("c")
+        self.py = chain("python")
+        if clock_spread_ns is not None:  # clocks close enough for the loop's fine steps
+            spread = random.Random(seed)
+            for a, b in zip(self.c._slaves, self.py._slaves, strict=True):
+                start = spread.randrange(-clock_spread_ns, clock_spread_ns)
+                a.clock.start_ns = b.clock.start_ns = start
+        self.timing = self.c.timing
+        self.rng = random.Random(seed)
+        self.frames = 0
+        self.compared = 0
+        self.held_cycles = 0  # most device cycles the core held at once
+        self.compiled_frames = 0  # frames the C core answered
+
+    def process(self, frame: bytes, t_ns: int, *, defer_cycles: bool = False):  # type: ignore[no-untyped-def]
+        """Like a real-time server half of the time: answers first, runs the deferred work
+        now and then, or holds the cycle because the next frame is already there."""
+        defer = defer_cycles or self.rng.random() < 0.5
+        replies = [ch.process(frame, t_ns, defer_cycles=defer) for ch in (self.c, self.py)]
+        assert replies[0] == replies[1], f"frame {self.frames}: {frame.hex()}"
+        self._note_held()
+        key = layout_key(frame)
+        plan = self.c._plans.get(key) if key is not None else None
+        if plan is not None and isinstance(plan.compiled, CompiledPlan):
+            self.compiled_frames += 1
+        if defer:
+            roll = self.rng.random()
+            if roll < 0.3:
+                self.both(lambda ch: ch.run_deferred_cycles())
+            elif roll < 0.45:
+                self.both(lambda ch: ch.hold_deferred_cycle())
+        self.frames += 1
+        if self.frames % 29 == 0:
+            self.same_state()
+        return replies[0]
+
+    def both(self, action: Callable[[Chain], object]) -> None:
+        results = [action(ch) for ch in (self.c, self.py)]
+        assert results[0] == results[1]
+
+    def _note_held(self) -> None:
+        core = self.c._core
+        assert core is not None
+        self.held_cycles = max(self.held_cycles, len(core.held_devices()))
+
+    def same_state(self) -> None:
+        self.both(lambda ch: ch.run_deferred_cycles())
+        self.compared += 1
+        for i, (a, b) in enumerate(zip(self.c.slaves, self.py.slaves, strict=True)):
+            assert_same_slave(a, b, f"frame {self.frames}, slave {i + 1}")
+        assert self.c.stats == self.py.stats
+
+
+def assert_same_slave(a: Esc, b: Esc, where: str) -> None:
+    if a.mem != b.mem:
+        differ = [f"0x{k:04X}" for k in range(len(a.mem)) if a.mem[k] != b.mem[k]]
+        raise AssertionError(f"{where}: memories differ at {differ[:8]}")
+    assert a.clock == b.clock, where
+    assert a.counters == b.counters, where
+    fields = ("outputs_valid", "pending_op", "_last_outputs_ns", "_now_ns", "al_state")
+    assert [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields], where
+    da, db = device_of(a), device_of(b)
+    assert (da is None) == (db is None)
+    if da is None or db is None:
+        return
+    values_a = [(e.index, e.subindex, e.value) for o in da.od for e in o.entries.values()]
+    values_b = [(e.index, e.subindex, e.value) for o in db.od for e in o.entries.values()]
+    if values_a != values_b:
+        differ = [(x, y) for x, y in zip(values_a, values_b, strict=True) if x != y]
+        raise AssertionError(f"{where}: object dictionaries differ: {differ[:4]}")
+    for name in ("t_ns", "state", "power", "_previous_cw", "_last_sample"):
+        assert getattr(da, name, None) == getattr(db, name, None), f"{where}: {name}"
+    assert da.od.version == db.od.version and da.od.writes == db.od.writes, where
+
+
+# ---------------------------------------------------------------- the master's side
+def _key(name: str) -> str:
+    return name.lower().replace(" ", "").rsplit(".", 1)[-1]
+
+
+class Outputs:
+    """The ENI's output process image, written by variable name suffix."""
+
+    SUFFIXES = {
+        "controlword": ("controlword",),
+        "mode": ("modesofoperation", "modeofoperation"),
+        "target_position": ("targetposition", "profiletargetposition"),
+        "target_velocity": ("targetvelocity",),
+    }
+    FORMATS = {"controlword": "<H", "mode": "<b", "target_position": "<i", "target_velocity": "<i"}
+
+    def __init__(self, eni: Eni) -> None:
+        out = [v for v in eni.process_image.variables if v.direction.value == "output"]
+        size = max([(v.bit_offset + v.bit_size + 7) // 8 for v in out] + [1])
+        self.image = bytearray(max(size, eni.process_image.outputs_bytes))
+        self.at: dict[str, list[int]] = {name: [] for name in self.SUFFIXES}
+        for v in out:
+            for name, suffixes in self.SUFFIXES.items():
+                width = struct.calcsize(self.FORMATS[name]) * 8
+                if _key(v.name) in suffixes and v.bit_offset % 8 == 0 and v.bit_size == width:
+                    self.at[name].append(v.bit_offset // 8)
+
+    def set(self, name: str, value: int | Callable[[int], int]) -> None:
+        for k, at in enumerate(self.at[name]):
+            number = value(k) if callable(value) else value
+            struct.pack_into(self.FORMATS[name], self.image, at, number)
+
+
+def cyclic_frame(eni: Eni, outputs: Outputs, *, plannable_only: bool) -> bytes:
+    datagrams = []
+    for c in eni.cyclic_frames[0].commands:
+        if plannable_only and c.cmd not in PLANNABLE:
+            continue
+        if c.logical_address is not None:
+            start = c.output_offset_bytes or 0
+            data = bytes(outputs.image[start : start + c.data_length_bytes])
+            datagrams.append(
+                Datagram.logical(c.cmd, c.logical_address, data.ljust(c.data_length_bytes, b"\0"))
+            )
+        else:
+            datagrams.append(Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, c.data_length_bytes))
+    return encode_frame(make_frame(datagrams), pad=True)
+
+
+def bring_up(
+    bus: Bus,
+    eni: Eni,
+    outputs: Outputs,
+    *,
+    plannable_only: bool,
+    first_cycle_ns: int | None = None,
+) -> None:
+    """INIT -> OP through the ENI's InitCmds; a refused step is not the test's business
+    (both engines get the same frames either way). ``first_cycle_ns``: when the first
+    application cycle runs (the clock jumps there). The cyclic frame comes from PREOP on,
+    as many masters send it, so the first cycle in SAFEOP already has its plan."""
+    frame = cyclic_frame(eni, outputs, plannable_only=plannable_only)
+    for name in ("IP", "PS"):
+        if name == "PS":
+            for _ in range(3):
+                bus.t_ns += PERIOD_NS
+                bus.chain.process(frame, bus.t_ns)
+        try:
+            bus.transition(eni, name)
+        except AssertionError:
+            pass
+    bus.t_ns = bus.t_ns + PERIOD_NS if first_cycle_ns is None else first_cycle_ns
+    bus.chain.process(cyclic_frame(eni, outputs, plannable_only=plannable_only), bus.t_ns)
+    try:
+        bus.transition(eni, "SO")
+    except AssertionError:
+        pass
+
+
+class Script:
+    """The master's side of a run: cyclic frames with CiA 402 sequences, mixed with SDO,
+    AL state changes, faults and odd times."""
+
+    def __init__(
+        self,
+        eni: Eni,
+        twin: Twin,
+        *,
+        plannable_only: bool,
+        seed: int = 1,
+        first_cycle_ns: int | None = None,
+    ) -> None:
+        self.eni, self.twin = eni, twin
+        self.bus = Bus(twin)  # type: ignore[arg-type]
+        self.first_cycle_ns = first_cycle_ns
+        self.outputs = Outputs(eni)
+        self.plannable_only = plannable_only
+        self.rng = random.Random(seed)
+        self.targets = [self.rng.randrange(-50_000, 50_000) for _ in range(64)]
+
+    def cycle(self, step_ns: int = PERIOD_NS) -> None:
+        self.bus.t_ns += step_ns
+        frame = cyclic_frame(self.eni, self.outputs, plannable_only=self.plannable_only)
+        self.twin.process(frame, self.bus.t_ns)
+
+    def move(self, n: int, *, controlword: int = 0x0F, mode: int = 8) -> None:
+        out = self.outputs
+        for _ in range(n):
+            self.targets = [t + self.rng.randrange(-900, 900) for t in self.targets]
+            out.set("controlword", controlword)
+            out.set("mode", mode)
+            out.set("target_position", lambda k: self.targets[k])
+            out.set("target_velocity", lambda k: 20_000 * (k + 1) * (-1) ** k)
+            self.cycle()
+
+    def sdo_write(self, position: int, index: int, sub: int, data: bytes) -> None:
+        slave = self.eni.slaves[position - 1]
+        mb = slave.mailbox
+        if mb is None or not mb.out_length_bytes:
+            return
+        mbx = ((mb.out_start, mb.out_length_bytes), (mb.in_start, mb.in_length_bytes))
+        try:
+            self.bus.sdo_download(slave.station_address, index, sub, data, mbx)
+        except (AssertionError, WireError):
+            pass  # no answer, or an emergency first in the mailbox: the same in both
+
+    def al_request(self, position: int, state: int) -> None:
+        station = self.eni.slaves[position - 1].station_address
+        self.bus.t_ns += 20_000
+        self.bus.one(C.FPWR, station, 0x0120, struct.pack("<H", state))
+
+    def run(self) -> None:
+        bring_up(
+            self.bus,
+            self.eni,
+            self.outputs,
+            plannable_only=self.plannable_only,
+            first_cycle_ns=self.first_cycle_ns,
+        )
+        out, twin, rng = self.outputs, self.twin, self.rng
+        out.set("controlword", 0)
+        self.move(4, controlword=0x00)
+        for cw in (0x06, 0x07, 0x0F):  # shutdown, switch on, enable operation
+            self.move(1, controlword=cw)
+        self.move(60)  # CSP, no rate limit: actual jumps to target
+        for position in range(1, min(len(self.eni.slaves), 4) + 1):
+            self.sdo_write(position, 0x607F, 0, struct.pack("<I", 400_000 * position))
+        self.move(60)  # CSP with the 0x607F rate limit
+        self.sdo_write(1, 0x60FF, 0, struct.pack("<i", -123_456))
+        self.move(30, mode=9)  # CSV
+        self.move(3, controlword=0x07)  # disable operation
+        self.move(5)
+        self.move(4, controlword=0x02)  # quick stop
+        self.move(3)  # enable from quick stop active
+        twin.both(lambda ch: ch.drive_fault(1) if _is_drive(ch, 1) else None)
+        self.move(5)
+        self.move(2, controlword=0x8F)  # fault reset on the rising edge of bit 7
+        for cw in (0x06, 0x07, 0x0F):
+            self.move(1, controlword=cw)
+        self.move(20)
+        for _ in range(40):  # random controlwords and modes
+            self.move(1, controlword=rng.randrange(0x10000), mode=rng.choice([8, 9, 1, -3]))
+        for cw in (0x00, 0x06, 0x07, 0x0F):
+            self.move(1, controlword=cw)
+        self.al_changes()
+        self.watchdog()
+        self.odd_times()
+        self.remap()
+        self.mixed_traffic()
+        twin.same_state()
+
+    def al_changes(self) -> None:
+        last = len(self.eni.slaves)
+        self.al_request(last, AlState.SAFEOP)
+        self.move(10)
+        self.al_request(last, AlState.OP)  # waits for outputs: pending until the next frame
+        self.move(20)
+        self.al_request(1, AlState.PREOP)
+        self.move(5)
+        self.al_request(1, AlState.SAFEOP)
+        self.al_request(1, AlState.OP)
+        self.move(20)
+
+    def watchdog(self) -> None:
+        """No frames for 150 ms: every slave with an SM watchdog falls back to SAFEOP
+        with 0x001B; then the error is acknowledged and OP requested again."""
+        self.bus.t_ns += 150_000_000
+        self.twin.both(lambda ch: ch.tick(self.bus.t_ns))
+        expired = [
+            esc.al_status_code == AlStatusCode.SYNC_MANAGER_WATCHDOG for esc in self.twin.c.slaves
+        ]
+        self.move(3)
+        for position, hit in enumerate(expired, start=1):
+            if hit:
+                self.al_request(position, AlState.SAFEOP | 0x10)  # acknowledge
+                self.al_request(position, AlState.OP)
+        self.move(20)
+        self.twin.same_state()
+        # and watchdogs that expire in the middle of cyclic traffic: 120 ms of frames that
+        # only read (LRD instead of LRW/LWR), so no slave gets outputs
+        for _ in range(240):
+            self.bus.t_ns += PERIOD_NS
+            frame = cyclic_frame(self.eni, self.outputs, plannable_only=self.plannable_only)
+            self.twin.process(_reads_only(frame), self.bus.t_ns)
+        self.al_recover()
+        self.move(5)
+
+    def odd_times(self) -> None:
+        self.move(5)
+        self.cycle(step_ns=-3 * PERIOD_NS)  # time goes back
+        self.cycle(step_ns=0)
+        self.move(3)
+        self.cycle(step_ns=9_000_000_000)  # a 9 s gap (with the watchdogs: a reason to tick)
+        self.move(3)
+        self.al_recover()
+        saved = self.bus.t_ns
+        self.bus.t_ns = (1 << 62) + 17  # beyond what the core takes: the reference runs
+        self.move(3)
+        self.bus.t_ns = saved + 10 * PERIOD_NS
+        self.al_recover()
+        self.move(10)
+
+    def al_recover(self) -> None:
+        for position, esc in enumerate(self.twin.c.slaves, start=1):
+            if esc.al_state != AlState.OP:
+                self.al_request(position, AlState.SAFEOP | 0x10)
+                self.al_request(position, AlState.OP)
+        self.move(2)
+
+    def remap(self) -> None:
+        """TxPDO assignment of the first slave cut to one PDO and back (od.version)."""
+        self.sdo_write(1, 0x1C13, 0, b"\x00")
+        self.move(5)
+        self.sdo_write(1, 0x1C13, 0, b"\x01")
+        self.move(5)
+
+    def mixed_traffic(self) -> None:
+        logical = self.eni.cyclic_frames[0].commands[0].data_length_bytes
+        for _ in range(4):  # a BRD that brings data along: the slaves OR theirs into it
+            data = self.rng.randbytes(2)
+            frame = encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, data)]))
+            self.bus.t_ns += 10_000
+            self.twin.process(frame, self.bus.t_ns)
+        for k in range(150):
+            self.bus.t_ns += self.rng.randrange(1, 300_000)
+            self.twin.process(_random_frame(self.rng, len(self.eni.slaves), logical), self.bus.t_ns)
+            if k % 3 == 0:
+                self.move(1)
+            if k % 40 == 0:
+                self.twin.both(lambda ch: ch.tick(self.bus.t_ns))
+
+
+def _reads_only(frame: bytes) -> bytes:
+    """The frame with its LRW/LWR datagrams turned into LRD."""
+    decoded = decode_frame(frame)
+    datagrams = []
+    for d in decoded.datagrams:
+        if d.cmd in (C.LRW, C.LWR):
+            datagrams.append(Datagram.logical(C.LRD, d.adp | d.ado << 16, bytes(len(d.data))))
+        else:
+            datagrams.append(Datagram.physical(d.cmd, d.adp, d.ado, bytes(d.data)))
+    return encode_frame(make_frame(datagrams), pad=True)
+
+
+def _is_drive(chain: Chain, position: int) -> bool:
+    return hasattr(device_of(chain._slaves[position - 1]), "fault")
+
+
+# ------------------------------------------------------------------------ tests
+@pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml", "ek1100_io.xml"])
+@pytest.mark.parametrize(("drift_ppb", "spread_ns"), [(20, None), (-13, 5_000)])
+def test_c_core_matches_the_reference_on_the_examples(
+    name: str, drift_ppb: int, spread_ns: int | None
+) -> None:
+    eni = load_eni(EXAMPLES / name)
+    twin = Twin(eni, drift_ppb=drift_ppb, clock_spread_ns=spread_ns)
+    Script(eni, twin, plannable_only=False).run()
+    assert twin.c.stats.planned_frames > 250
+    assert twin.compiled_frames > 250  # answered by the C core
+    assert twin.held_cycles == len(eni.slaves)  # every device's cycle ran in C
+
+
+@pytest.mark.parametrize("name", ["single_drive.xml", "ek1100_io.xml"])
+def test_c_core_matches_the_reference_from_time_zero(name: str) -> None:
+    """The first application cycle within the first analog sample period after t = 0."""
+    eni = load_eni(EXAMPLES / name)
+    twin = Twin(eni)
+    Script(eni, twin, plannable_only=False, first_cycle_ns=400_000).run()
+    assert twin.compiled_frames > 250
+
+
+@pytest.mark.parametrize("path", CORPUS_ENIS, ids=[p.name for p in CORPUS_ENIS])
+@pytest.mark.parametrize("plannable_only", [True, False], ids=["planned", "eni-frame"])
+def test_c_core_matches_the_reference_on_corpus_enis(path: Path, plannable_only: bool) -> None:
+    eni = load_eni(path)
+    twin = Twin(eni, seed=len(path.name))
+    Script(eni, twin, plannable_only=plannable_only).run()
+    assert twin.compared > 5
+    if plannable_only and path.name in COMPILED_CORPUS:
+        assert twin.compiled_frames > 250
+
+
+def test_c_core_matches_with_dropped_and_damaged_frames_and_link_loss() -> None:
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni, faults={"drop_probability": 0.05, "corrupt_probability": 0.05})
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    twin.c.faults.drop_probability = twin.py.faults.drop_probability = 0.0
+    twin.c.faults.corrupt_probability = twin.py.faults.corrupt_probability = 0.0
+    for cw in (0x06, 0x07, 0x0F):
+        script.move(1, controlword=cw)
+    for p in (0.05, 0.0):
+        twin.c.faults.drop_probability = twin.py.faults.drop_probability = p
+        twin.c.faults.corrupt_probability = twin.py.faults.corrupt_probability = p
+        script.move(80)
+    twin.both(lambda ch: ch.break_link(12))
+    script.move(20)
+    twin.both(lambda ch: ch.restore_link())
+    script.move(20)
+    twin.both(lambda ch: ch.schedule_link_loss(20, script.bus.t_ns + 10 * PERIOD_NS))
+    script.move(20)
+    twin.same_state()
+    assert twin.c.stats.dropped > 0 and twin.c.stats.corrupted > 0 and twin.c.stats.links_lost == 1
+
+
+def test_the_core_holds_the_state_and_chain_slaves_gives_it_back() -> None:
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni, engine="c")
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    size = eni.cyclic_frames[0].commands[0].data_length_bytes
+    for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F):
+        bus.cycle(eni, struct.pack("<Hbi", cw, 8, 777).ljust(size, b"\0"))
+    core = chain._core
+    assert core is not None and core.held_devices() == [0]
+    drive = device_of(chain._slaves[0])
+    assert drive is not None
+    assert drive.od.get_int(0x6064) != 777  # the Python object lags while the core holds it
+    assert device_of(chain.slaves[0]).od.get_int(0x6064) == 777  # read through Chain.slaves
+    assert core.held_devices() == []
+    bus.cycle(eni, struct.pack("<Hbi", 0x0F, 8, 778).ljust(size, b"\0"))
+    assert core.held_devices() == [0]
+
+
+def test_engine_choice() -> None:
+    assert chain_engine("python") == "python"
+    assert chain_engine(None) == "c"
+    with pytest.raises(UsageError, match="expected one of"):
+        chain_engine("numba")
+    chain = build_chain(load_eni(EXAMPLES / "single_drive.xml"), engine="python")
+    assert chain.engine == "python" and chain._core is None
+
+
+def test_engine_choice_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("LOLACLI_CHAIN_ENGINE", "python")
+    assert build_chain(load_eni(EXAMPLES / "single_drive.xml")).engine == "python"
+    monkeypatch.setattr(core_module, "_library", lambda: None)
+    monkeypatch.setenv("LOLACLI_CHAIN_ENGINE", "c")
+    with pytest.raises(UsageError, match="not built"):
+        chain_engine()
+    monkeypatch.delenv("LOLACLI_CHAIN_ENGINE")
+    assert chain_engine() == "python"  # no C core: the reference, silently
+
+
+# ------------------------------------------------------------- the kernel's checks
+def _lola_plan() -> tuple[Chain, CompiledPlan]:
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni, engine="c")
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    for _ in range(3):
+        bus.cycle(eni)
+    plans = [p for p in chain._plans.values() if p is not None and p.logical]
+    compiled = plans[0].compiled
+    assert isinstance(compiled, CompiledPlan)
+    return chain, compiled
+
+
+def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
+    """Every single-word change of a valid program is either refused by the check or
+    still within bounds; those that pass run (under a sanitizer build: without a fault)."""
+    chain, compiled = _lola_plan()
+    lib = compiled._lib
+    program = ctypes.cast(compiled.table.prog, ctypes.POINTER(ctypes.c_int64))
+    words = compiled.table.prog_len
+    rng = random.Random(5)
+    refused = 0
+    frame = bytes(compiled.buf)
+    for _ in range(3000):
+        k = rng.randrange(words)
+        saved = program[k]
+        program[k] = rng.choice(
+            [saved + 1, saved - 1, -1, 1 << 40, 65536, len(frame), saved + rng.randrange(-64, 64)]
+        )
+        if lib.lolacli_core_check_plan(compiled.address):
+            refused += 1
+        else:
+            compiled.pend[0] = 0
+            lib.lolacli_core_answer(compiled.address, frame, len(frame), 10**12)
+            lib.lolacli_core_finish(compiled.address)
+        program[k] = saved
+    assert lib.lolacli_core_check_plan(compiled.address) == 0
+    assert refused > 1000
+
+
+def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
+    chain, _compiled = _lola_plan()
+    core = chain._core
+    assert core is not None
+    lib = core._lib
+    row = core._table[0]
+    address = core.address
+    assert lib.lolacli_core_check_slave(address) == 0
+    for name, bad in [
+        ("out_start", 65530),
+        ("in_bytes", 1 << 20),
+        ("vals_len", 2),
+        ("omap_n", 1000),
+        ("kind", 99),
+        ("clk_corr", 1 << 62),
+        ("power", 0x1234),
+        ("prev_cw", 0x10000),
+    ]:
+        saved = getattr(row, name)
+        setattr(row, name, bad)
+        assert lib.lolacli_core_check_slave(address) != 0, name
+        setattr(row, name, saved)
+    assert lib.lolacli_core_check_slave(address) == 0
+
+
+def test_wrapper_gives_the_reference_what_the_core_cannot_hold() -> None:
+    """A clock value beyond the core's arithmetic: the frames go through Python, with
+    the same answers."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni)
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    script.move(10)
+    twin.both(lambda ch: setattr(ch.slaves[3].clock, "correction_ns", 1 << 63))
+    script.move(10)
+    core = twin.c._core
+    assert core is not None and len(core.released) == len(eni.slaves)
+    twin.both(lambda ch: setattr(ch.slaves[3].clock, "correction_ns", 0))
+    script.move(10)
+    assert len(core.released) == 0
+    twin.same_state()
+
+
+def test_a_subclassed_device_runs_in_python_beside_the_core() -> None:
+    from lolacli.devices.cia402 import Cia402Drive
+
+    class Slower(Cia402Drive):
+        def step(self, t_ns: int) -> None:
+            super().step(t_ns)
+            self.od.entry(0x6064, 0).value = bytes(4)
+
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni)
+    for chain in (twin.c, twin.py):
+        app = chain._slaves[2].app
+        app.device.__class__ = Slower  # type: ignore[union-attr]
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    for cw in (0x06, 0x07, 0x0F):
+        script.move(1, controlword=cw)
+    script.move(30)
+    core = twin.c._core
+    assert core is not None and 2 not in core.held_devices() and 3 in core.held_devices()
+    twin.same_state()
+
+
+def test_held_flag_for_every_example_device() -> None:
+    """Every device of the examples and of the corpus the core can describe runs in C."""
+    for path in [EXAMPLES / "lola.xml", EXAMPLES / "ek1100_io.xml", *CORPUS_ENIS]:
+        eni = load_eni(path)
+        chain = build_chain(eni, engine="c")
+        core = chain._core
+        assert isinstance(core, ChainCore)
+        assert core.acquire()
+        kinds = [core._table[i].kind for i in range(len(eni.slaves))]
+        assert all(kind >= 2 for kind in kinds), (path.name, kinds)
+        core.release()
+
