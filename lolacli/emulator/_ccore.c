@@ -32,7 +32,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 3
+#define ABI_VERSION 4
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -61,11 +61,12 @@ static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2};
 /* One slave: its ESC's cyclic state and its device's. Field order and types are mirrored
  * by core.py's SlaveTable (ctypes); lolacli_core_abi lets it check the layout. */
 typedef struct {
-    i64 owned;               /* 1: this table holds the state; 0: the Python objects do */
+    i64 owned;               /* 1: this table holds the ESC's scalars; 0: the Esc object */
+    i64 dev_owned;           /* 1: this table holds the device's state; 0: the Device */
     uint8_t *mem;            /* the ESC's memory, MEMORY_BYTES */
     i64 clk_start, clk_drift, clk_corr;
     i64 outputs_valid, last_outputs_ns, now_ns;
-    i64 datagrams, cycles;   /* counted here since the state was last handed back */
+    i64 datagrams, cycles;   /* counted here since they were last added to the Esc's */
     i64 wd_timeout;          /* process-data watchdog (ns), < 0: none */
     i64 kind;
     i64 out_start, out_bytes, in_start, in_bytes;
@@ -356,11 +357,12 @@ static void slave_cycle(slave_t *s, i64 t) {
 }
 
 /* The application cycle of the first n slaves (Chain.run_deferred_cycles), for those
- * whose tables hold their state and whose device runs here; the rest run in Python. */
+ * whose tables hold their device's state; the rest run in Python. (The cycle uses no
+ * ESC scalar but the cycle counter, which both sides add to.) */
 void lolacli_core_cycles(slave_t *slaves, i64 n, i64 t) {
     for (i64 i = 0; i < n; i++) {
         slave_t *s = &slaves[i];
-        if (s->owned && s->kind >= K_GENERIC) slave_cycle(s, t);
+        if (s->dev_owned && s->kind >= K_GENERIC) slave_cycle(s, t);
     }
 }
 

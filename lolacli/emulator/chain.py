@@ -233,6 +233,7 @@ class Chain:
         for esc in slaves:
             esc.epoch = self._epoch
         self._plans: dict[Key, FramePlan | None] = {}
+        self._last_plan: FramePlan | None = None  # the plan the last planned lookup found
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
@@ -245,7 +246,7 @@ class Chain:
         """The slaves in line order, their Python state up to date (the C core gives back
         what it holds first; keep no slave or device across frames, read them here)."""
         if self._core is not None:
-            self._core.release()
+            self._core.release_all()
         return self._slaves
 
     def use_sii(self, position: int, image: bytes) -> None:
@@ -392,6 +393,9 @@ class Chain:
 
     def _plan(self, frame: bytes) -> FramePlan | None:
         """The frame's plan for the current epoch, made when its layout comes often."""
+        last = self._last_plan
+        if last is not None and last.epoch == self._epoch[0] and last.fits(frame):
+            return last  # the cyclic frame again: no key to work out
         key = layout_key(frame)
         if key is None:
             return None
@@ -399,7 +403,8 @@ class Chain:
             self._plans.clear()
             self._plan_epoch = self._epoch[0]
         if key in self._plans:
-            return self._plans[key]
+            plan = self._last_plan = self._plans[key]
+            return plan
         seen = self._seen.get(key, 0) + 1
         if len(self._seen) >= 1024:
             self._seen.clear()
@@ -413,7 +418,7 @@ class Chain:
         plan = make_plan(
             key, self._active, self._port_offsets, self._epoch[0], delay_ns, self._deferred_dc
         )
-        self._plans[key] = plan
+        self._plans[key] = self._last_plan = plan
         return plan
 
     def _run_plan(
@@ -422,7 +427,9 @@ class Chain:
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
-        compiled = self._compiled(plan)
+        compiled = plan.compiled
+        if compiled is NOT_COMPILED:
+            compiled = self._compiled(plan)
         answer = compiled.answer(frame, t_ns, self._deferred_dc) if compiled else None
         expired = True  # the Python checks run (the C core found one expiring, or ran not)
         if answer is None:

@@ -27,7 +27,7 @@ import ctypes
 import importlib.util
 from array import array
 from collections.abc import Iterable
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any
 
 from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
@@ -39,8 +39,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 3
-K_NONE, K_PYTHON, K_GENERIC = 0, 1, 2
+ABI_VERSION = 4
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -59,6 +58,7 @@ class SlaveTable(ctypes.Structure):
 
     _fields_ = [
         ("owned", _I64),
+        ("dev_owned", _I64),
         ("mem", _VP),
         ("clk_start", _I64),
         ("clk_drift", _I64),
@@ -92,6 +92,23 @@ class SlaveTable(ctypes.Structure):
         ("scale", ctypes.c_double),
         ("e", _I64 * 10),
     ]
+
+
+WORDS = ctypes.sizeof(SlaveTable) // 8
+_WORD = {f[0]: getattr(SlaveTable, f[0]).offset // 8 for f in SlaveTable._fields_}
+F_OWNED, F_DEV_OWNED, F_MEM = _WORD["owned"], _WORD["dev_owned"], _WORD["mem"]
+F_CLK_START, F_CLK_DRIFT, F_CLK_CORR = _WORD["clk_start"], _WORD["clk_drift"], _WORD["clk_corr"]
+F_OUTPUTS_VALID, F_LAST_OUTPUTS = _WORD["outputs_valid"], _WORD["last_outputs_ns"]
+F_NOW, F_DATAGRAMS, F_CYCLES = _WORD["now_ns"], _WORD["datagrams"], _WORD["cycles"]
+F_WATCHDOG, F_KIND = _WORD["wd_timeout"], _WORD["kind"]
+F_OUT_START, F_OUT_BYTES = _WORD["out_start"], _WORD["out_bytes"]
+F_IN_START, F_IN_BYTES = _WORD["in_start"], _WORD["in_bytes"]
+F_VALS, F_VALS_LEN = _WORD["vals"], _WORD["vals_len"]
+F_OMAP, F_OMAP_N, F_IMAP, F_IMAP_N = _WORD["omap"], _WORD["omap_n"], _WORD["imap"], _WORD["imap_n"]
+F_CHAN, F_CHAN_N, F_PHASE = _WORD["chan"], _WORD["chan_n"], _WORD["phase"]
+F_DEV_T, F_POWER, F_PREV_CW = _WORD["dev_t_ns"], _WORD["power"], _WORD["prev_cw"]
+F_LAST_SAMPLE, F_HAS_LAST = _WORD["last_sample"], _WORD["has_last"]
+F_PERIOD, F_SCALE, F_E = _WORD["period"], _WORD["scale"], _WORD["e"]
 
 
 class PlanTable(ctypes.Structure):
@@ -152,10 +169,6 @@ def core_available() -> bool:
     return _library() is not None
 
 
-def _bounded(value: object) -> bool:
-    return type(value) is int and -VALUE_LIMIT < value < VALUE_LIMIT
-
-
 def _signed64(value: int) -> int:
     return ((value + (1 << 63)) & _MASK64) - (1 << 63)
 
@@ -173,7 +186,16 @@ def _address(buffer: bytearray | array[Any], keep: list[Any]) -> int:
 
 
 class ChainCore:
-    """The kernel's tables for the slaves of one chain (all of them, in line order)."""
+    """The kernel's tables for the slaves of one chain (all of them, in line order).
+
+    Each slave's cyclic state is in two parts, each held either by the Python objects or
+    by the slave's table: its ESC's scalars (DC clock correction, outputs-valid flag and
+    time, the time of the last outputs event) and its device's state. The frame work
+    needs the first, the application cycle the second; both add to the ESC's counters.
+    The chain gives the ESC part back before Python processes a frame (``release``);
+    the device part goes back when Python uses the device (its application's
+    ``before_use`` hook: mailbox requests, AL state changes, a cycle run in Python).
+    """
 
     def __init__(self, escs: list[Esc]) -> None:
         lib = _library()
@@ -184,161 +206,251 @@ class ChainCore:
         self._lib = lib
         self.escs = escs
         n = len(escs)
-        self._table = (SlaveTable * max(1, n))()
-        self.address = ctypes.addressof(self._table)
+        self._words = array("q", bytes(ctypes.sizeof(SlaveTable) * max(1, n)))
+        self.address = int(self._words.buffer_info()[0])
+        self._doubles = memoryview(self._words).cast("B").cast("d")
         self._mem_pins = [(ctypes.c_char * MEMORY_BYTES).from_buffer(esc.mem) for esc in escs]
+        for i, pin in enumerate(self._mem_pins):
+            self._words[i * WORDS + F_MEM] = ctypes.addressof(pin)
         self._flat: list[FlatDevice | None] = [None] * n
+        self._unflat: list[tuple[int, int] | None] = [None] * n  # od (version, writes)
         self._device_pins: list[tuple[FlatDevice | None, list[Any]]] = [(None, [])] * n
-        self.released: set[int] = set(range(n))  # the Python objects hold these
+        self._watchdogs: list[tuple[int, int] | None] = [None] * n  # (epoch, timeout)
+        self._starts_epoch = -1  # the epoch the held devices' SM buffer starts are for
+        self.released: set[int] = set(range(n))  # ESC scalars the Esc objects hold
+        self.devices_released: set[int] = set(range(n))  # devices the objects hold
         self._python_cycles: dict[int, list[Esc]] = {}
         self._index = {id(esc): i for i, esc in enumerate(escs)}
+        for i, esc in enumerate(escs):
+            app = esc.app
+            if _device_of(app) is not None:
+                app.before_use = partial(self.release_device, i)  # type: ignore[union-attr]
 
     # ------------------------------------------------------------ ownership
     def acquire(self) -> bool:
-        """Take every released slave's state into the tables; ``False`` (and everything
-        given back) when one cannot be held (a value beyond what the kernel computes with)."""
-        if not self.released:
-            return True
+        """Take every released slave's ESC scalars into the tables; ``False`` (and all
+        given back) when one cannot be held (a value beyond the kernel's arithmetic)."""
         for i in sorted(self.released):
-            if not self._load(i):
+            if not self._load_esc(i):
                 self.release()
                 return False
             self.released.discard(i)
-        self._python_cycles.clear()
         return True
 
     def release(self, positions: Iterable[int] | None = None) -> None:
-        """Give the state of the slaves at these 0-based positions (all: ``None``) back
-        to the Python objects."""
+        """Give the ESC scalars of the slaves at these 0-based positions (all: ``None``)
+        back to the Esc objects, with the counts the kernel added."""
         n = len(self.escs)
         if positions is None:
             if len(self.released) == n:
                 return
             positions = range(n)
-        stored = False
         for i in positions:
             if i not in self.released and 0 <= i < n:
-                self._store(i)
+                self._store_esc(i)
                 self.released.add(i)
-                stored = True
-        if stored:
+
+    def release_device(self, i: int) -> None:
+        """Give the device at 0-based position ``i`` its state back (before Python uses it)."""
+        if i not in self.devices_released:
+            self._store_device(i)
+            self.devices_released.add(i)
             self._python_cycles.clear()
 
-    def _load(self, i: int) -> bool:
-        esc, row = self.escs[i], self._table[i]
+    def release_all(self) -> None:
+        """Everything back to the Python objects, counters included."""
+        self.release()
+        for i in range(len(self.escs)):
+            self.release_device(i)
+            self._flush_counters(i)
+
+    def _load_esc(self, i: int) -> bool:
+        esc, w, b = self.escs[i], self._words, i * WORDS
         clock = esc.clock
-        scalars = (clock.start_ns, clock.drift_ppb, clock.correction_ns)
-        times = (esc._last_outputs_ns, esc._now_ns)
-        watchdog = esc._watchdog_ns  # what check_watchdog would use
-        if watchdog == -1:
-            watchdog = esc.watchdog_timeout_ns()
-        watchdog = -1 if watchdog is None else watchdog
-        if not all(_bounded(v) for v in (*scalars, *times, watchdog)):
-            return False
-        row.mem = ctypes.addressof(self._mem_pins[i])
-        row.clk_start, row.clk_drift, row.clk_corr = scalars
-        row.outputs_valid = 1 if esc.outputs_valid else 0
-        row.last_outputs_ns, row.now_ns = times
-        row.datagrams = row.cycles = 0
-        row.wd_timeout = watchdog
-        row.kind = self._load_device(i, row)
-        if self._lib.lolacli_core_check_slave(self.address + i * ctypes.sizeof(SlaveTable)):
-            if row.kind < K_GENERIC:
+        values = (
+            clock.start_ns,
+            clock.drift_ppb,
+            clock.correction_ns,
+            esc._last_outputs_ns,
+            esc._now_ns,
+            self._watchdog(i),
+        )
+        for v in values:
+            if v.__class__ is not int or not -VALUE_LIMIT < v < VALUE_LIMIT:
                 return False
-            row.kind = K_PYTHON  # the device part did not pass: Python runs the device
-            if self._lib.lolacli_core_check_slave(self.address + i * ctypes.sizeof(SlaveTable)):
-                return False
-        row.owned = 1
+        (
+            w[b + F_CLK_START],
+            w[b + F_CLK_DRIFT],
+            w[b + F_CLK_CORR],
+            w[b + F_LAST_OUTPUTS],
+            w[b + F_NOW],
+            w[b + F_WATCHDOG],
+        ) = values
+        w[b + F_OUTPUTS_VALID] = 1 if esc.outputs_valid else 0
+        w[b + F_OWNED] = 1
         return True
 
-    def _load_device(self, i: int, row: SlaveTable) -> int:
-        """The device's tables into the row; its kind (K_PYTHON: Python runs it)."""
+    def _store_esc(self, i: int) -> None:
+        esc, w, b = self.escs[i], self._words, i * WORDS
+        esc.clock.correction_ns = w[b + F_CLK_CORR]
+        esc.outputs_valid = w[b + F_OUTPUTS_VALID] != 0
+        esc._last_outputs_ns = w[b + F_LAST_OUTPUTS]
+        esc._now_ns = w[b + F_NOW]
+        w[b + F_OWNED] = 0
+        self._flush_counters(i)
+
+    def _flush_counters(self, i: int) -> None:
+        w, b = self._words, i * WORDS
+        datagrams, cycles = w[b + F_DATAGRAMS], w[b + F_CYCLES]
+        if datagrams or cycles:
+            counters = self.escs[i].counters
+            counters.datagrams += datagrams
+            counters.cycles += cycles
+            w[b + F_DATAGRAMS] = w[b + F_CYCLES] = 0
+
+    def _watchdog(self, i: int) -> int:
+        """The process-data watchdog time check_watchdog would use (-1: none), kept per
+        epoch (its registers change only with one)."""
         esc = self.escs[i]
-        if esc.app is None:
-            return K_NONE
+        epoch = esc.epoch[0]
+        known = self._watchdogs[i]
+        if known is not None and known[0] == epoch:
+            return known[1]
+        timeout = esc._watchdog_ns
+        if timeout == -1:
+            timeout = esc.watchdog_timeout_ns()
+        value = -1 if timeout is None else timeout
+        self._watchdogs[i] = (epoch, value)
+        return value
+
+    def _acquire_devices(self, n: int) -> None:
+        for i in sorted(self.devices_released):
+            if i < n and self._load_device(i):
+                self.devices_released.discard(i)
+                self._python_cycles.clear()
+
+    def _load_device(self, i: int) -> bool:
+        """The device's tables and state into the slave's table; False: Python runs it."""
+        esc, w, b = self.escs[i], self._words, i * WORDS
         device = _device_of(esc.app)
         if device is None:
-            return K_PYTHON
+            return False
         flat = self._flat[i]
         loaded = flat.load() if flat is not None else None
-        if loaded is None:
+        if flat is None or loaded is None:
+            stamp = (device.od.version, device.od.writes)
+            if self._unflat[i] == stamp:
+                return False  # tried with this dictionary already
             flat = self._flat[i] = flatten(device)
             loaded = flat.load() if flat is not None else None
-        if flat is None or loaded is None:
-            return K_PYTHON
+            if flat is None or loaded is None:
+                self._unflat[i] = stamp
+                return False
         try:
             out_start, in_start = esc._process_data_starts()
         except (IndexError, AttributeError):
-            return K_PYTHON
+            return False
         pinned, keep = self._device_pins[i]
         if pinned is not flat:
             keep = []
-            row.vals = _address(flat.vals, keep)
-            row.omap = _address(flat.out_map, keep)
-            row.imap = _address(flat.in_map, keep)
-            row.chan = _address(flat.channels, keep)
-            row.phase = _address(flat.phases, keep)
+            w[b + F_VALS] = _address(flat.vals, keep)
+            w[b + F_OMAP] = _address(flat.out_map, keep)
+            w[b + F_IMAP] = _address(flat.in_map, keep)
+            w[b + F_CHAN] = _address(flat.channels, keep)
+            w[b + F_PHASE] = _address(flat.phases, keep)
+            w[b + F_VALS_LEN] = len(flat.vals)
+            w[b + F_OMAP_N], w[b + F_IMAP_N] = len(flat.out_map) // 4, len(flat.in_map) // 4
+            w[b + F_CHAN_N] = len(flat.channels) // 6
+            w[b + F_PERIOD] = flat.period_ns
+            self._doubles[b + F_SCALE] = flat.scale
+            for k, offset in enumerate(flat.cyclic):
+                w[b + F_E + k] = offset
+            w[b + F_KIND] = flat.kind
             self._device_pins[i] = (flat, keep)
-        row.vals_len = len(flat.vals)
-        row.omap_n, row.imap_n = len(flat.out_map) // 4, len(flat.in_map) // 4
-        row.chan_n = len(flat.channels) // 6
-        row.out_start, row.out_bytes = out_start, flat.out_bytes
-        row.in_start, row.in_bytes = in_start, flat.in_bytes
-        row.dev_t_ns, row.power, row.prev_cw = loaded.t_ns, loaded.power, loaded.previous_cw
-        row.last_sample, row.has_last = loaded.last_sample, int(loaded.has_last)
-        row.period, row.scale = flat.period_ns, flat.scale
-        for k, offset in enumerate(flat.cyclic):
-            row.e[k] = offset
-        return flat.kind
+        w[b + F_OUT_START], w[b + F_OUT_BYTES] = out_start, flat.out_bytes
+        w[b + F_IN_START], w[b + F_IN_BYTES] = in_start, flat.in_bytes
+        w[b + F_DEV_T], w[b + F_POWER], w[b + F_PREV_CW] = (
+            loaded.t_ns,
+            loaded.power,
+            loaded.previous_cw,
+        )
+        w[b + F_LAST_SAMPLE], w[b + F_HAS_LAST] = loaded.last_sample, int(loaded.has_last)
+        if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+            self._device_pins[i] = (None, [])
+            return False
+        w[b + F_DEV_OWNED] = 1
+        return True
 
-    def _store(self, i: int) -> None:
-        esc, row = self.escs[i], self._table[i]
-        esc.clock.correction_ns = row.clk_corr
-        esc.outputs_valid = bool(row.outputs_valid)
-        esc._last_outputs_ns, esc._now_ns = row.last_outputs_ns, row.now_ns
-        esc.counters.datagrams += row.datagrams
-        esc.counters.cycles += row.cycles
-        row.datagrams = row.cycles = 0
+    def _store_device(self, i: int) -> None:
+        w, b = self._words, i * WORDS
         flat = self._flat[i]
-        if row.kind >= K_GENERIC and flat is not None:
-            flat.store(
-                DeviceScalars(
-                    row.dev_t_ns, row.power, row.prev_cw, row.last_sample, bool(row.has_last)
-                )
+        assert flat is not None
+        flat.store(
+            DeviceScalars(
+                w[b + F_DEV_T],
+                w[b + F_POWER],
+                w[b + F_PREV_CW],
+                w[b + F_LAST_SAMPLE],
+                w[b + F_HAS_LAST] != 0,
             )
-        row.owned = 0
+        )
+        w[b + F_DEV_OWNED] = 0
+
+    def _refresh_starts(self) -> None:
+        """Where the held devices' SM buffers start: register writes (which the ESC
+        takes in Python, with a new epoch) may have moved them."""
+        self._starts_epoch = self.escs[0].epoch[0]  # one cell for the chain's slaves
+        w = self._words
+        for i in range(len(self.escs)):
+            if i in self.devices_released:
+                continue
+            b = i * WORDS
+            try:
+                w[b + F_OUT_START], w[b + F_IN_START] = self.escs[i]._process_data_starts()
+            except (IndexError, AttributeError):
+                self.release_device(i)
+                continue
+            if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+                self.release_device(i)
 
     def held_devices(self) -> list[int]:
-        """Positions whose device cycle runs in the kernel (for tests and reports)."""
-        return [
-            i
-            for i in range(len(self.escs))
-            if i not in self.released and self._table[i].kind >= K_GENERIC
-        ]
+        """Positions whose device cycle runs in the kernel now (for tests and reports)."""
+        return [i for i in range(len(self.escs)) if i not in self.devices_released]
 
     # ------------------------------------------------------------- the work
     def cycles(self, n: int, t_ns: int) -> None:
-        """The application cycle of the first ``n`` slaves at ``t_ns`` (``Esc.cycle``)."""
-        if not _bounded(t_ns):
-            self.release()
+        """The application cycle of the first ``n`` slaves at ``t_ns`` (``Esc.cycle``):
+        in the kernel for the devices it can hold, in Python for the others."""
+        if t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
+            for i in range(n):
+                self.release_device(i)
             for esc in self.escs[:n]:
                 esc.cycle(t_ns)
             return
+        escs = self.escs
+        if escs and escs[0].epoch[0] != self._starts_epoch:
+            self._refresh_starts()
+        if self.devices_released:
+            self._acquire_devices(n)
         self._lib.lolacli_core_cycles(self.address, n, t_ns)
         python = self._python_cycles.get(n)
         if python is None:
+            released = self.devices_released
             python = self._python_cycles[n] = [
-                esc
-                for i, esc in enumerate(self.escs[:n])
-                if i in self.released or self._table[i].kind < K_GENERIC
+                esc for i, esc in enumerate(self.escs[:n]) if i in released
             ]
         for esc in python:
             esc.cycle(t_ns)
 
     def check_watchdogs(self, n: int, t_ns: int) -> None:
-        """``Esc.check_watchdog`` of the first ``n`` slaves; the kernel looks at those it
-        holds, and when one would expire all go back to Python, which runs the checks."""
-        if _bounded(t_ns) and self._lib.lolacli_core_watchdog(self.address, n, t_ns) < 0:
+        """``Esc.check_watchdog`` of the first ``n`` slaves; the kernel looks at those whose
+        scalars it holds, and when one would expire all go back to Python, which runs the
+        checks."""
+        if (
+            t_ns.__class__ is int
+            and -VALUE_LIMIT < t_ns < VALUE_LIMIT
+            and self._lib.lolacli_core_watchdog(self.address, n, t_ns) < 0
+        ):
             for i in sorted(self.released):
                 if i < n:
                     self.escs[i].check_watchdog(t_ns)
@@ -400,6 +512,7 @@ class CompiledPlan:
         if self._lib.lolacli_core_check_plan(self.address):
             raise _NotCompiled
         self.item = (self.finish, ())
+        self._answer = self._lib.lolacli_core_answer
 
     # ------------------------------------------------------------- running
     def answer(self, frame: bytes, t_ns: int, deferred: list[Any]) -> tuple[bytes, bool] | None:
@@ -407,16 +520,19 @@ class CompiledPlan:
         watchdog would expire now (the chain then runs the checks in Python). Work for
         after the answer goes into ``deferred`` as the Python plan's does. ``None``: the
         kernel cannot take this one (time out of range, a slave it cannot hold)."""
-        if not _bounded(t_ns) or not self.core.acquire():
+        if t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
             return None
-        if self.pend[0]:
+        if self.core.released and not self.core.acquire():
+            return None
+        pend = self.pend
+        if pend[0]:
             self.finish()  # the chain runs deferred work before the next frame: not reached
-        if type(frame) is not bytes:
+        if frame.__class__ is not bytes:
             frame = bytes(frame)
-        code = self._lib.lolacli_core_answer(self.address, frame, len(frame), t_ns)
+        code = self._answer(self.address, frame, len(frame), t_ns)
         if code < 0:
             return None
-        if self.pend[0]:
+        if pend[0]:
             deferred.append(self.item)
         return bytes(self.buf), code == 1
 
@@ -425,7 +541,7 @@ class CompiledPlan:
         events, DC time loops), in the plan's order."""
         if not self.pend[0]:
             return
-        if self.core.acquire():
+        if not self.core.released or self.core.acquire():
             self._lib.lolacli_core_finish(self.address)
         else:
             self._finish_in_python()

@@ -24,6 +24,7 @@ each datagram has its own, so the two orders give the same result.
 
 from __future__ import annotations
 
+import operator
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -98,6 +99,24 @@ class _Datagram:
         return self.header + 10 + self.length
 
 
+def layout_check(key: Key) -> Callable[[bytes], bool]:
+    """A test that a frame has the layout ``key`` (``layout_key(frame) == key``) in one
+    C-level pass over the bytes the key comes from: the frame's length, the EtherType and
+    EtherCAT header word, and each datagram's command, ADP, ADO and length word."""
+    places: list[int | slice] = [slice(12, 16)]
+    want: list[int | bytes] = [bytes((0x88, 0xA4)) + _U16.pack(key[1])]
+    for i, d in enumerate(_datagrams(key)):
+        places += [d.header, slice(d.header + 2, d.header + 8)]
+        want += [d.cmd, struct.pack("<HHH", d.adp, d.ado, key[5 + 4 * i])]
+    fields = operator.itemgetter(*places)
+    n, expected = key[0], tuple(want)
+
+    def check(frame: bytes) -> bool:
+        return len(frame) == n and fields(frame) == expected
+
+    return check
+
+
 def _datagrams(key: Key) -> list[_Datagram]:
     out = []
     pos = 16
@@ -155,6 +174,7 @@ class FramePlan:
         self.delay_ns = delay_ns
         self.deferred = deferred
         self.compiled: Any = NOT_COMPILED  # the chain's C core's program for it, or None
+        self.fits = layout_check(key)  # frame -> whether it has this plan's layout
         self.buf = bytearray(key[0])
         view = memoryview(self.buf)
         self.slaves = [(esc, o.port0_ns) for esc, o in zip(slaves, offsets, strict=True)]

@@ -7,6 +7,8 @@ slaves: for each ENI slave an SII image (:mod:`lolacli.emulator.sii`), a device 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from lolacli.devices import device_for
 from lolacli.devices.base import Device
 from lolacli.emulator.chain import Chain, ChainTiming, Faults
@@ -24,17 +26,26 @@ class SlaveApplication:
         self.device = device
         self.sdo = SdoServer(device.od, mailbox_in_bytes) if mailbox_in_bytes else None
         self.has_coe = mailbox_in_bytes > 0
+        # called before Python uses the device: the chain's C core, which may hold the
+        # device's state between cycles, gives it back (lolacli.emulator.core)
+        self.before_use: Callable[[], None] | None = None
 
     def mailbox_request(self, request: bytes) -> list[bytes]:
+        if self.before_use is not None:
+            self.before_use()
         return self.sdo.handle(request) if self.sdo is not None else []
 
     def process_data_bytes(self) -> tuple[int, int]:
         return self.device.process_data_bytes()
 
     def state_changed(self, state: AlState) -> None:
+        if self.before_use is not None:
+            self.before_use()
         self.device.state_changed(int(state))
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        if self.before_use is not None:
+            self.before_use()
         return self.device.cycle(outputs, t_ns)
 
 

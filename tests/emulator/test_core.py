@@ -29,7 +29,7 @@ import pytest
 
 from lolacli.emulator import core as core_module
 from lolacli.emulator.chain import Chain, Faults, chain_engine
-from lolacli.emulator.core import ChainCore, CompiledPlan, core_available
+from lolacli.emulator.core import ChainCore, CompiledPlan, SlaveTable, core_available
 from lolacli.emulator.esc import Esc
 from lolacli.emulator.plan import layout_key
 from lolacli.emulator.registers import AlState, AlStatusCode
@@ -72,6 +72,7 @@ class Twin:
         drift_ppb: int = 20,
         clock_spread_ns: int | None = None,
         faults: dict[str, float] | None = None,
+        compare_every: int = 29,
     ) -> None:
         def chain(engine: str) -> Chain:
             f = Faults(seed=seed, **(faults or {}))
@@ -85,6 +86,7 @@ class Twin:
                 start = spread.randrange(-clock_spread_ns, clock_spread_ns)
                 a.clock.start_ns = b.clock.start_ns = start
         self.timing = self.c.timing
+        self.compare_every = compare_every  # frames between state comparisons (0: never)
         self.rng = random.Random(seed)
         self.frames = 0
         self.compared = 0
@@ -109,7 +111,7 @@ class Twin:
             elif roll < 0.45:
                 self.both(lambda ch: ch.hold_deferred_cycle())
         self.frames += 1
-        if self.frames % 29 == 0:
+        if self.compare_every and self.frames % self.compare_every == 0:
             self.same_state()
         return replies[0]
 
@@ -422,12 +424,16 @@ def _is_drive(chain: Chain, position: int) -> bool:
 
 # ------------------------------------------------------------------------ tests
 @pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml", "ek1100_io.xml"])
-@pytest.mark.parametrize(("drift_ppb", "spread_ns"), [(20, None), (-13, 5_000)])
+@pytest.mark.parametrize(
+    ("drift_ppb", "spread_ns", "compare_every"), [(20, None, 29), (-13, 5_000, 0)]
+)
 def test_c_core_matches_the_reference_on_the_examples(
-    name: str, drift_ppb: int, spread_ns: int | None
+    name: str, drift_ppb: int, spread_ns: int | None, compare_every: int
 ) -> None:
+    """``compare_every`` 0: no state comparison (which gives the state back to Python)
+    between the script's own, so the core holds it for long stretches."""
     eni = load_eni(EXAMPLES / name)
-    twin = Twin(eni, drift_ppb=drift_ppb, clock_spread_ns=spread_ns)
+    twin = Twin(eni, drift_ppb=drift_ppb, clock_spread_ns=spread_ns, compare_every=compare_every)
     Script(eni, twin, plannable_only=False).run()
     assert twin.c.stats.planned_frames > 250
     assert twin.compiled_frames > 250  # answered by the C core
@@ -475,6 +481,62 @@ def test_c_core_matches_with_dropped_and_damaged_frames_and_link_loss() -> None:
     script.move(20)
     twin.same_state()
     assert twin.c.stats.dropped > 0 and twin.c.stats.corrupted > 0 and twin.c.stats.links_lost == 1
+
+
+def test_watchdogs_expire_per_slave_when_only_some_outputs_come() -> None:
+    """Outputs for all drives, then for drives 11-21 only, then for drives 1-3 only: the
+    drives 4-10 expire first (0x001B), 11-21 later; the Python checks the core hands over
+    to see each slave's own last outputs (no comparison in between gives the state back
+    to Python early)."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni, compare_every=0)
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    for cw in (0x06, 0x07, 0x0F):
+        script.move(1, controlword=cw)
+    drive_bytes = 11  # controlword, mode, target position, velocity offset
+
+    def writes(first: int, last: int, ms: float) -> None:
+        start = (first - 1) * drive_bytes
+        data = bytes(script.outputs.image[start : last * drive_bytes])
+        frame = encode_frame(make_frame([Datagram.logical(C.LWR, 0x10000 + start, data)]))
+        for _ in range(round(2 * ms)):
+            script.bus.t_ns += PERIOD_NS
+            twin.process(frame, script.bus.t_ns)
+
+    writes(11, 21, 1)  # both layouts get their plans now, so later frames keep the core
+    writes(1, 3, 1)
+    script.move(10)
+    twin.same_state()  # everything back in Python once, then the core takes it again
+    script.move(10)
+    writes(11, 21, 80)
+    writes(1, 3, 40)
+    codes = [esc.al_status_code for esc in twin.c.slaves]
+    assert codes[3:10] == [AlStatusCode.SYNC_MANAGER_WATCHDOG] * 7
+    assert codes[10:21] == [AlStatusCode.NO_ERROR] * 11
+    writes(1, 3, 70)
+    codes = [esc.al_status_code for esc in twin.c.slaves]
+    assert codes[:3] == [AlStatusCode.NO_ERROR] * 3
+    assert codes[10:21] == [AlStatusCode.SYNC_MANAGER_WATCHDOG] * 11
+    twin.same_state()
+
+
+def test_sync_managers_moved_in_op_move_the_process_data() -> None:
+    """A master rewrites a slave's input SM start in OP (a register write, taken in
+    Python): the next cycles put the inputs where the SM now is."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni, compare_every=0)
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    for cw in (0x06, 0x07, 0x0F):
+        script.move(1, controlword=cw)
+    script.move(10)
+    station = eni.slaves[4].station_address
+    for sm in range(2, 4):  # the process data SMs, wherever they are: 0x20 bytes on
+        start = struct.unpack("<H", script.bus.fprd(station, 0x0800 + 8 * sm, 2))[0]
+        script.bus.fpwr(station, 0x0800 + 8 * sm, struct.pack("<H", start + 0x20))
+    script.move(10)
+    twin.same_state()
 
 
 def test_the_core_holds_the_state_and_chain_slaves_gives_it_back() -> None:
@@ -562,9 +624,8 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
     core = chain._core
     assert core is not None
     lib = core._lib
-    row = core._table[0]
-    address = core.address
-    assert lib.lolacli_core_check_slave(address) == 0
+    row = SlaveTable.from_address(core.address)  # the first drive's table
+    assert lib.lolacli_core_check_slave(core.address) == 0
     for name, bad in [
         ("out_start", 65530),
         ("in_bytes", 1 << 20),
@@ -577,9 +638,9 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
     ]:
         saved = getattr(row, name)
         setattr(row, name, bad)
-        assert lib.lolacli_core_check_slave(address) != 0, name
+        assert lib.lolacli_core_check_slave(core.address) != 0, name
         setattr(row, name, saved)
-    assert lib.lolacli_core_check_slave(address) == 0
+    assert lib.lolacli_core_check_slave(core.address) == 0
 
 
 def test_wrapper_gives_the_reference_what_the_core_cannot_hold() -> None:
@@ -594,6 +655,7 @@ def test_wrapper_gives_the_reference_what_the_core_cannot_hold() -> None:
     script.move(10)
     core = twin.c._core
     assert core is not None and len(core.released) == len(eni.slaves)
+    assert core.held_devices()  # the devices' cycles need no ESC scalar: still in C
     twin.both(lambda ch: setattr(ch.slaves[3].clock, "correction_ns", 0))
     script.move(10)
     assert len(core.released) == 0
@@ -630,8 +692,7 @@ def test_held_flag_for_every_example_device() -> None:
         chain = build_chain(eni, engine="c")
         core = chain._core
         assert isinstance(core, ChainCore)
-        assert core.acquire()
-        kinds = [core._table[i].kind for i in range(len(eni.slaves))]
-        assert all(kind >= 2 for kind in kinds), (path.name, kinds)
-        core.release()
+        core.cycles(len(eni.slaves), 1_000_000)  # takes every device it can describe
+        assert core.held_devices() == list(range(len(eni.slaves))), path.name
+        core.release_all()
 
