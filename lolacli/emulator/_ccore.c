@@ -13,7 +13,8 @@
  *
  * Safety: every table is checked once, when it is built (lolacli_core_check_slave and
  * lolacli_core_check_plan walk it as the executors do and refuse any index or range
- * outside its buffer); the executors then trust the tables. The wrapper bounds every time
+ * outside its buffer); the executors then trust the tables. The buffer lengths and row
+ * counts themselves are the wrapper's, which takes them from the buffers it allocates. The wrapper bounds every time
  * (|t| < 2^62) and every state value it loads (|x| < 2^62), so sums of two of them never
  * overflow; products of a time with a rate are taken in 128 bits, and the DC arithmetic
  * is done modulo 2^64, which is what Python's masks give.

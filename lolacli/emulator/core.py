@@ -133,8 +133,14 @@ def _library() -> ctypes.CDLL | None:
     spec = importlib.util.find_spec("lolacli.emulator._ccore")
     if spec is None or spec.origin is None:
         return None
+    return load_library(spec.origin)
+
+
+def load_library(path: str) -> ctypes.CDLL | None:
+    """The kernel at ``path`` with its functions declared, or ``None`` when it does not
+    load or does not fit this module (tests load a sanitizer build this way)."""
     try:
-        lib = ctypes.CDLL(spec.origin)
+        lib = ctypes.CDLL(path)
         lib.lolacli_core_abi.argtypes = [_I64]
         lib.lolacli_core_abi.restype = _I64
         lib.lolacli_core_answer.argtypes = [_VP, ctypes.c_char_p, _I64, _I64]

@@ -21,7 +21,12 @@ from __future__ import annotations
 import ctypes
 import os
 import random
+import shutil
 import struct
+import subprocess
+import sys
+import sysconfig
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -620,6 +625,8 @@ def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
 
 
 def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
+    """Offsets, sizes and state values outside what the kernel can run are refused (the
+    row counts and buffer lengths are the wrapper's, which sets them from the arrays)."""
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None
@@ -630,7 +637,7 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
         ("out_start", 65530),
         ("in_bytes", 1 << 20),
         ("vals_len", 2),
-        ("omap_n", 1000),
+        ("out_bytes", 1),
         ("kind", 99),
         ("clk_corr", 1 << 62),
         ("power", 0x1234),
@@ -696,3 +703,66 @@ def test_held_flag_for_every_example_device() -> None:
         assert core.held_devices() == list(range(len(eni.slaves))), path.name
         core.release_all()
 
+
+
+# ------------------------------------------------------------------ sanitizers
+SANITIZED_TESTS = (
+    "(examples or refuses or moved or per_slave or corpus_enis and planned) and not sanitizers"
+)
+
+
+def _runtime(name: str) -> str | None:
+    out = subprocess.run(["gcc", f"-print-file-name={name}"], capture_output=True, text=True)
+    path = out.stdout.strip()
+    return path if out.returncode == 0 and os.path.isabs(path) else None
+
+
+@pytest.mark.slow
+def test_kernel_under_address_and_undefined_behaviour_sanitizers() -> None:
+    """The differential tests again with the kernel built with ASan and UBSan (any
+    out-of-bounds access, overflow or other undefined behaviour aborts the run). In a
+    folder of its own: pytest's basetemp is rotated by every other session of the user."""
+    if os.environ.get("LOLACLI_SANITIZED_RUN"):
+        pytest.skip("already the sanitized run")
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc")
+    runtimes = [_runtime("libasan.so"), _runtime("libubsan.so")]
+    if None in runtimes:
+        pytest.skip("gcc without the sanitizer runtimes")
+    root = Path(__file__).resolve().parents[2]
+    with tempfile.TemporaryDirectory(prefix="lolacli-sanitized-") as folder:
+        work = Path(folder)
+        library = work / "_ccore_sanitized.so"
+        include = sysconfig.get_paths()["include"]
+        subprocess.run(
+            ["gcc", "-O1", "-g", "-fno-omit-frame-pointer", "-fsanitize=address,undefined",
+             "-fno-sanitize-recover=all", "-std=c11", "-ffp-contract=off", "-fPIC", "-shared",
+             f"-I{include}", str(root / "lolacli/emulator/_ccore.c"), "-o", str(library),
+             "-lm"],
+            check=True,
+        )  # fmt: skip
+        arguments = ["-q", "-x", "-p", "no:cacheprovider", "--capture=sys"]  # reports on fd 2
+        arguments += ["--basetemp", str(work / "tmp")]
+        arguments += ["tests/emulator/test_core.py", "-k", SANITIZED_TESTS]
+        driver = work / "run.py"
+        driver.write_text(
+            "import sys\n"
+            f"sys.path.insert(0, {str(root)!r})\n"
+            "import pytest\n"
+            "from lolacli.emulator import core\n"
+            f"lib = core.load_library({str(library)!r})\n"
+            "assert lib is not None\n"
+            "core._library = lambda: lib\n"
+            f"sys.exit(pytest.main({arguments!r}))\n"
+        )
+        env = dict(os.environ)
+        env["LD_PRELOAD"] = " ".join(str(r) for r in runtimes)
+        env["ASAN_OPTIONS"] = "detect_leaks=0"
+        env["UBSAN_OPTIONS"] = "print_stacktrace=1:halt_on_error=1"
+        env["LOLACLI_SANITIZED_RUN"] = "1"
+        env["PYTHONMALLOC"] = "malloc"  # every Python buffer from malloc, which ASan watches
+        run = subprocess.run(
+            [sys.executable, str(driver)], cwd=root, env=env, capture_output=True, text=True
+        )
+    assert run.returncode == 0, (run.stdout + run.stderr)[-3000:]
+    assert " passed" in run.stdout

@@ -13,9 +13,11 @@ import random
 import struct
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lolacli.emulator.chain import Chain
-from lolacli.emulator.plan import layout_key
+from lolacli.emulator.plan import layout_check, layout_key
 from lolacli.emulator.slave import build_chain
 from lolacli.eni.model import Eni
 from lolacli.files import load_eni
@@ -210,3 +212,35 @@ def test_held_cycles_let_frames_answer_first_and_lose_no_outputs() -> None:
     replies, inputs = bus.cycle(eni, struct.pack("<Hbi", 0x0F, 8, 4242).ljust(size, b"\0"))
     status, _mode, actual = struct.unpack_from("<Hbi", inputs, 0)
     assert status & 0x6F == 0x27 and actual == 4242
+
+
+_KINDS = [C.LRW, C.LRD, C.BRD, C.ARMW, C.FPRD]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    a=st.lists(st.tuples(st.sampled_from(_KINDS), st.integers(0, 40)), min_size=1, max_size=4),
+    b=st.lists(st.tuples(st.sampled_from(_KINDS), st.integers(0, 40)), min_size=1, max_size=4),
+    noise=st.binary(min_size=0, max_size=4),
+    pad=st.booleans(),
+)
+def test_layout_check_agrees_with_layout_key(a, b, noise, pad) -> None:  # type: ignore[no-untyped-def]
+    """A plan recognises its frames without working out their key; the test it uses
+    says yes exactly when the keys are equal (also for cut, tagged or noisy frames)."""
+
+    def frame(spec: list[tuple[int, int]]) -> bytes:
+        datagrams = [
+            Datagram.logical(cmd, 0x10000, bytes(n))
+            if cmd in (C.LRW, C.LRD)
+            else Datagram.physical(cmd, 0x1001, 0x0130, bytes(n))
+            for cmd, n in spec
+        ]
+        return encode_frame(make_frame(datagrams), pad=pad)
+
+    first = frame(a)
+    key = layout_key(first)
+    assert key is not None
+    check = layout_check(key)
+    assert check(first)
+    for other in (frame(b), frame(b) + noise, frame(b)[: len(frame(b)) - len(noise)], first[:-1]):
+        assert check(other) == (layout_key(other) == key)
