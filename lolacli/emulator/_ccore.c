@@ -107,6 +107,12 @@ enum { D_COUNT = 5, D_DEFERRED, D_N_SEGMENTS, D_ROWS };
 /* ------------------------------------------------------------------ arithmetic */
 
 static inline i128 floordiv(i128 a, i128 b) {
+    if (a >= INT64_MIN && a <= INT64_MAX && b >= INT64_MIN && b <= INT64_MAX && b != -1) {
+        i64 x = (i64)a, y = (i64)b; /* the usual case, in one 64-bit division */
+        i64 q = x / y;
+        if (x % y != 0 && ((x < 0) != (y < 0))) q -= 1;
+        return q;
+    }
     i128 q = a / b;
     if (a % b != 0 && ((a < 0) != (b < 0))) q -= 1;
     return q;
@@ -135,7 +141,7 @@ static inline i64 wrap32(i128 v) { return (i64)(int32_t)(uint32_t)(u64)v; }
 
 /* DcClock.local_ns + the system time offset register: Esc.system_time_ns, mod 2^64 */
 static u64 system_time(const slave_t *s, i64 t) {
-    i128 drift = floordiv((i128)t * s->clk_drift, NS_PER_S);
+    i128 drift = s->clk_drift ? floordiv((i128)t * s->clk_drift, NS_PER_S) : 0;
     u64 offset = get_le(s->mem + DC_SYSTEM_TIME_OFFSET, 8);
     return (u64)t + (u64)drift + (u64)s->clk_start + (u64)s->clk_corr + offset;
 }
