@@ -349,7 +349,7 @@ class Chain:
         times = self._port_offsets
         logical = any(s.cmd in LOGICAL for s in slots)
         self._address(slots)
-        if self._core is not None:  # Python processes the frame: the slaves' state back
+        if self._core is not None:  # Python runs the frame: ESC state back from the C core
             self._core.release(_addressed(slots))
         datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
         if not self._active:
@@ -431,7 +431,7 @@ class Chain:
         if compiled is NOT_COMPILED:
             compiled = self._compiled(plan)
         answer = compiled.answer(frame, t_ns, self._deferred_dc) if compiled else None
-        expired = True  # the Python checks run (the C core found one expiring, or ran not)
+        expired = True  # the Python checks run: no compiled answer, or a watchdog expires
         if answer is None:
             if self._core is not None:
                 self._core.release()

@@ -8,14 +8,17 @@ esc.py, the device classes) stays the reference: without the kernel, or for anyt
 tables do not describe, the chain runs it; tests compare the two bit for bit.
 
 Who holds the state. ESC memory is shared: the kernel reads and writes each slave's
-bytearray in place. The rest of a slave's cyclic state — its ESC's DC clock correction,
-outputs-valid flag and time, datagram and cycle counters, and its device's entry values
-and scalars (:mod:`lolacli.devices.flat`) — is held either by the Python objects or by the
-kernel's table for that slave. :meth:`ChainCore.acquire` moves it into the tables before
-compiled work runs; :meth:`ChainCore.release` gives it back before Python code touches a
-slave (the chain releases the slaves a general-path frame addresses, and all of them when
-``Chain.slaves`` is read). A slave whose device the tables cannot describe keeps its
-device in Python (its cycle runs there) while the kernel holds its ESC's scalars.
+bytearray in place. The rest of a slave's cyclic state is in two parts, each held either by
+the Python objects or by the kernel's table for the slave: the ESC's scalars (DC clock
+correction, outputs-valid flag, time of the last outputs and of the last outputs event;
+the frame work needs them) and the device's state (entry values and scalars, see
+:mod:`lolacli.devices.flat`; the application cycle needs it). Both sides add to the ESC's
+datagram and cycle counters. The kernel takes what it needs before it runs; Python gets
+it back before it touches a slave: the chain gives back the ESC part of the slaves a
+general-path frame addresses, a device's part goes back when Python uses the device (its
+application's ``before_use`` hook: a mailbox request, an AL state change, a cycle run in
+Python), and ``Chain.slaves`` gives back everything. A device the tables cannot describe
+stays in Python, and so does its cycle.
 
 The kernel trusts its tables; they are checked once when built (``lolacli_core_check_*``
 walk them as the executors do), and every time passed in is bounded here.
@@ -180,7 +183,8 @@ def _signed64(value: int) -> int:
 
 
 def _address(buffer: bytearray | array[Any], keep: list[Any]) -> int:
-    """The address of a buffer the kernel writes, kept exported (so it cannot move)."""
+    """The address of a buffer the kernel uses; ``keep`` keeps it alive (and a bytearray
+    exported, so it cannot move; the arrays are never resized)."""
     if isinstance(buffer, array):
         keep.append(buffer)
         return int(buffer.buffer_info()[0]) if len(buffer) else 0
