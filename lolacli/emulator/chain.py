@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import random
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
@@ -145,26 +147,40 @@ _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
 
 @dataclass(slots=True)
 class _Slot:
-    """A datagram's place in the frame and which slaves it addresses.
-
-    ``target`` is the one addressed position for APxx/FPxx (-1: nobody), ``None`` when
-    every slave takes part (broadcast, logical, ARMW/FRMW)."""
+    """A datagram's place in the frame."""
 
     header: int  # offset of the datagram header in the frame
     cmd: int
     length: int
     adp: int  # as the next slave sees it
     ado: int
-    target: int | None = None
-    wkc_added: int = 0
 
-    @property
-    def data_offset(self) -> int:
-        return self.header + DATAGRAM_HEADER_BYTES
 
-    @property
-    def wkc_offset(self) -> int:
-        return self.data_offset + self.length
+def _slots(frame: bytes) -> list[_Slot] | None:
+    """The datagrams of an untagged EtherCAT command frame; ``None`` for anything else
+    (the full decoder then tells a tagged frame from a malformed one). Accepts what
+    :func:`lolacli.wire.frame.decode_frame` accepts for such frames."""
+    n = len(frame)
+    if n < 16 or frame[12] != 0x88 or frame[13] != 0xA4:
+        return None
+    word = frame[14] | frame[15] << 8
+    end = 16 + (word & 0x7FF)
+    if word >> 12 != ECAT_TYPE_COMMANDS or end > n:
+        return None
+    out = []
+    pos = 16
+    unpack = _HEAD.unpack_from
+    while True:
+        if pos + DATAGRAM_HEADER_BYTES > end:
+            return None
+        cmd, _index, adp, ado, lenw = unpack(frame, pos)
+        length = lenw & 0x7FF
+        out.append(_Slot(pos, cmd, length, adp, ado))
+        pos += DATAGRAM_HEADER_BYTES + length + WKC_BYTES
+        if pos > end:
+            return None
+        if not lenw & 0x8000:
+            return out
 
 
 PLAN_CACHE_SIZE = 32
@@ -193,8 +209,15 @@ class Chain:
         self._deferred_t_ns: int | None = None
         self.reachable = len(slaves)
         self._epoch = [0]  # one cell for all slaves: any change invalidates the plans
+        self._addressing = [0]  # one cell for all slaves: configured addresses changed
+        self._pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # firmware work
         for esc in slaves:
             esc.epoch = self._epoch
+            esc.addressing = self._addressing
+            esc.pdi = self._pdi
+        self._stations_at = -1
+        self._stations_map: dict[int, int] = {}
+        self._delays: dict[tuple[tuple[int, ...], int], int] = {}
         self._plans: dict[Key, FramePlan | None] = {}
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
@@ -214,6 +237,7 @@ class Chain:
     def _line_changed(self) -> None:
         """Topology and arrival offsets of the slaves the frames reach."""
         self._epoch[0] += 1
+        self._addressing[0] += 1
         self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
         self._port_offsets = self.timing.port_times(0, len(self._active))
@@ -284,6 +308,8 @@ class Chain:
         """
         self.stats.frames += 1
         self._due_link_loss(t_ns)
+        if self._pdi and not defer_cycles:
+            self._run_pdi()  # in-process: the firmware has kept up
         damaged = self.faults.corrupt(len(self._active))  # a damaged frame never takes a plan
         plan = self._plan(frame) if self.plan_after and damaged is None else None
         if self._held is not None and (plan is None or not plan.defers_writes):
@@ -292,56 +318,106 @@ class Chain:
             self._run_deferred_dc()
         if plan is not None:
             return self._run_plan(plan, frame, t_ns, defer_cycles)
-        slots = self._parse(frame)
+        slots = _slots(frame)
         if slots is None:
-            return None, 0
+            slots = self._parse(frame)  # tagged, another EtherCAT type, or malformed
+            if slots is None:
+                return None, 0
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
-        buf = bytearray(frame)
-        view = memoryview(buf)
-        times = self._port_offsets
-        logical = any(s.cmd in LOGICAL for s in slots)
-        self._address(slots)
-        datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
         if not self._active:
             self.stats.dropped += 1  # the link is down at the master: nothing comes back
             return None, 0
-        processing = self._active if damaged is None else self._active[:damaged]
-        for position, (esc, offsets) in enumerate(zip(processing, times, strict=False)):
-            esc.frame_t_ns = t_ns
-            esc.port_offsets = offsets
-            t = t_ns + offsets.port0_ns
-            for slot, data in zip(slots, datas, strict=True):
-                if slot.target is None:
-                    slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, data, t)
-                    slot.wkc_added += added
-                elif slot.target == position:
-                    seen = 0 if slot.cmd in _AUTO_INCREMENT_SINGLE else slot.adp
-                    slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, data, t)[1]
-        for slot in slots:
-            if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
-                slot.adp = (slot.adp + len(processing)) & 0xFFFF
-            _U16.pack_into(buf, slot.header + 2, slot.adp)
-            if slot.wkc_added:
-                (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
-                _U16.pack_into(buf, slot.wkc_offset, (wkc + slot.wkc_added) & 0xFFFF)
-        for data in datas:
-            data.release()
-        view.release()
+        buf = bytearray(frame)
+        logical = self._run_slots(buf, slots, t_ns, damaged)
         if damaged is not None:
             self._count_damaged(damaged)
         self.tick(t_ns)
         if logical:
             self._deferred_t_ns = t_ns
+            self.stats.logical_frames += 1
             if not defer_cycles:
                 self.run_deferred_cycles()
-        if logical:
-            self.stats.logical_frames += 1
+        elif self._pdi and not defer_cycles:
+            self._run_pdi()
         buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
-        lengths = [slot.length for slot in slots]
-        return bytes(buf), self.timing.round_trip_ns(lengths, len(self._active))
+        return bytes(buf), self._delay_ns(tuple(slot.length for slot in slots))
+
+    def _run_slots(
+        self, buf: bytearray, slots: list[_Slot], t_ns: int, damaged: int | None
+    ) -> bool:
+        """Run the datagrams through the slaves (``damaged``: only that many process the
+        frame); ADP and WKC fields updated in ``buf``. True when a datagram was logical.
+
+        Datagram by datagram, each through the slaves it reaches, which is the order the
+        frame passes them in for every slave (slave-major) as long as slaves meet only
+        through the frame's bytes; a single-slave datagram goes straight to its slave."""
+        view = memoryview(buf)
+        processing = self._active if damaged is None else self._active[:damaged]
+        reached = len(processing)
+        offsets = self._port_offsets
+        logical = False
+        for slot in slots:
+            cmd, ado = slot.cmd, slot.ado
+            start = slot.header + DATAGRAM_HEADER_BYTES
+            data = view[start : start + slot.length]
+            added = 0
+            if cmd in _AUTO_INCREMENT_SINGLE:
+                position = (-slot.adp) & 0xFFFF
+                if position < reached:
+                    added = self._one(
+                        processing[position], offsets[position], cmd, 0, ado, data, t_ns
+                    )
+                slot.adp = (slot.adp + reached) & 0xFFFF  # every slave incremented it
+            elif cmd in _CONFIGURED_SINGLE:
+                position = self._station_position(slot.adp)
+                if position < reached:
+                    added = self._one(
+                        processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
+                    )
+            else:
+                logical = logical or cmd in LOGICAL
+                adp = slot.adp
+                for esc, port in zip(processing, offsets, strict=False):
+                    esc.frame_t_ns = t_ns
+                    esc.port_offsets = port
+                    adp, wkc = esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)
+                    added += wkc
+                slot.adp = adp
+            data.release()
+            _U16.pack_into(buf, slot.header + 2, slot.adp)
+            if added:
+                at = start + slot.length
+                _U16.pack_into(buf, at, (_U16.unpack_from(buf, at)[0] + added) & 0xFFFF)
+        view.release()
+        return logical
+
+    @staticmethod
+    def _one(
+        esc: Esc, port: PortTimes, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
+    ) -> int:
+        esc.frame_t_ns = t_ns
+        esc.port_offsets = port
+        return esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)[1]
+
+    def _station_position(self, address: int) -> int:
+        """The first position answering configured ``address`` (station address or
+        alias); the number of active slaves when none does."""
+        if self._stations_at != self._addressing[0]:
+            self._stations_map = self._stations()
+            self._stations_at = self._addressing[0]
+        return self._stations_map.get(address, len(self._active))
+
+    def _delay_ns(self, lengths: tuple[int, ...]) -> int:
+        key = (lengths, len(self._active))
+        delay = self._delays.get(key)
+        if delay is None:
+            if len(self._delays) >= 256:
+                self._delays.clear()
+            delay = self._delays[key] = self.timing.round_trip_ns(list(lengths), len(self._active))
+        return delay
 
     def _plan(self, frame: bytes) -> FramePlan | None:
         """The frame's plan for the current epoch, made when its layout comes often."""
@@ -428,6 +504,8 @@ class Chain:
         for."""
         if self._held is not None:
             self._run_held()
+        if self._pdi:
+            self._run_pdi()
         if self._deferred_dc:
             self._run_deferred_dc()
         t_ns = self._deferred_t_ns
@@ -455,22 +533,30 @@ class Chain:
             for esc in self._active:
                 esc.cycle(t_ns)
 
+    @property
+    def firmware_pending(self) -> int:
+        """How many pieces of firmware work (AL control requests, mailbox writes) the
+        slaves have taken but not yet handled."""
+        return len(self._pdi)
+
+    def run_firmware(self, limit: int | None = None) -> None:
+        """Handle up to ``limit`` (``None``: all) pieces of pending firmware work, oldest
+        first; work they queue in turn waits for the next call."""
+        work = self._pdi
+        n = len(work) if limit is None else min(limit, len(work))
+        batch = work[:n]
+        del work[:n]
+        for function, args in batch:
+            function(*args)
+
+    def _run_pdi(self) -> None:
+        while self._pdi:
+            self.run_firmware()
+
     def _run_deferred_dc(self) -> None:
         for work, args in self._deferred_dc:
             work(*args)
         self._deferred_dc.clear()
-
-    def _address(self, slots: list[_Slot]) -> None:
-        """Resolve single-slave datagrams to their position once per frame."""
-        stations: dict[int, int] | None = None
-        for slot in slots:
-            if slot.cmd in _AUTO_INCREMENT_SINGLE:
-                position = (-slot.adp) & 0xFFFF
-                slot.target = position if position < len(self._active) else -1
-            elif slot.cmd in _CONFIGURED_SINGLE:
-                if stations is None:
-                    stations = self._stations()
-                slot.target = stations.get(slot.adp, -1)
 
     def _stations(self) -> dict[int, int]:
         """Configured address -> first position answering it (station address or alias)."""
