@@ -23,7 +23,7 @@ from typing import Any
 
 from lolacli.emulator.esc import Esc, PortTimes
 from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
-from lolacli.emulator.registers import AlStatusCode
+from lolacli.emulator.registers import PROCESS_RAM, AlStatusCode
 from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
@@ -141,6 +141,7 @@ class ChainStats:
     planned_frames: int = 0  # answered through a frame plan
 
 
+_READS_ONLY = frozenset({Command.APRD, Command.FPRD, Command.BRD})
 _AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
 _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
 
@@ -154,6 +155,25 @@ class _Slot:
     length: int
     adp: int  # as the next slave sees it
     ado: int
+
+
+_SM_AND_FMMU = (0x0600, 0x0900)  # FMMU and SM registers: where a device cycle's data go
+
+
+def _touches_process_data(slots: list[_Slot]) -> bool:
+    """Whether a frame may see or change what a held device cycle reads and writes: the
+    SM buffers in process RAM (logical datagrams, physical ones from 0x1000) and the
+    FMMU/SM registers. Register reads and other register writes may go first, as they
+    would on a slave whose application is late (AL control requests wait for the
+    firmware anyway)."""
+    lo, hi = _SM_AND_FMMU
+    for slot in slots:
+        cmd = slot.cmd
+        if cmd in LOGICAL or slot.ado + slot.length > PROCESS_RAM:
+            return True
+        if cmd not in _READS_ONLY and slot.ado < hi and lo < slot.ado + slot.length:
+            return True
+    return False
 
 
 def _slots(frame: bytes) -> list[_Slot] | None:
@@ -223,6 +243,7 @@ class Chain:
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
+        self._plan_later: Key | None = None  # a plan to make after the answer
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
 
@@ -311,18 +332,22 @@ class Chain:
         if self._pdi and not defer_cycles:
             self._run_pdi()  # in-process: the firmware has kept up
         damaged = self.faults.corrupt(len(self._active))  # a damaged frame never takes a plan
-        plan = self._plan(frame) if self.plan_after and damaged is None else None
-        if self._held is not None and (plan is None or not plan.defers_writes):
-            self._run_held()  # this frame's outputs would reach memory before it ran
-        if self._deferred_dc:
-            self._run_deferred_dc()
+        plan = self._plan(frame, defer_cycles) if self.plan_after and damaged is None else None
         if plan is not None:
+            if self._held is not None and not plan.defers_writes:
+                self._run_held()  # this frame's outputs would reach memory before it ran
+            if self._deferred_dc:
+                self._run_deferred_dc()
             return self._run_plan(plan, frame, t_ns, defer_cycles)
         slots = _slots(frame)
         if slots is None:
             slots = self._parse(frame)  # tagged, another EtherCAT type, or malformed
-            if slots is None:
-                return None, 0
+        if self._held is not None and (slots is None or _touches_process_data(slots)):
+            self._run_held()  # the held cycle reads and writes what this frame touches
+        if self._deferred_dc:
+            self._run_deferred_dc()
+        if slots is None:
+            return None, 0
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
@@ -419,8 +444,9 @@ class Chain:
             delay = self._delays[key] = self.timing.round_trip_ns(list(lengths), len(self._active))
         return delay
 
-    def _plan(self, frame: bytes) -> FramePlan | None:
-        """The frame's plan for the current epoch, made when its layout comes often."""
+    def _plan(self, frame: bytes, defer: bool = False) -> FramePlan | None:
+        """The frame's plan for the current epoch, made when its layout comes often;
+        with ``defer``, made after the answer (this frame takes the general path)."""
         key = layout_key(frame)
         if key is None:
             return None
@@ -435,6 +461,15 @@ class Chain:
         self._seen[key] = seen
         if seen < self.plan_after:
             return None
+        if defer:
+            self._plan_later = key
+            return None
+        return self._make_plan(key)
+
+    def _make_plan(self, key: Key) -> FramePlan | None:
+        if self._plan_epoch != self._epoch[0]:
+            self._plans.clear()
+            self._plan_epoch = self._epoch[0]
         if len(self._plans) >= PLAN_CACHE_SIZE:
             self._plans.clear()
         lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
@@ -509,11 +544,14 @@ class Chain:
         if self._deferred_dc:
             self._run_deferred_dc()
         t_ns = self._deferred_t_ns
-        if t_ns is None:
-            return
-        self._deferred_t_ns = None
-        for esc in self._active:
-            esc.cycle(t_ns)
+        if t_ns is not None:
+            self._deferred_t_ns = None
+            for esc in self._active:
+                esc.cycle(t_ns)
+        if self._plan_later is not None:
+            key, self._plan_later = self._plan_later, None
+            if key not in self._plans or self._plan_epoch != self._epoch[0]:
+                self._make_plan(key)
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending

@@ -501,6 +501,7 @@ class Esc:
             self.mem[base + 7] = (self.mem[base + 7] & 0x02) | (0 if on else r.SM_PDI_DEACTIVATE)
         self._cache = None
         self.epoch[0] += 1
+        self._config()  # decoded now, in the firmware's time, not in the next frame's
 
     def _check_mailbox_sms(self) -> int | None:
         layout = self.layout
@@ -585,12 +586,15 @@ class Esc:
             self.mem[addr] &= ~r.SM_STATUS_MAILBOX_FULL
 
     def _sm_registers_written(self, start: int, end: int) -> None:
-        for i in range(self.config.sync_managers):
-            base = self._sm_address(i)
-            if not _overlaps(start, end, base, base + 8):
-                continue
-            if not self.mem[base + 6] & 1:
-                self._set_sm_full(i, False)
+        first = max(0, (start - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES)
+        last = min(self.config.sync_managers, (end - 1 - r.SYNC_MANAGER_BASE) // 8 + 1)
+        mem = self.mem
+        for i in range(first, last):
+            base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * i
+            if not mem[base + 6] & 1:
+                mem[base + 5] &= ~r.SM_STATUS_MAILBOX_FULL  # a disabled SM forgets its buffer
+                if i == self.layout.mailbox_out_sm:
+                    self._mailbox_pending = False
             elif i == self.layout.mailbox_in_sm:
                 self._repeat_request(base)
 

@@ -140,15 +140,16 @@ def serve(
     should_stop: Callable[[], bool],
     on_status: Callable[[ServerStats], None] | None = None,
     status_interval_s: float = 1.0,
-    on_ready: Callable[[], None] | None = None,
-    realtime_priority: int = 0,
+    on_ready: Callable[[str], None] | None = None,
+    realtime_priority: int | None = None,
 ) -> ServerStats:
     """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
-    ``on_ready`` is called once the socket is open (frames are answered from then on).
-    ``realtime_priority`` > 0 runs the server SCHED_FIFO at that priority (root or
-    CAP_SYS_NICE): with master and emulator on one core, the device work then runs
-    while the master waits for its next cycle instead of when it waits for an answer."""
+    ``on_ready(scheduling)`` is called once the socket is open (frames are answered from
+    then on), with the scheduling the server got. ``realtime_priority``: ``None`` runs
+    SCHED_FIFO where permitted (root or CAP_SYS_NICE) and normal scheduling elsewhere,
+    0 normal scheduling, 1..99 SCHED_FIFO at that priority or a TransportError. A slave
+    does not wait for other processes to yield the core; neither should its stand-in."""
     with RawSocketServer(iface, chain, realtime_priority=realtime_priority) as server:
         if on_ready is not None:
-            on_ready()
+            on_ready(server.scheduling)
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)
