@@ -212,7 +212,12 @@ class Esc:
         _U16.pack_into(m, r.FEATURES, cfg.features)
         _U16.pack_into(m, r.STATION_ALIAS, self.layout.station_alias)
         _U32.pack_into(m, r.DL_CONTROL, 0x00000001)
-        _U16.pack_into(m, r.PDI_CONTROL, cfg.pdi_control)
+        # PDI control and configuration come from SII words 0 and 1 at power-on (ET1100
+        # datasheet §3.45); an image too short to hold them leaves the configured ones
+        sii_pdi = self.sii[0:2] if len(self.sii) >= 2 else b""
+        _U16.pack_into(
+            m, r.PDI_CONTROL, int.from_bytes(sii_pdi, "little") if sii_pdi else cfg.pdi_control
+        )
         _U16.pack_into(m, r.WATCHDOG_DIVIDER, cfg.watchdog_divider)
         _U16.pack_into(m, r.WATCHDOG_TIME_PROCESS_DATA, cfg.watchdog_time_process_data)
         status = r.EEPROM_STATUS_READ_8_BYTES if cfg.eeprom_8_byte_reads else 0
