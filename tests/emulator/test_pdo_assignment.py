@@ -98,7 +98,9 @@ def test_a_slave_without_pdos_in_its_eni_maps_the_enis_sizes(corpus: Path) -> No
     assert sum(p.bit_size for p in pdos if p.index >= 0x1A00) == 112
 
 
-@pytest.mark.parametrize(("eni_name", "position", "sm"), [("lola.xml", 24, 1), ("ek1100_io.xml", 2, 0)])
+@pytest.mark.parametrize(
+    ("eni_name", "position", "sm"), [("lola.xml", 24, 1), ("ek1100_io.xml", 2, 0)]
+)
 def test_sm_control_bytes_stay_as_the_eni_gives_them(eni_name: str, position: int, sm: int) -> None:
     slave = load_eni(EXAMPLES / eni_name).slaves[position - 1]
     declared = next(m for m in slave.sync_managers if m.index == sm)
