@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from lolacli.emulator.esc import Esc, PortTimes
+from lolacli.emulator.esc import Esc, PortTimes, broadcast_read, broadcast_write
 from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
 from lolacli.emulator.registers import PROCESS_RAM, AlStatusCode
 from lolacli.emulator.sii import sii_layout
@@ -142,6 +142,7 @@ class ChainStats:
 
 
 _READS_ONLY = frozenset({Command.APRD, Command.FPRD, Command.BRD})
+_APRD, _FPRD, _BRD, _BWR = int(Command.APRD), int(Command.FPRD), int(Command.BRD), int(Command.BWR)
 _AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
 _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
 
@@ -157,6 +158,8 @@ class _Slot:
     ado: int
 
 
+_AL_STATUS = 0x0130
+_OP = 0x08
 _SM_AND_FMMU = (0x0600, 0x0900)  # FMMU and SM registers: where a device cycle's data go
 
 
@@ -392,16 +395,38 @@ class Chain:
             if cmd in _AUTO_INCREMENT_SINGLE:
                 position = (-slot.adp) & 0xFFFF
                 if position < reached:
-                    added = self._one(
-                        processing[position], offsets[position], cmd, 0, ado, data, t_ns
-                    )
+                    if cmd == _APRD:
+                        esc = processing[position]
+                        t = t_ns + offsets[position].port0_ns
+                        added = esc.read_addressed(cmd, 0, ado, data, t)
+                    else:
+                        added = self._one(
+                            processing[position], offsets[position], cmd, 0, ado, data, t_ns
+                        )
                 slot.adp = (slot.adp + reached) & 0xFFFF  # every slave incremented it
             elif cmd in _CONFIGURED_SINGLE:
                 position = self._station_position(slot.adp)
                 if position < reached:
-                    added = self._one(
-                        processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
-                    )
+                    if cmd == _FPRD:
+                        esc = processing[position]
+                        t = t_ns + offsets[position].port0_ns
+                        added = esc.read_addressed(cmd, slot.adp, ado, data, t)
+                    else:
+                        added = self._one(
+                            processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
+                        )
+            elif (
+                cmd == _BRD
+                and (got := broadcast_read(processing, offsets, ado, data, t_ns)) is not None
+            ):
+                added = got
+                slot.adp = (slot.adp + reached) & 0xFFFF
+            elif (
+                cmd == _BWR
+                and (got := broadcast_write(processing, offsets, ado, data, t_ns)) is not None
+            ):
+                added = got
+                slot.adp = (slot.adp + reached) & 0xFFFF
             else:
                 logical = logical or cmd in LOGICAL
                 adp = slot.adp
@@ -530,7 +555,8 @@ class Chain:
         if self._deferred_dc:
             self._run_deferred_dc()
         for esc in self._active:
-            esc.check_watchdog(t_ns)
+            if esc.mem[_AL_STATUS] == _OP:  # only a slave in OP has a watchdog to run out
+                esc.check_watchdog(t_ns)
 
     def run_deferred_cycles(self) -> None:
         """Run the work left for after the answer, in order: the application cycle held

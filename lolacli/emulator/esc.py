@@ -58,6 +58,8 @@ _ACCESS: dict[int, int] = {
 _ARMW, _FRMW, _BRD, _BRW = int(Command.ARMW), int(Command.FRMW), int(Command.BRD), int(Command.BRW)
 _SYSTEM_TIME = r.DC_SYSTEM_TIME
 _SYSTEM_TIME_END = r.DC_SYSTEM_TIME + 8
+_AL_STATUS = r.AL_STATUS
+_PROCESS_RAM = r.PROCESS_RAM
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
 _SAFEOP = int(AlState.SAFEOP)
 _OP = int(AlState.OP)
@@ -305,6 +307,18 @@ class Esc:
             return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
         return adp, 0
 
+    def read_addressed(self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int) -> int:
+        """APRD/FPRD addressed to this slave (``adp`` as it sees it): the WKC increment.
+        Registers other than the DC system time are copied straight; anything else goes
+        through :meth:`process`."""
+        end = ado + len(data)
+        if end <= _SYSTEM_TIME or (_SYSTEM_TIME_END <= ado and end <= _PROCESS_RAM):
+            self.counters.datagrams += 1
+            self._now_ns = t_ns
+            data[:] = self.mem[ado:end]
+            return 1
+        return self.process(cmd, adp, ado, data, t_ns)[1]
+
     # --------------------------------------------------------- physical access
     def _physical(self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool) -> int:
         n = len(data)
@@ -466,7 +480,7 @@ class Esc:
 
     def check_watchdog(self, t_ns: int) -> None:
         """In OP without new outputs for the watchdog time: back to SAFEOP, error 0x001B."""
-        if self.mem[r.AL_STATUS] != AlState.OP:
+        if self.mem[_AL_STATUS] != _OP:
             return
         if self._watchdog_ns == -1:
             self._watchdog_ns = self.watchdog_timeout_ns()
@@ -911,6 +925,54 @@ def system_time_loop(
             clock.correction_ns -= (
                 diff >> 1 if diff < _TWICE_MAX_CORRECTION_NS else MAX_CORRECTION_NS
             )
+
+
+def broadcast_read(
+    escs: list[Esc], ports: list[PortTimes], ado: int, data: memoryview, t_ns: int
+) -> int | None:
+    """BRD of registers other than the DC system time through ``escs`` (``ports``: when
+    the frame of time ``t_ns`` reaches each): each ORs its bytes into ``data``; the WKC
+    increment, as :meth:`Esc.process` would give slave by slave. ``None`` for any other
+    range (process RAM and the system time have side effects: :meth:`Esc.process` then)."""
+    end = ado + len(data)
+    if end > _PROCESS_RAM or (ado < _SYSTEM_TIME_END and _SYSTEM_TIME < end):
+        return None
+    merged = int.from_bytes(data, "little")
+    for esc, port in zip(escs, ports, strict=False):
+        esc.counters.datagrams += 1
+        esc._now_ns = t_ns + port.port0_ns
+        merged |= int.from_bytes(esc.mem[ado:end], "little")
+    data[:] = merged.to_bytes(end - ado, "little")
+    return len(escs)
+
+
+def broadcast_write(
+    escs: list[Esc], ports: list[PortTimes], ado: int, data: memoryview, t_ns: int
+) -> int | None:
+    """BWR of registers through ``escs``: the write worked out once for all
+    (:func:`_register_write`), then stored and its side effects run slave by slave, as
+    :meth:`Esc.process` would; the WKC increment. ``None`` for a write that reaches
+    process RAM (sync manager buffers: :meth:`Esc.process` then)."""
+    end = ado + len(data)
+    if end > _PROCESS_RAM:
+        return None
+    payload = bytes(data)
+    plan = _register_write(ado, end)
+    segments = [(lo, hi, payload[lo - ado : hi - ado]) for lo, hi in plan.segments]
+    effects = plan.effects
+    for esc, port in zip(escs, ports, strict=False):
+        t = t_ns + port.port0_ns
+        esc.counters.datagrams += 1
+        esc._now_ns = t
+        esc.epoch[0] += 1
+        mem = esc.mem
+        for lo, hi, part in segments:
+            mem[lo:hi] = part
+        if effects:
+            esc.frame_t_ns = t_ns
+            esc.port_offsets = port
+            esc._register_side_effects(plan, ado, end, payload, t)
+    return len(escs)
 
 
 @dataclass(frozen=True, slots=True)
