@@ -17,8 +17,8 @@ EC_TIMEOUTRET, KickCAT's link timeout) and the target p99 <= 150 µs, max <= 1 m
     sudo python benchmarks/emulate_latency.py --eni lolacli/eni_examples/single_drive.xml
 
 Needs root (veth, raw sockets), dumpcap, pysoem and/or kickcat. The masters run at
-``--master-nice`` (default -20: ahead of other processes, as a master is run; not
-SCHED_FIFO, whose budget SOEM's busy-polling receive would use up and get throttled). The
+``--master-nice`` (default 0: normal; SOEM polls its socket without sleeping, and above
+the kernel's softirq thread it holds back the very packets it waits for). The
 machine's load during the run is printed with the table: figures on a shared host are
 upper bounds.
 """
@@ -266,7 +266,7 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=10_000)
     parser.add_argument("--masters", default="pysoem,kickcat")
     parser.add_argument("--loads", default="idle,hog", help="idle, hog or both")
-    parser.add_argument("--master-nice", type=int, default=-20)
+    parser.add_argument("--master-nice", type=int, default=0)
     parser.add_argument("--prefix", default="lbl", help="veth name prefix")
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder")
     parser.add_argument("--json", action="store_true", help="also print the results as JSON")

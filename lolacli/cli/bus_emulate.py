@@ -57,9 +57,7 @@ def emulate_cmd(
     ] = None,
     duration_s: Annotated[
         float,
-        typer.Option(
-            "--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."
-        ),
+        typer.Option("--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."),
     ] = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
     realtime_priority: Annotated[
@@ -149,8 +147,15 @@ def emulate_cmd(
             highlight=False,
         )
 
+    scratch = make_chain(model, EmulateOptions(), esi=esi_files)  # warms the code up
     stats = serve(
-        iface, chain, should_stop, status, on_ready=ready, realtime_priority=realtime_priority
+        iface,
+        chain,
+        should_stop,
+        status,
+        on_ready=ready,
+        realtime_priority=realtime_priority,
+        scratch=scratch,
     )
     status(stats)
     console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")

@@ -7,9 +7,9 @@ are skipped (``PACKET_OUTGOING``), so on a veth pair only the master's frames ar
 
 The answer goes first; the work the frame left (device cycles, DC control loops, writes
 into the slaves' memories) runs afterwards, once the master had ``grace_s`` to take the
-answer (the server sleeps that long, or until the master's next frame comes). On a host
-where master and emulator share a core the sleep is what lets the master see the answer
-before that work is done. When the next frame comes first, it is answered first and the
+answer (the server watches the socket that long without sleeping, so a frame the master
+sends right after the answer, as in any start-up or mailbox exchange, is answered with no
+wake-up latency). When the next frame comes first, it is answered first and the
 device cycle waits with the outputs it was due (:meth:`Chain.hold_deferred_cycle`).
 The slaves' firmware work (AL state requests, mailbox services) runs the same way: after
 the answer, a piece at a time while no frame waits, at least one piece per frame.
@@ -117,6 +117,10 @@ class RawSocketServer:
         self.iface = iface
         self.chain = chain
         self.grace_s = grace_s
+        self.grace_ns = round(grace_s * 1e9)
+        self._next: tuple[bytes, list[tuple[int, int, bytes]]] | None = None
+        self._poller = select.poll()
+        self._poll_ms = 100
         self.realtime_priority = realtime_priority
         self.stats = ServerStats()
         self.scheduling = "normal"
@@ -157,7 +161,10 @@ class RawSocketServer:
         sock = self._sock
         if sock is None:
             raise TransportError("server not opened (use it as a context manager)")
-        sock.settimeout(poll_s)
+        sock.setblocking(False)  # waits go through poll(): a frame already here is taken at once
+        self._poller = select.poll()
+        self._poller.register(sock, select.POLLIN)
+        self._poll_ms = max(1, round(poll_s * 1000))
         self.stats.started_ns = time.monotonic_ns()
         next_status = time.monotonic() + status_interval_s
         while not should_stop():
@@ -168,19 +175,18 @@ class RawSocketServer:
         return self.stats
 
     def _serve_one(self, sock: socket.socket) -> None:
-        try:
-            frame, ancillary, _flags, address = sock.recvmsg(MAX_FRAME_BYTES, 64)
-        except TimeoutError:
-            self.chain.run_deferred_cycles()  # nothing may wait while the master is silent
-            self.chain.tick(time.monotonic_ns())  # watchdogs run while the master is silent
-            gc.collect()
-            return
-        except InterruptedError:
-            return
-        except OSError as exc:
-            raise TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}") from None
-        if len(address) > 2 and address[2] == PACKET_OUTGOING:
-            return
+        if self._next is None and not self._poll(sock):
+            if not self._poller.poll(self._poll_ms):
+                self.chain.run_deferred_cycles()  # nothing may wait while the master is silent
+                self.chain.tick(time.monotonic_ns())  # watchdogs run while it is silent
+                gc.collect()
+                return
+            if not self._poll(sock):
+                return  # a frame of our own, or a wake-up for nothing
+        received = self._next
+        self._next = None
+        assert received is not None
+        frame, ancillary = received
         t_ns = time.monotonic_ns()
         arrived = _arrival_ns(ancillary)
         if arrived is not None:
@@ -198,14 +204,43 @@ class RawSocketServer:
         self.stats.answered += 1
         self.stats.service.add(service_ns)
         self.stats.max_service_ns = max(self.stats.max_service_ns, service_ns)
-        if self._firmware(sock):
+        if self._firmware(sock) or self._spin(sock):
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
-            return
-        if self.grace_s > 0 and select.select([sock], [], [], self.grace_s)[0]:
-            self.chain.hold_deferred_cycle()
             return
         self.chain.run_deferred_cycles()  # device updates after the answer is on its way
         self._idle()
+
+    def _poll(self, sock: socket.socket) -> bool:
+        """Take a frame that is already here (kept for the next answer); True if one is."""
+        while True:
+            try:
+                frame, ancillary, _flags, address = sock.recvmsg(
+                    MAX_FRAME_BYTES, 64, socket.MSG_DONTWAIT
+                )
+            except (BlockingIOError, InterruptedError):
+                return False  # nothing here
+            except OSError as exc:
+                raise TransportError(
+                    f"{self.iface}: receive failed: {exc.strerror or exc}"
+                ) from None
+            if len(address) > 2 and address[2] == PACKET_OUTGOING:
+                continue
+            self._next = frame, ancillary
+            return True
+
+    def _receive_failed(self, exc: OSError) -> TransportError:
+        return TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}")
+
+    def _spin(self, sock: socket.socket) -> bool:
+        """Watch the socket for ``grace_s`` after an answer without sleeping: the master
+        takes the answer meanwhile, and its next frame (in a start-up and a mailbox
+        exchange they come back to back) is answered with no wake-up in between."""
+        deadline = time.monotonic_ns() + self.grace_ns
+        while True:
+            if self._poll(sock):
+                return True
+            if time.monotonic_ns() >= deadline:
+                return False
 
     def _firmware(self, sock: socket.socket) -> bool:
         """The slaves' firmware work, a piece at a time while no frame waits (at least
@@ -215,7 +250,7 @@ class RawSocketServer:
             return False
         chain.run_firmware(1)
         while chain.firmware_pending:
-            if select.select([sock], [], [], 0)[0]:
+            if self._poll(sock):
                 return True
             chain.run_firmware(1)
         return False
