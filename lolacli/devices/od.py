@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from lolacli.errors import SdoAbortError
+from lolacli.wire.registers import AlState
 
 
 class DataType(IntEnum):
@@ -189,9 +190,6 @@ def decode_value(data_type: int, raw: bytes) -> int | float | str | bytes:
     return value
 
 
-AL_PREOP = 2  # AL state (ETG.1000.6 Table 9) in which the PDO configuration may change
-
-
 def pdo_configuration(index: int) -> bool:
     """PDO mapping (0x1600-0x17FF, 0x1A00-0x1BFF) and sync manager PDO assignment
     (0x1C10-0x1C2F) objects: writable in PREOP only (ETG.1000.6 §5.6.7.4; a change
@@ -312,7 +310,7 @@ class ObjectDictionary:
         entry = self.entry(index, subindex)
         if not entry.writable:
             raise SdoAbortError(index, subindex, AbortCode.READ_ONLY)
-        if self.al_state not in (None, AL_PREOP) and pdo_configuration(index):
+        if self.al_state not in (None, AlState.PREOP) and pdo_configuration(index):
             raise SdoAbortError(index, subindex, AbortCode.CANNOT_TRANSFER_STATE)
         if entry.data_type not in _VARIABLE_LENGTH:
             size = max(1, (type_bits(entry.data_type) + 7) // 8)

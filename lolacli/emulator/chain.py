@@ -23,7 +23,15 @@ from typing import Any
 
 from lolacli.emulator.esc import Esc, PortTimes, broadcast_read, broadcast_write
 from lolacli.emulator.plan import Deferred, FramePlan, Key, layout_key, make_plan
-from lolacli.emulator.registers import PROCESS_RAM, AlStatusCode
+from lolacli.emulator.registers import (
+    AL_STATUS,
+    FMMU_BASE,
+    PROCESS_RAM,
+    SYNC_MANAGER_BASE,
+    SYNC_MANAGER_BYTES,
+    AlState,
+    AlStatusCode,
+)
 from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
@@ -158,9 +166,10 @@ class _Slot:
     ado: int
 
 
-_AL_STATUS = 0x0130
-_OP = 0x08
-_SM_AND_FMMU = (0x0600, 0x0900)  # FMMU and SM registers: where a device cycle's data go
+_AL_STATUS = AL_STATUS
+_OP = int(AlState.OP)
+# FMMU and SM registers: where a device cycle's data go
+_SM_AND_FMMU = (FMMU_BASE, SYNC_MANAGER_BASE + 16 * SYNC_MANAGER_BYTES)
 
 
 def _touches_process_data(slots: list[_Slot]) -> bool:

@@ -20,6 +20,7 @@ from lolacli.emulator import registers as r
 from lolacli.emulator.registers import AlState, AlStatusCode
 from lolacli.emulator.sii import SiiLayout, sii_layout
 from lolacli.wire.commands import Command
+from lolacli.wire.mailbox import MAILBOX_HEADER_BYTES, decode_mailbox_header
 from lolacli.wire.registers import decode_system_time_difference
 
 _U16 = struct.Struct("<H")
@@ -683,7 +684,9 @@ class Esc:
         request = bytes(self.mem[sm.start : sm.start + sm.length])
         self._mailbox_pending = False
         self._set_sm_full(index, False)  # the PDI has read it
-        counter = (request[5] >> 4) & 0x07 if len(request) > 5 else 0
+        counter = 0
+        if len(request) >= MAILBOX_HEADER_BYTES:
+            counter = decode_mailbox_header(request).counter
         if counter and counter == self._mailbox_write_counter:
             return
         self._mailbox_write_counter = counter

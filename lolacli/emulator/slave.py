@@ -11,7 +11,7 @@ import struct
 from dataclasses import replace
 
 from lolacli.devices import device_for
-from lolacli.devices.base import Device
+from lolacli.devices.base import ASSIGN_RX, ASSIGN_TX, MAPPING_RX, MAPPING_TX, Device
 from lolacli.emulator.chain import Chain, ChainTiming, Faults
 from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.esc import DcClock, Esc
@@ -19,8 +19,8 @@ from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
 from lolacli.eni.model import CoeInitCmd, Direction, Eni, Pdo, PdoEntry, Slave
 
-ASSIGN_OBJECTS = {Direction.OUTPUT: 0x1C12, Direction.INPUT: 0x1C13}
-DEFAULT_PDO = {Direction.OUTPUT: 0x1600, Direction.INPUT: 0x1A00}
+ASSIGN_OBJECTS = {Direction.OUTPUT: ASSIGN_RX, Direction.INPUT: ASSIGN_TX}
+DEFAULT_PDO = {Direction.OUTPUT: MAPPING_RX, Direction.INPUT: MAPPING_TX}
 FILLER_OBJECT = {Direction.OUTPUT: 0x5FFE, Direction.INPUT: 0x5FFF}
 _FILLER_TYPES = ((32, "UDINT"), (16, "UINT"), (8, "USINT"))
 ENTRIES_PER_PDO = 8
