@@ -255,6 +255,7 @@ class Chain:
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
+        self._held_from = 0  # ... and the position it goes on from
         self._plan_later: Key | None = None  # a plan to make after the answer
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
@@ -567,11 +568,15 @@ class Chain:
             if esc.mem[_AL_STATUS] == _OP:  # only a slave in OP has a watchdog to run out
                 esc.check_watchdog(t_ns)
 
-    def run_deferred_cycles(self) -> None:
+    def run_deferred_cycles(self, should_yield: Callable[[], bool] | None = None) -> bool:
         """Run the work left for after the answer, in order: the application cycle held
-        back by :meth:`hold_deferred_cycle`, what the frame plans left (DC time control
-        loops, writes into the slaves' memories), the cycle the last logical frame asked
-        for."""
+        back by :meth:`hold_deferred_cycle`, the slaves' firmware work, what the frame
+        plans left (DC time control loops, writes into the slaves' memories), the cycle
+        the last logical frame asked for.
+
+        ``should_yield`` is asked between the slaves of that cycle: when it says a frame
+        waits, the rest of the cycle is held as by :meth:`hold_deferred_cycle` (it goes on
+        from the next slave) and the result is False; True when everything ran."""
         if self._held is not None:
             self._run_held()
         if self._pdi:
@@ -581,12 +586,18 @@ class Chain:
         t_ns = self._deferred_t_ns
         if t_ns is not None:
             self._deferred_t_ns = None
-            for esc in self._active:
+            active = self._active
+            last = len(active) - 1
+            for i, esc in enumerate(active):
                 esc.cycle(t_ns)
+                if should_yield is not None and i < last and should_yield():
+                    self._held, self._held_from = t_ns, i + 1
+                    return False
         if self._plan_later is not None:
             key, self._plan_later = self._plan_later, None
             if key not in self._plans or self._plan_epoch != self._epoch[0]:
                 self._make_plan(key)
+        return True
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending
@@ -599,11 +610,13 @@ class Chain:
         if self._deferred_dc:
             self._run_deferred_dc()
         self._held, self._deferred_t_ns = self._deferred_t_ns, None
+        self._held_from = 0
 
     def _run_held(self) -> None:
         t_ns, self._held = self._held, None
+        start, self._held_from = self._held_from, 0
         if t_ns is not None:
-            for esc in self._active:
+            for esc in self._active[start:]:
                 esc.cycle(t_ns)
 
     @property

@@ -48,6 +48,7 @@ TIMER_SLACK_NS = 1000
 SO_TIMESTAMPNS = 35  # Linux: receive timestamps as struct timespec (socket module lacks it)
 SCM_TIMESTAMPNS = SO_TIMESTAMPNS
 _TIMESPEC = struct.Struct("qq")
+YIELD_CHECK_NS = 20_000  # deferred device work looks for a waiting frame this often
 GC_EVERY_FRAMES = 4096  # a young-generation collection in an idle moment after this many
 
 
@@ -121,6 +122,7 @@ class RawSocketServer:
         self._next: tuple[bytes, list[tuple[int, int, bytes]]] | None = None
         self._poller = select.poll()
         self._poll_ms = 100
+        self._next_check_ns = 0
         self.realtime_priority = realtime_priority
         self.stats = ServerStats()
         self.scheduling = "normal"
@@ -207,8 +209,9 @@ class RawSocketServer:
         if self._firmware(sock) or self._spin(sock):
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
             return
-        self.chain.run_deferred_cycles()  # device updates after the answer is on its way
-        self._idle()
+        # device updates after the answer is on its way, giving way to the next frame
+        if self.chain.run_deferred_cycles(should_yield=self._frame_waiting):
+            self._idle()
 
     def _poll(self, sock: socket.socket) -> bool:
         """Take a frame that is already here (kept for the next answer); True if one is."""
@@ -230,6 +233,15 @@ class RawSocketServer:
 
     def _receive_failed(self, exc: OSError) -> TransportError:
         return TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}")
+
+    def _frame_waiting(self) -> bool:
+        """Whether the master's next frame is here (looked for at most every
+        :data:`YIELD_CHECK_NS`, so the check costs little against the work it interrupts)."""
+        now = time.monotonic_ns()
+        if now < self._next_check_ns or self._sock is None:
+            return False
+        self._next_check_ns = now + YIELD_CHECK_NS
+        return self._poll(self._sock)
 
     def _spin(self, sock: socket.socket) -> bool:
         """Watch the socket for ``grace_s`` after an answer without sleeping: the master
