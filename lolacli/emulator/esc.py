@@ -660,6 +660,11 @@ class Esc:
         self.outputs_valid = True
         self._last_outputs_ns = self._now_ns
         if self.pending_op and self.al_state == AlState.SAFEOP:
+            self._firmware(self._enter_requested_op)  # the firmware sees valid outputs
+
+    def _enter_requested_op(self) -> None:
+        """Firmware: OP, requested while the outputs were not yet valid, now that they are."""
+        if self.pending_op and self.al_state == AlState.SAFEOP:
             self._enter(AlState.OP)
 
     # ------------------------------------------------------------- mailbox
