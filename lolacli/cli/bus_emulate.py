@@ -129,6 +129,7 @@ def emulate_cmd(
             f"emulating {len(chain.slaves)} slaves of {model.source} on {iface} "
             f"(scheduling: {scheduling})",
             highlight=False,
+            soft_wrap=True,  # one line: scripts wait for it
         )
         if esi_note:
             console.print(esi_note, highlight=False)
@@ -160,7 +161,7 @@ def emulate_cmd(
     status(stats)
     console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")
     if stats.answered:
-        console.print(_latency_line(stats), highlight=False)
+        console.print(_latency_line(stats), highlight=False, soft_wrap=True)
 
 
 def _latency_line(stats: object) -> str:

@@ -215,8 +215,8 @@ class Esc:
         _U16.pack_into(m, r.FEATURES, cfg.features)
         _U16.pack_into(m, r.STATION_ALIAS, self.layout.station_alias)
         _U32.pack_into(m, r.DL_CONTROL, 0x00000001)
-        # PDI control and configuration come from SII words 0 and 1 at power-on (ET1100
-        # datasheet §3.45); an image too short to hold them leaves the configured ones
+        # PDI control (0x0140) and ESC configuration (0x0141) come from SII word 0 at
+        # power-on (ET1100 datasheet, EEPROM content); an image too short keeps the default
         sii_pdi = self.sii[0:2] if len(self.sii) >= 2 else b""
         _U16.pack_into(
             m, r.PDI_CONTROL, int.from_bytes(sii_pdi, "little") if sii_pdi else cfg.pdi_control
@@ -607,7 +607,9 @@ class Esc:
 
     def _sm_registers_written(self, start: int, end: int) -> None:
         first = max(0, (start - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES)
-        last = min(self.config.sync_managers, (end - 1 - r.SYNC_MANAGER_BASE) // 8 + 1)
+        last = min(
+            self.config.sync_managers, (end - 1 - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES + 1
+        )
         mem = self.mem
         for i in range(first, last):
             base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * i

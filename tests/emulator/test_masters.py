@@ -64,7 +64,7 @@ def veth() -> Iterator[tuple[str, str]]:
         subprocess.run(["ip", "link", "del", master], capture_output=True, check=False)
 
 
-def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[str]:
+def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[bytes]:
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -82,20 +82,27 @@ def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[str]:
         cwd=ROOT,
         stderr=subprocess.PIPE,
         stdout=subprocess.PIPE,
-        text=True,
+        bufsize=0,
     )
     assert proc.stderr is not None
-    line = proc.stderr.readline()  # "emulating N slaves of …" once the socket is open
-    assert "emulating" in line, line + proc.stderr.read()
+    line = b""  # "emulating N slaves of …" once the socket is open; read byte by byte,
+    while not line.endswith(b"\n"):  # so nothing after it is buffered here and lost
+        byte = proc.stderr.read(1)
+        if not byte:
+            break
+        line += byte
+    assert b"emulating" in line, (line + proc.stderr.read()).decode()
+    proc.first_line = line.decode()  # type: ignore[attr-defined]
     time.sleep(0.2)
     return proc
 
 
-def _stop(proc: subprocess.Popen[str]) -> str:
+def _stop(proc: subprocess.Popen[bytes]) -> str:
     proc.send_signal(2)  # SIGINT: stops cleanly
     _out, err = proc.communicate(timeout=20)
-    assert proc.returncode == 0, err
-    return err
+    text = getattr(proc, "first_line", "") + err.decode()
+    assert proc.returncode == 0, text
+    return text
 
 
 @pytest.fixture
@@ -453,13 +460,18 @@ def test_emulate_status_line_and_clean_sigterm(veth) -> None:
         cwd=ROOT,
         stderr=subprocess.PIPE,
         stdout=subprocess.PIPE,
-        text=True,
+        bufsize=0,
     )
+    assert proc.stderr is not None
+    first = b""
+    while not first.endswith(b"\n") and (byte := proc.stderr.read(1)):
+        first += byte  # serving from here on
     time.sleep(2.5)  # the status line comes every second
     proc.send_signal(15)
-    out, err = proc.communicate(timeout=20)
+    out, rest = proc.communicate(timeout=20)
+    err = (first + rest).decode()
     assert proc.returncode == 0, err
-    assert out == ""  # nothing on stdout: status goes to stderr
+    assert out == b""  # nothing on stdout: status goes to stderr
     assert "emulating 25 slaves" in err
     assert "INIT×25" in err and "frames" in err
     assert "stopped:" in err
