@@ -57,17 +57,49 @@ def _sdo_frames(counter: int) -> list[tuple[int, bytes]]:
     """(offset_ns, frame) of one expedited upload of 0x6041:00 from station 0x1001."""
     req = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x20, 0x40, 0x41, 0x60, 0x00])
     req += bytes(4)
-    resp = bytes([10, 0, 0, 0, 0, 0x03 | (counter << 4), 0x00, 0x30, 0x4B, 0x41, 0x60, 0x00,
-                  0x37, 0x02, 0, 0])
+    resp = bytes(
+        [
+            10,
+            0,
+            0,
+            0,
+            0,
+            0x03 | (counter << 4),
+            0x00,
+            0x30,
+            0x4B,
+            0x41,
+            0x60,
+            0x00,
+            0x37,
+            0x02,
+            0,
+            0,
+        ]
+    )
     out = []
-    for k, (cmd, ado, data) in enumerate(((Command.FPWR, 0x1000, req.ljust(128, b"\0")),
-                                          (Command.FPRD, 0x1100, resp.ljust(128, b"\0")))):
+    for k, (cmd, ado, data) in enumerate(
+        (
+            (Command.FPWR, 0x1000, req.ljust(128, b"\0")),
+            (Command.FPRD, 0x1100, resp.ljust(128, b"\0")),
+        )
+    ):
         for ret in (False, True):
-            d = Datagram.physical(cmd, 0x1001, ado, data if (ret or cmd == Command.FPWR)
-                                  else bytes(128), index=0x80 + k, wkc=1 if ret else 0)
+            d = Datagram.physical(
+                cmd,
+                0x1001,
+                ado,
+                data if (ret or cmd == Command.FPWR) else bytes(128),
+                index=0x80 + k,
+                wkc=1 if ret else 0,
+            )
             src = b"\x03" + OUT_MAC[1:] if ret else OUT_MAC
-            out.append((60_000 * k + (30_000 if ret else 0) + 100_000,
-                        encode_frame(make_frame([d], src=src), pad=True)))
+            out.append(
+                (
+                    60_000 * k + (30_000 if ret else 0) + 100_000,
+                    encode_frame(make_frame([d], src=src), pad=True),
+                )
+            )
     return out
 
 
@@ -93,8 +125,9 @@ def _record_header(layout: Layout, frame_len: int) -> bytes:
     return struct.pack("<IIII", 0, 0, frame_len, frame_len)
 
 
-def _chunk(layout: Layout, template: bytes, first_cycle: int, n: int, t0: int,
-           rng: np.random.Generator) -> tuple[np.ndarray, int]:
+def _chunk(
+    layout: Layout, template: bytes, first_cycle: int, n: int, t0: int, rng: np.random.Generator
+) -> tuple[np.ndarray, int]:
     """2n fixed-size records (out, ret per cycle) minus lost returns."""
     rec = np.zeros((2 * n, layout.size), np.uint8)
     head = np.frombuffer(_record_header(layout, len(template)) + template, np.uint8)
@@ -110,8 +143,9 @@ def _chunk(layout: Layout, template: bytes, first_cycle: int, n: int, t0: int,
         words = np.stack([(ts >> 32).astype(np.uint32), (ts & 0xFFFFFFFF).astype(np.uint32)], 1)
         rec[:, 12:20] = words.view(np.uint8).reshape(-1, 8)
     else:
-        words = np.stack([(ts // 10**9).astype(np.uint32),
-                          (ts % 10**9 // 1000).astype(np.uint32)], 1)
+        words = np.stack(
+            [(ts // 10**9).astype(np.uint32), (ts % 10**9 // 1000).astype(np.uint32)], 1
+        )
         rec[:, 0:8] = words.view(np.uint8).reshape(-1, 8)
     idx = (cycles & 0xFF).astype(np.uint8)
     rec[0::2, layout.lrw_idx] = idx
@@ -126,8 +160,9 @@ def _chunk(layout: Layout, template: bytes, first_cycle: int, n: int, t0: int,
     return rec[keep], int(t_out[-1])
 
 
-def write_capture(path: Path, cycles: int, *, pcapng: bool, lrw_bytes: int,
-                  seed: int = 1) -> dict[str, int]:
+def write_capture(
+    path: Path, cycles: int, *, pcapng: bool, lrw_bytes: int, seed: int = 1
+) -> dict[str, int]:
     """Write the synthetic capture; returns its frame counts."""
     rng = np.random.default_rng(seed)
     template = _cyclic_template(lrw_bytes)
@@ -165,9 +200,7 @@ def _row_after_cycle(m: int, first: int, rows: int) -> int:
     """Row index just after cycle (first + m - 1)'s return (no lost cycle before the SDO
     marks within a chunk shifts rows: lost cycles are rare and at chunk-independent
     positions, so count them)."""
-    lost_before = sum(
-        1 for c in range(first, first + m) if c % LOST_EVERY == LOST_EVERY - 1
-    )
+    lost_before = sum(1 for c in range(first, first + m) if c % LOST_EVERY == LOST_EVERY - 1)
     return min(rows, 2 * m - lost_before)
 
 
@@ -193,8 +226,18 @@ def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float,
 
 
 def analyze_cmd(path: Path) -> list[str]:
-    return [sys.executable, "-m", "lolacli", "capture", "analyze", str(path), "--format", "json",
-            "--max-lost", "1000000000"]
+    return [
+        sys.executable,
+        "-m",
+        "lolacli",
+        "capture",
+        "analyze",
+        str(path),
+        "--format",
+        "json",
+        "--max-lost",
+        "1000000000",
+    ]
 
 
 def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float]:
@@ -206,13 +249,33 @@ def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float
     assert rep["lost_frames"] == expected["lost"], (rep["lost_frames"], expected)
     assert rep["sdo_transactions"] == expected["sdo"], (rep["sdo_transactions"], expected)
     frames = rep["frames_total"]
-    result = {"file_mb": size / 1e6, "frames": frames, "lolacli_s": dt,
-              "lolacli_frames_per_s": frames / dt, "lolacli_peak_rss_mb": rss / 1024}
-    print(f"  lolacli capture analyze: {dt:8.2f} s  {frames / dt / 1e6:7.2f} M frames/s  "
-          f"peak RSS {rss / 1024:.0f} MB  (engine {rep['engine']})")
+    result = {
+        "file_mb": size / 1e6,
+        "frames": frames,
+        "lolacli_s": dt,
+        "lolacli_frames_per_s": frames / dt,
+        "lolacli_peak_rss_mb": rss / 1024,
+    }
+    print(
+        f"  lolacli capture analyze: {dt:8.2f} s  {frames / dt / 1e6:7.2f} M frames/s  "
+        f"peak RSS {rss / 1024:.0f} MB  (engine {rep['engine']})"
+    )
     if tshark and shutil.which("tshark"):
-        cmd = ["tshark", "-r", str(path), "-T", "fields", "-e", "frame.time_epoch",
-               "-e", "ecat.cmd", "-e", "ecat.idx", "-e", "ecat.cnt"]
+        cmd = [
+            "tshark",
+            "-r",
+            str(path),
+            "-T",
+            "fields",
+            "-e",
+            "frame.time_epoch",
+            "-e",
+            "ecat.cmd",
+            "-e",
+            "ecat.idx",
+            "-e",
+            "ecat.cnt",
+        ]
         tdt, _, _ = _timed(cmd, stdout=None)
         result.update(tshark_s=tdt, tshark_frames_per_s=frames / tdt, ratio=tdt / dt)
         print(f"  tshark -T fields:        {tdt:8.2f} s  {frames / tdt / 1e6:7.2f} M frames/s")
@@ -222,17 +285,29 @@ def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--frames", type=int, default=2_000_000,
-                    help="approximate EtherCAT frames (2 per cycle); default 2,000,000")
+    ap.add_argument(
+        "--frames",
+        type=int,
+        default=2_000_000,
+        help="approximate EtherCAT frames (2 per cycle); default 2,000,000",
+    )
     ap.add_argument("--lrw-bytes", type=int, default=64, help="LRW process data per frame")
     ap.add_argument("--format", choices=("pcapng", "pcap", "both"), default="both")
     ap.add_argument("--no-tshark", action="store_true", help="skip the tshark comparison")
-    ap.add_argument("--rss-gb", type=float, default=0.0,
-                    help="also write a capture of about this many GB and measure analyze on it")
+    ap.add_argument(
+        "--rss-gb",
+        type=float,
+        default=0.0,
+        help="also write a capture of about this many GB and measure analyze on it",
+    )
     ap.add_argument("--keep", type=Path, default=None, help="write files here and keep them")
     ap.add_argument("--json", action="store_true", help="print the results as JSON at the end")
-    ap.add_argument("--engine", choices=("auto", "c", "numba", "python"), default="auto",
-                    help="capture scanner engine (LOLACLI_ENGINE); default auto (c when built)")
+    ap.add_argument(
+        "--engine",
+        choices=("auto", "c", "numba", "python"),
+        default="auto",
+        help="capture scanner engine (LOLACLI_ENGINE); default auto (c when built)",
+    )
     args = ap.parse_args()
     global ENGINE
     ENGINE = args.engine
@@ -244,10 +319,13 @@ def main() -> None:
         for fmt in formats:
             path = folder / f"synthetic-{args.frames}.{fmt}"
             t = time.perf_counter()
-            expected = write_capture(path, args.frames // 2, pcapng=fmt == "pcapng",
-                                     lrw_bytes=args.lrw_bytes)
-            print(f"{fmt}: {expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
-                  f"(written in {time.perf_counter() - t:.1f} s)")
+            expected = write_capture(
+                path, args.frames // 2, pcapng=fmt == "pcapng", lrw_bytes=args.lrw_bytes
+            )
+            print(
+                f"{fmt}: {expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
+                f"(written in {time.perf_counter() - t:.1f} s)"
+            )
             results[fmt] = bench(path, expected, not args.no_tshark)
         if args.rss_gb:
             frame_bytes = 28 + len(_cyclic_template(args.lrw_bytes)) + 8
@@ -256,8 +334,10 @@ def main() -> None:
             t = time.perf_counter()
             expected = write_capture(path, cycles, pcapng=True, lrw_bytes=args.lrw_bytes)
             took = time.perf_counter() - t
-            print(f"large pcapng: {expected['frames']:,} frames, "
-                  f"{path.stat().st_size / 1e9:.2f} GB (written in {took:.1f} s)")
+            print(
+                f"large pcapng: {expected['frames']:,} frames, "
+                f"{path.stat().st_size / 1e9:.2f} GB (written in {took:.1f} s)"
+            )
             results["large"] = bench(path, expected, tshark=False)
             path.unlink()
     finally:

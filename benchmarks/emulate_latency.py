@@ -1,20 +1,26 @@
-"""Reply latency of `lolacli bus emulate` under a real master (SOEM via pysoem) over veth.
+"""Reply latency of `lolacli bus emulate` per command type, for real masters over veth.
 
-Creates a veth pair, serves the chain (default: the embedded LOLA chain) on one end, drives
-it to OP with pysoem on the other, then runs N process-data cycles at the given rate and
-reports the round trip send_processdata -> receive_processdata: p50/p99/max, lost cycles
-(timeout or WKC mismatch) and cycles over the real-time budget (the cycle period). With
-``--moving`` every drive is enabled in CSP and gets a new target every cycle, so every
-device model steps every cycle (the default leaves the outputs at zero: drives at rest).
+For each master (SOEM through pysoem, KickCAT) and each load (other core idle, a CPU hog
+pinned to core 1): a veth pair, `lolacli bus emulate` on one end, `dumpcap` on the
+master's end, and the master in its own process: its whole start-up (INIT -> OP) then
+N cycles at 1 kHz with its default timeouts (pysoem ``receive_processdata(2000)``;
+KickCAT's 2 ms link timeout, 500 µs in the cyclic loop as its examples set it). The
+capture is then analysed with lolacli's own capture library: ``analyze_file`` for the
+totals (pairs, lost frames, round trip), and the reader + wire decoder for the reply
+latency per command type (an echo is the next frame with the same command/index/length
+sequence: KickCAT's own MAC has the locally administered bit set, so the MAC cannot tell).
+The table shows p50/p99/max against the 2 ms budget real masters wait per frame (SOEM's
+EC_TIMEOUTRET, KickCAT's link timeout) and the target p99 <= 150 µs, max <= 1 ms.
 
-Needs root. Both processes are pinned to the same core with taskset by default, the worst
-case for a host that runs master and emulator together. ``--emulator-priority N`` runs the
-emulator SCHED_FIFO (chrt -f N), as the stand-in for slave hardware that does not wait for
-the master's process to yield the core.
+    sudo python benchmarks/emulate_latency.py                      # LOLA, both masters
+    sudo python benchmarks/emulate_latency.py --masters pysoem --cycles 2000 --loads idle
+    sudo python benchmarks/emulate_latency.py --eni lolacli/eni_examples/single_drive.xml
 
-    sudo python benchmarks/emulate_latency.py                     # LOLA, 2 kHz, 20 000 cycles
-    sudo python benchmarks/emulate_latency.py --eni lolacli/eni_examples/single_drive.xml \
-        --rate 1000 --cycles 10000 --core -1                      # no pinning
+Needs root (veth, raw sockets), dumpcap, pysoem and/or kickcat. The masters run at
+``--master-nice`` (default 0: normal; SOEM polls its socket without sleeping, and above
+the kernel's softirq thread it holds back the very packets it waits for). The
+machine's load during the run is printed with the table: figures on a shared host are
+upper bounds.
 """
 
 from __future__ import annotations
@@ -22,173 +28,288 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
-import struct
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
+from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 DEFAULT_ENI = ROOT / "lolacli" / "eni_examples" / "lola.xml"
+BUDGET_US = 2000.0  # SOEM EC_TIMEOUTRET, KickCAT default link timeout
+TARGET_P99_US = 150.0
+TARGET_MAX_US = 1000.0
 
 
-def veth(tag: str) -> tuple[str, str]:
-    master, emulator = f"lbm{tag}", f"lbe{tag}"
-    subprocess.run(["ip", "link", "add", master, "type", "veth", "peer", "name", emulator],
-                   check=True)
-    for name in (master, emulator):
-        subprocess.run(["sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"], check=False)
-        subprocess.run(["ip", "link", "set", name, "up"], check=True)
-    return master, emulator
+# ---------------------------------------------------------------- the masters
+def run_pysoem(iface: str, cycles: int) -> dict[str, object]:
+    import pysoem
 
-
-def start_emulator(iface: str, eni: Path, core: int, priority: int = 0) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", iface,
-           "--eni", str(eni), "--quiet"]
-    if core >= 0:
-        cmd = ["taskset", "-c", str(core), *cmd]
-    if priority > 0:
-        cmd = ["chrt", "-f", str(priority), *cmd]  # the emulator stands in for hardware
-    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
-    assert proc.stderr is not None
-    line = proc.stderr.readline()
-    if "emulating" not in line:
-        raise SystemExit(f"emulator did not start: {line}{proc.stderr.read()}")
-    time.sleep(0.3)
-    return proc
-
-
-def to_op(master, pysoem, timeout_us: int) -> None:
-    if master.config_init() <= 0:
-        raise SystemExit("no slaves found")
-    master.config_map()
-    master.config_dc()
-    if master.state_check(pysoem.SAFEOP_STATE, 10_000_000) != pysoem.SAFEOP_STATE:
-        raise SystemExit("SAFEOP not reached")
-    master.state = pysoem.OP_STATE
-    master.write_state()
-    for _ in range(1000):
+    master = pysoem.Master()
+    master.open(iface)
+    t0 = time.perf_counter()
+    try:
+        slaves = master.config_init()
+        image = master.config_map()
+        master.config_dc()
+        if master.state_check(pysoem.SAFEOP_STATE, 5_000_000) != pysoem.SAFEOP_STATE:
+            return {"error": "SAFEOP not reached"}
         master.send_processdata()
-        master.receive_processdata(timeout_us)
-        if master.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
-            return
-    raise SystemExit("OP not reached")
-
-
-DRIVE_OUTPUT_BYTES = 11  # controlword, mode of operation, target position, target velocity
-CSP = 8
-
-
-def drives_of(master) -> list:
-    """The CiA 402 drives, by the size of their outputs."""
-    return [s for s in master.slaves if len(s.output) == DRIVE_OUTPUT_BYTES]
-
-
-def enable(master, timeout_us: int) -> None:
-    """Shutdown, switch on, enable operation in CSP on every drive (a few cycles each)."""
-    for cw in (0x06, 0x07, 0x0F):
-        for drive in drives_of(master):
-            drive.output = struct.pack("<Hbi", cw, CSP, 0) + bytes(DRIVE_OUTPUT_BYTES - 7)
-        for _ in range(20):
+        master.receive_processdata(2000)
+        master.state = pysoem.OP_STATE
+        master.write_state()
+        for _ in range(1000):
             master.send_processdata()
-            master.receive_processdata(timeout_us)
-            time.sleep(0.001)
-
-
-def set_targets(drives: list, k: int) -> None:
-    for j, drive in enumerate(drives):
-        target = 1000 * j + 37 * k
-        drive.output = struct.pack("<Hbi", 0x0F, CSP, target) + bytes(DRIVE_OUTPUT_BYTES - 7)
-
-
-SLEEP_MARGIN_NS = 150_000  # a sleeping master wakes this long before its next cycle
-
-
-def run(master, cycles: int, period_ns: int, timeout_us: int,
-        moving: bool = False, sleeps: bool = False) -> dict[str, object]:
-    latencies: list[int] = []
-    lost = 0
-    drives = drives_of(master) if moving else []
-    next_t = time.perf_counter_ns()
-    for k in range(cycles):
-        if drives:
-            set_targets(drives, k)  # every drive gets a new target every cycle
-        t0 = time.perf_counter_ns()
-        master.send_processdata()
-        wkc = master.receive_processdata(timeout_us)
-        t1 = time.perf_counter_ns()
-        if wkc != master.expected_wkc:
-            lost += 1
+            master.receive_processdata(2000)
+            if master.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
+                break
         else:
-            latencies.append(t1 - t0)
-        next_t += period_ns
-        if sleeps and next_t - time.perf_counter_ns() > SLEEP_MARGIN_NS:
-            time.sleep((next_t - time.perf_counter_ns() - SLEEP_MARGIN_NS) / 1e9)
-        while time.perf_counter_ns() < next_t:
-            pass  # busy-wait: sleep() granularity would dominate at 2 kHz
-    latencies.sort()
+            return {"error": "OP not reached"}
+        startup_s = time.perf_counter() - t0
+        bad = 0
+        next_t = time.perf_counter()
+        for _ in range(cycles):
+            master.send_processdata()
+            if master.receive_processdata(2000) != master.expected_wkc:
+                bad += 1
+            next_t += 0.001
+            delay = next_t - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+        master.state = pysoem.INIT_STATE
+        master.write_state()
+        return {"slaves": slaves, "image_bytes": image, "startup_s": startup_s, "errors": bad}
+    finally:
+        master.close()
 
-    def pct(p: float) -> float:
-        return latencies[min(len(latencies) - 1, int(p * len(latencies)))] / 1000
 
-    return {
-        "cycles": cycles,
-        "lost_cycles": lost,
-        "over_budget_cycles": sum(1 for x in latencies if x > period_ns),
-        "budget_us": period_ns / 1000,
-        "latency_us": {
-            "p50": pct(0.50), "p90": pct(0.90), "p99": pct(0.99), "p99.9": pct(0.999),
-            "max": latencies[-1] / 1000,
-            "mean": statistics.fmean(latencies) / 1000,
-        } if latencies else None,
-        "expected_wkc": master.expected_wkc,
-    }
+def run_kickcat(iface: str, cycles: int) -> dict[str, object]:
+    import kickcat
+
+    link = kickcat.create_link(iface, "")  # default link timeout: 2 ms
+    bus = kickcat.Bus(link)
+    t0 = time.perf_counter()
+    try:
+        bus.init(0.1)
+        slaves = bus.slaves()
+        bus.create_mapping()
+        bus.request_state(kickcat.State.SAFE_OP)
+        bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
+        for s in slaves:
+            s.set_output_bytes(bytes(s.output_size))
+        bus.process_data_no_check()
+        bus.request_state(kickcat.State.OPERATIONAL)
+        bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, lambda: bus.process_data_no_check())
+    except RuntimeError as exc:
+        return {"error": f"start-up: {exc}"}
+    startup_s = time.perf_counter() - t0
+    link.set_timeout(0.0005)  # as KickCAT's examples in their cyclic loops
+    errors = 0
+    next_t = time.perf_counter()
+    for _ in range(cycles):
+        try:
+            bus.process_data()
+        except RuntimeError:
+            errors += 1
+        next_t += 0.001
+        delay = next_t - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    return {"slaves": len(slaves), "startup_s": startup_s, "errors": errors}
+
+
+MASTERS = {"pysoem": run_pysoem, "kickcat": run_kickcat}
+
+
+# ------------------------------------------------------------- the capture
+def per_command_latency(path: Path) -> tuple[dict[str, list[int]], int]:
+    """Reply latency (ns) per command type from a master-side capture; unanswered count.
+
+    A frame is the echo of the pending one with the same command/index/length sequence
+    when the source MAC's locally administered bit differs (DESIGN.md "Direction") or,
+    where the master's own MAC has that bit set (KickCAT), when a working counter or an
+    ADP changed on the way; otherwise it is the master sending the frame again."""
+    from lolacli.capture.reader import iter_frames
+    from lolacli.errors import WireError
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import decode_frame
+
+    pending: dict[tuple[tuple[int, int, int], ...], tuple[int, str, bytes, tuple[int, ...]]] = {}
+    out: dict[str, list[int]] = defaultdict(list)
+    unanswered = 0
+    for frame in iter_frames(path):
+        try:
+            decoded = decode_frame(frame.data)
+        except WireError:
+            continue
+        datagrams = decoded.datagrams
+        key = tuple((d.cmd, d.index, len(d.data)) for d in datagrams)
+        fields = tuple(v for d in datagrams for v in (d.wkc, d.adp))
+        first = pending.get(key)
+        if first is not None:
+            bit_differs = (frame.data[6] ^ first[2][6]) & 0x02
+            if bit_differs or fields != first[3]:
+                del pending[key]
+                out[first[1]].append(frame.timestamp_ns - first[0])
+                continue
+            unanswered += 1  # sent again: the first copy had no answer
+        names = sorted({_mnemonic(Command, d.cmd) for d in datagrams})
+        pending[key] = (frame.timestamp_ns, "+".join(names), frame.data[:12], fields)
+    unanswered += len(pending)
+    return out, unanswered
+
+
+def _mnemonic(command: type, cmd: int) -> str:
+    try:
+        return str(command(cmd).name)
+    except ValueError:
+        return f"0x{cmd:02X}"
+
+
+def _pct(values: list[int], p: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(p * len(ordered)))] / 1000
+
+
+# ------------------------------------------------------------------ the run
+def _ip(*args: str) -> None:
+    subprocess.run(["ip", *args], check=True, capture_output=True)
+
+
+def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> dict[str, object]:
+    tag = f"{os.getpid() % 10000:04d}"
+    m_if, e_if = f"{args.prefix}m{tag}", f"{args.prefix}e{tag}"
+    _ip("link", "add", m_if, "type", "veth", "peer", "name", e_if)
+    procs: list[subprocess.Popen[bytes]] = []
+    try:
+        for name in (m_if, e_if):
+            subprocess.run(["sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"], check=False)
+            _ip("link", "set", name, "up")
+        pcap = folder / f"{master}-{'hog' if hog else 'idle'}.pcapng"
+        emu_log = folder / f"{master}-{'hog' if hog else 'idle'}.emulate.txt"
+        emulator = subprocess.Popen(
+            [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", e_if,
+             "--eni", str(args.eni), "--quiet"],
+            cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
+        )  # fmt: skip
+        procs.append(emulator)
+        assert emulator.stderr is not None
+        ready = emulator.stderr.readline()  # "emulating N slaves …": the socket is open
+        if "emulating" not in ready:
+            raise SystemExit(f"emulator did not start: {ready}{emulator.stderr.read()}")
+        if hog:
+            hog_cmd = [sys.executable, "-c", "while 1: pass"]
+            if shutil.which("taskset"):
+                hog_cmd = ["taskset", "-c", "1", *hog_cmd]
+            procs.append(subprocess.Popen(hog_cmd))
+        dumpcap = subprocess.Popen(
+            ["dumpcap", "-q", "-i", m_if, "-w", str(pcap)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        procs.append(dumpcap)
+        time.sleep(1.0)  # dumpcap capturing
+        cmd = [sys.executable, __file__, "--run-master", master, "--iface", m_if,
+               "--cycles", str(args.cycles)]  # fmt: skip
+        if args.master_nice:
+            cmd = ["nice", "-n", str(args.master_nice), *cmd]
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.cycles / 100 + 300)
+        lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+        result: dict[str, object] = (
+            json.loads(lines[-1]) if lines else {"error": (done.stderr or done.stdout)[-300:]}
+        )
+        time.sleep(0.3)
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            proc.wait(timeout=20)
+        if procs and procs[0].stderr is not None:
+            emu_log.write_text(procs[0].stderr.read())
+        subprocess.run(["ip", "link", "del", m_if], capture_output=True, check=False)
+    from lolacli.capture import analyze_file
+
+    report = analyze_file(pcap).to_dict()
+    latency, unanswered = per_command_latency(pcap)
+    result.update(
+        master=master,
+        hog=hog,
+        capture=str(pcap),
+        emulator=" ".join(emu_log.read_text().split()).partition("reply time:")[2],
+        pairs=report["pairs"],
+        lost_frames=report["lost_frames"],
+        direction_rule=report.get("direction_rule", "mac"),
+        round_trip_us=report["round_trip_us"],
+        unanswered=unanswered,
+        by_command={
+            kind: {
+                "count": len(v),
+                "p50_us": _pct(v, 0.5),
+                "p99_us": _pct(v, 0.99),
+                "max_us": max(v) / 1000,
+            }
+            for kind, v in sorted(latency.items(), key=lambda kv: -len(kv[1]))
+        },
+    )
+    return result
+
+
+def print_table(result: dict[str, object]) -> None:
+    load = "CPU hog on core 1" if result["hog"] else "other core idle"
+    print(f"\n== {result['master']}, {load}: start-up {result.get('startup_s', 0):.2f} s, "
+          f"master errors {result.get('errors', result.get('error'))}, "
+          f"unanswered {result['unanswered']}, capture analyze: {result['pairs']} pairs, "
+          f"{result['lost_frames']} lost ({result['direction_rule']} direction)")  # fmt: skip
+    print(
+        f"{'command':>14} {'n':>7} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9} "
+        f"{'p99/budget':>10}  target (p99 ≤ {TARGET_P99_US:.0f}, max ≤ {TARGET_MAX_US:.0f})"
+    )
+    by_command = result["by_command"]
+    assert isinstance(by_command, dict)
+    for kind, s in by_command.items():
+        ok = s["p99_us"] <= TARGET_P99_US and s["max_us"] <= TARGET_MAX_US
+        print(
+            f"{kind:>14} {s['count']:7d} {s['p50_us']:8.1f} {s['p99_us']:8.1f} "
+            f"{s['max_us']:9.1f} {s['p99_us'] / BUDGET_US:10.3f}  {'ok' if ok else 'MISSED'}"
+        )
+    print(f"emulator's own reply time: {result['emulator']}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
-    parser.add_argument("--rate", type=float, default=2000.0, help="cycles per second")
-    parser.add_argument("--cycles", type=int, default=20_000)
-    parser.add_argument("--core", type=int, default=0, help="CPU for both processes; -1: none")
-    parser.add_argument("--timeout-us", type=int, default=5000,
-                        help="receive timeout; later replies count as lost")
-    parser.add_argument("--emulator-priority", type=int, default=0,
-                        help="run the emulator SCHED_FIFO at this priority (chrt -f); 0: normal")
-    parser.add_argument("--master-sleeps", action="store_true",
-                        help="the master sleeps between cycles (busy-waits only the last "
-                        "150 µs), as a real-time master does; default: busy-waits throughout")
-    parser.add_argument("--moving", action="store_true",
-                        help="enable every drive (CSP) and give each a new target every cycle")
+    parser.add_argument("--cycles", type=int, default=10_000)
+    parser.add_argument("--masters", default="pysoem,kickcat")
+    parser.add_argument("--loads", default="idle,hog", help="idle, hog or both")
+    parser.add_argument("--master-nice", type=int, default=0)
+    parser.add_argument("--prefix", default="lbl", help="veth name prefix")
+    parser.add_argument("--keep", type=Path, help="keep the captures in this folder")
+    parser.add_argument("--json", action="store_true", help="also print the results as JSON")
+    parser.add_argument("--run-master", choices=sorted(MASTERS), help=argparse.SUPPRESS)
+    parser.add_argument("--iface", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.run_master:
+        print(json.dumps(MASTERS[args.run_master](args.iface, args.cycles)))
+        return
     if os.geteuid() != 0:
         raise SystemExit("needs root (veth pair, raw sockets)")
-    import pysoem
-
-    if args.core >= 0:
-        os.sched_setaffinity(0, {args.core})
-    master_if, emulator_if = veth(f"{os.getpid() % 100000:05d}")
-    proc = start_emulator(emulator_if, args.eni, args.core, args.emulator_priority)
-    master = pysoem.Master()
-    try:
-        master.open(master_if)
-        to_op(master, pysoem, args.timeout_us)
-        if args.moving:
-            enable(master, args.timeout_us)
-        result = run(master, args.cycles, int(1e9 / args.rate), args.timeout_us, args.moving,
-                     args.master_sleeps)
-        result.update(eni=str(args.eni.name), slaves=len(master.slaves), rate_hz=args.rate,
-                      pinned_core=args.core, emulator_priority=args.emulator_priority,
-                      master_sleeps=args.master_sleeps,
-                      drives_moving=len(drives_of(master))
-                      if args.moving else 0)
-        print(json.dumps(result, indent=2))
-    finally:
-        master.close()
-        proc.send_signal(2)
-        proc.wait(timeout=20)
-        subprocess.run(["ip", "link", "del", master_if], check=False)
+    if shutil.which("dumpcap") is None:
+        raise SystemExit("needs dumpcap (Debian package wireshark-common / tshark)")
+    folder = args.keep or Path(tempfile.mkdtemp(prefix="emulate_latency_"))
+    folder.mkdir(parents=True, exist_ok=True)
+    results = []
+    for master in args.masters.split(","):
+        for load in args.loads.split(","):
+            results.append(one_run(args, master, load == "hog", folder))
+            print_table(results[-1])
+    print(f"\nENI {args.eni.name}, {args.cycles} cycles at 1 kHz after start-up; "
+          f"load average during the run: {os.getloadavg()[0]:.2f} (2 cores); "
+          f"captures in {folder}")  # fmt: skip
+    if args.json:
+        print(json.dumps(results, indent=2))
+    if args.keep is None:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 if __name__ == "__main__":

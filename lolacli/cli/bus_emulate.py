@@ -57,21 +57,19 @@ def emulate_cmd(
     ] = None,
     duration_s: Annotated[
         float,
-        typer.Option(
-            "--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."
-        ),
+        typer.Option("--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."),
     ] = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
     realtime_priority: Annotated[
-        int,
+        int | None,
         typer.Option(
             "--realtime-priority",
             min=0,
             max=99,
-            help="Run SCHED_FIFO at this priority (1-99; needs root or CAP_SYS_NICE). "
-            "Use when master and emulator share a core.",
+            help="SCHED_FIFO priority (1-99; needs root or CAP_SYS_NICE), 0 for normal "
+            "scheduling. Default: SCHED_FIFO 10 where permitted, else normal.",
         ),
-    ] = 0,
+    ] = None,
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
     drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
@@ -125,9 +123,14 @@ def emulate_cmd(
             f"({exact} with the exact revision)"
         )
 
-    def ready() -> None:
+    def ready(scheduling: str) -> None:
         arm_link_loss(chain, options, time.monotonic_ns())  # the server's time base
-        console.print(f"emulating {len(chain.slaves)} slaves of {model.source} on {iface}")
+        console.print(
+            f"emulating {len(chain.slaves)} slaves of {model.source} on {iface} "
+            f"(scheduling: {scheduling})",
+            highlight=False,
+            soft_wrap=True,  # one line: scripts wait for it
+        )
         if esi_note:
             console.print(esi_note, highlight=False)
 
@@ -145,8 +148,30 @@ def emulate_cmd(
             highlight=False,
         )
 
+    scratch = make_chain(model, EmulateOptions(), esi=esi_files)  # warms the code up
     stats = serve(
-        iface, chain, should_stop, status, on_ready=ready, realtime_priority=realtime_priority
+        iface,
+        chain,
+        should_stop,
+        status,
+        on_ready=ready,
+        realtime_priority=realtime_priority,
+        scratch=scratch,
     )
     status(stats)
     console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")
+    if stats.answered:
+        console.print(_latency_line(stats), highlight=False, soft_wrap=True)
+
+
+def _latency_line(stats: object) -> str:
+    """Reply time inside the emulator: kernel receive -> server, server -> answer sent."""
+    parts = []
+    for label, name in (("wake-up", "wake"), ("answer", "service")):
+        summary = getattr(stats, name).summary()
+        if summary["count"]:
+            parts.append(
+                f"{label} p50 {summary['p50_us']:.0f} µs, p99 {summary['p99_us']:.0f} µs, "
+                f"max {summary['max_us']:.0f} µs"
+            )
+    return "reply time: " + "; ".join(parts)

@@ -39,9 +39,7 @@ def analyze_cmd(
     ] = 0,
     max_wkc: Annotated[
         int,
-        typer.Option(
-            "--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."
-        ),
+        typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
     ] = 0,
     engine: Annotated[
         str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
@@ -114,8 +112,9 @@ class _Progress:
 def _fmt_stats(s: dict[str, Any] | None) -> list[str]:
     if s is None:
         return ["—"] * 7
-    return [str(s["count"])] + [f"{s[k]:.2f}" for k in ("min", "mean", "median", "std",
-                                                        "p99", "max")]
+    return [str(s["count"])] + [
+        f"{s[k]:.2f}" for k in ("min", "mean", "median", "std", "p99", "max")
+    ]
 
 
 def _render_analysis(d: dict[str, Any]) -> None:
@@ -128,16 +127,38 @@ def _render_analysis(d: dict[str, Any]) -> None:
         f"{d['file']}  ({d['format']}, {d['time_span_us'] / 1e6:.3f} s, engine {d['engine']})"
     )
     frames = Table(title="Frames", title_justify="left")
-    for col in ("total", "EtherCAT", "other", "malformed", "out", "returned", "pairs",
-                "unmatched out", "lost", "WKC mismatches"):
+    for col in (
+        "total",
+        "EtherCAT",
+        "other",
+        "malformed",
+        "out",
+        "returned",
+        "pairs",
+        "unmatched out",
+        "lost",
+        "WKC mismatches",
+    ):
         frames.add_column(col, justify="right")
-    frames.add_row(*(str(d[k]) for k in (
-        "frames_total", "ecat_frames", "non_ecat_frames", "malformed_frames",
-        "outgoing_frames", "returned_frames", "pairs", "unmatched_outgoing", "lost_frames",
-        "wkc_mismatches")))
+    frames.add_row(
+        *(
+            str(d[k])
+            for k in (
+                "frames_total",
+                "ecat_frames",
+                "non_ecat_frames",
+                "malformed_frames",
+                "outgoing_frames",
+                "returned_frames",
+                "pairs",
+                "unmatched_outgoing",
+                "lost_frames",
+                "wkc_mismatches",
+            )
+        )
+    )
     console.print(frames)
-    times = Table(title=f"Timing (µs) — cyclic stream: {d['cyclic_stream']}",
-                  title_justify="left")
+    times = Table(title=f"Timing (µs) — cyclic stream: {d['cyclic_stream']}", title_justify="left")
     times.add_column("")
     for col in ("count", "min", "mean", "median", "std", "p99", "max"):
         times.add_column(col, justify="right")
@@ -147,8 +168,10 @@ def _render_analysis(d: dict[str, Any]) -> None:
     console.print(times)
     if d["cycle_jitter_us"]:
         j = d["cycle_jitter_us"]
-        console.print(f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
-                      f"{j['max_deviation']:.2f} µs")
+        console.print(
+            f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
+            f"{j['max_deviation']:.2f} µs"
+        )
     cmds = Table(title="Datagrams by command", title_justify="left")
     for name in d["datagrams_by_cmd"]:
         cmds.add_column(name, justify="right")
@@ -166,8 +189,9 @@ def _render_sdo_dc(console: Any, d: dict[str, Any]) -> None:
         f"{dc['drift_compensation_bursts']} bursts; {dc['system_time_difference_reads']} "
         f"reads of 0x092C, max |diff| {dc['system_time_difference_max_abs_ns']} ns"
     )
-    console.print(f"WKC reference: {d['wkc']['reference']}, "
-                  f"{d['wkc']['checked_datagrams']} datagrams checked")
+    console.print(
+        f"WKC reference: {d['wkc']['reference']}, {d['wkc']['checked_datagrams']} datagrams checked"
+    )
     if not d["sdo_transaction_list"]:
         console.print(f"SDO: none (mailbox messages: {d['mailbox']['messages']})")
         return
@@ -175,11 +199,22 @@ def _render_sdo_dc(console: Any, d: dict[str, Any]) -> None:
     for col in ("slave", "object", "kind", "transfer", "bytes", "status", "frames", "µs"):
         sdo.add_column(col)
     for t in d["sdo_transaction_list"][:50]:
-        status = t["status"] if t["abort_code"] is None else (
-            f"abort {t['abort_code']} {t['abort_text']}")
+        status = (
+            t["status"]
+            if t["abort_code"] is None
+            else (f"abort {t['abort_code']} {t['abort_text']}")
+        )
         dur = "" if t["duration_us"] is None else f"{t['duration_us']:.0f}"
-        sdo.add_row(f"0x{t['slave']:04X}", t["object"], t["kind"], t["transfer"],
-                    str(t["size_bytes"]), status, f"{t['start_frame']}–{t['end_frame']}", dur)
+        sdo.add_row(
+            f"0x{t['slave']:04X}",
+            t["object"],
+            t["kind"],
+            t["transfer"],
+            str(t["size_bytes"]),
+            status,
+            f"{t['start_frame']}–{t['end_frame']}",
+            dur,
+        )
     console.print(sdo)
 
 
@@ -205,8 +240,13 @@ def list_cmd(
 
     frames = list_frames(file, count=count, expr=expr)
     if fmt is OutputFormat.json:
-        emit_json({"schema": "lolacli.capture-list/1", "file": str(file),
-                   "frames": [f.to_dict() for f in frames]})
+        emit_json(
+            {
+                "schema": "lolacli.capture-list/1",
+                "file": str(file),
+                "frames": [f.to_dict() for f in frames],
+            }
+        )
         return
     out = sys.stdout
     try:

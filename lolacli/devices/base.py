@@ -23,6 +23,13 @@ MAX_ENTRIES = 8  # sub-indices of a PDO mapping object (the count in sub 0 says 
 MAX_PDOS = 4  # sub-indices of a PDO assignment object
 
 
+def assigned_pdos(pdos: tuple[Pdo, ...], direction: Direction) -> list[Pdo]:
+    """The PDOs of ``direction`` an ENI assigns to a sync manager (``<SmN><Pdo>`` or
+    ``Sm=``); an ENI that assigns none of them lists only the ones it uses: all."""
+    of = [p for p in pdos if p.direction == direction]
+    return [p for p in of if p.sync_manager is not None] or of
+
+
 class Device:
     """A generic device: its process data are plain object-dictionary entries."""
 
@@ -92,16 +99,19 @@ class Device:
         )
 
     def _pdo_objects(self, pdos: tuple[Pdo, ...]) -> None:
-        rx = [p for p in pdos if p.direction == Direction.OUTPUT]
-        tx = [p for p in pdos if p.direction == Direction.INPUT]
+        """Mapping objects for every PDO the ENI lists; 0x1C12/0x1C13 assign those the
+        ENI assigns to a sync manager (all of a direction where it assigns none)."""
+        rx = assigned_pdos(pdos, Direction.OUTPUT)
+        tx = assigned_pdos(pdos, Direction.INPUT)
         for pdo in pdos:
             subs = []
             for e in pdo.entries:
                 value = (e.index << 16) | (e.subindex << 8) | e.bit_size
                 subs.append((e.name or "Mapped object", DataType.UNSIGNED32, value, "rw"))
-                if e.index:
+                if e.index:  # inputs are the device's to write: read-only over SDO
+                    access = "ro" if pdo.direction == Direction.INPUT else "rw"
                     self.od.ensure_entry(
-                        e.index, e.subindex, e.name, data_type_for(e.data_type, e.bit_size)
+                        e.index, e.subindex, e.name, data_type_for(e.data_type, e.bit_size), access
                     )
             used = len(subs)
             subs += [("Mapped object", DataType.UNSIGNED32, 0, "rw")] * (MAX_ENTRIES - used)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from lolacli.errors import SdoAbortError
+from lolacli.wire.registers import AlState
 
 
 class DataType(IntEnum):
@@ -189,10 +190,32 @@ def decode_value(data_type: int, raw: bytes) -> int | float | str | bytes:
     return value
 
 
+def pdo_configuration(index: int) -> bool:
+    """PDO mapping (0x1600-0x17FF, 0x1A00-0x1BFF) and sync manager PDO assignment
+    (0x1C10-0x1C2F) objects: writable in PREOP only (ETG.1000.6 §5.6.7.4; a change
+    in SAFEOP or OP is refused with abort 0x08000022)."""
+    return 0x1600 <= index < 0x1800 or 0x1A00 <= index < 0x1C00 or 0x1C10 <= index < 0x1C30
+
+
+def access_flags(entry: Entry) -> int:
+    """The entry's access rights as an SDO information entry description gives them
+    (ETG.1000.6 Table 48): read in PREOP/SAFEOP/OP (bits 0-2), write in PREOP/SAFEOP/OP
+    (bits 3-5), PDO mappable (bit 6)."""
+    read = 0 if entry.access == "wo" else 0x07
+    write = 0x38 if entry.writable else 0
+    if write and pdo_configuration(entry.index):
+        write = 0x08
+    return read | write | (0x40 if entry.pdo_mappable else 0)
+
+
 class ObjectDictionary:
-    """Objects by index; typed get/set for device logic, checked read/write for SDO."""
+    """Objects by index; typed get/set for device logic, checked read/write for SDO.
+
+    ``al_state``: the AL state of the slave the dictionary is behind (``None``: not
+    behind an ESC); SDO writes of the PDO configuration are refused outside PREOP."""
 
     def __init__(self) -> None:
+        self.al_state: int | None = None
         self.objects: dict[int, OdObject] = {}
         self.version = 0  # bumped by every checked write: caches of mappings key on it
         self.writes = 0  # bumped by every write, checked or not: devices' rest states key on it
@@ -243,8 +266,10 @@ class ObjectDictionary:
         self.version += 1
         return obj
 
-    def ensure_entry(self, index: int, subindex: int, name: str, data_type: int) -> Entry:
-        """The entry, created (zero value, read-write, PDO-mappable) if it is not there."""
+    def ensure_entry(
+        self, index: int, subindex: int, name: str, data_type: int, access: str = "rw"
+    ) -> Entry:
+        """The entry, created (zero value, PDO-mappable, ``access``) if it is not there."""
         obj = self.objects.get(index)
         if obj is None:
             obj = OdObject(index, name, ObjectCode.VAR if subindex == 0 else ObjectCode.RECORD)
@@ -252,7 +277,7 @@ class ObjectDictionary:
         entry = obj.entries.get(subindex)
         if entry is None:
             size = max(1, (type_bits(data_type) + 7) // 8)
-            entry = Entry(index, subindex, name, data_type, "rw", bytes(size), True)
+            entry = Entry(index, subindex, name, data_type, access, bytes(size), True)
             obj.entries[subindex] = entry
             self.version += 1
             if subindex and 0 not in obj.entries:
@@ -285,6 +310,8 @@ class ObjectDictionary:
         entry = self.entry(index, subindex)
         if not entry.writable:
             raise SdoAbortError(index, subindex, AbortCode.READ_ONLY)
+        if self.al_state not in (None, AlState.PREOP) and pdo_configuration(index):
+            raise SdoAbortError(index, subindex, AbortCode.CANNOT_TRANSFER_STATE)
         if entry.data_type not in _VARIABLE_LENGTH:
             size = max(1, (type_bits(entry.data_type) + 7) // 8)
             if len(data) > size:

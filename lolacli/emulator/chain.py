@@ -18,11 +18,12 @@ from __future__ import annotations
 import os
 import random
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from lolacli.emulator.core import ChainCore, core_available
-from lolacli.emulator.esc import Esc, PortTimes
+from lolacli.emulator.esc import Esc, PortTimes, broadcast_read, broadcast_write
 from lolacli.emulator.plan import (
     NOT_COMPILED,
     Deferred,
@@ -31,7 +32,15 @@ from lolacli.emulator.plan import (
     layout_key,
     make_plan,
 )
-from lolacli.emulator.registers import AlStatusCode
+from lolacli.emulator.registers import (
+    AL_STATUS,
+    FMMU_BASE,
+    PROCESS_RAM,
+    SYNC_MANAGER_BASE,
+    SYNC_MANAGER_BYTES,
+    AlState,
+    AlStatusCode,
+)
 from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
 from lolacli.timing.model import (
@@ -149,32 +158,70 @@ class ChainStats:
     planned_frames: int = 0  # answered through a frame plan
 
 
+_READS_ONLY = frozenset({Command.APRD, Command.FPRD, Command.BRD})
+_APRD, _FPRD, _BRD, _BWR = int(Command.APRD), int(Command.FPRD), int(Command.BRD), int(Command.BWR)
 _AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
 _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
 
 
 @dataclass(slots=True)
 class _Slot:
-    """A datagram's place in the frame and which slaves it addresses.
-
-    ``target`` is the one addressed position for APxx/FPxx (-1: nobody), ``None`` when
-    every slave takes part (broadcast, logical, ARMW/FRMW)."""
+    """A datagram's place in the frame."""
 
     header: int  # offset of the datagram header in the frame
     cmd: int
     length: int
     adp: int  # as the next slave sees it
     ado: int
-    target: int | None = None
-    wkc_added: int = 0
 
-    @property
-    def data_offset(self) -> int:
-        return self.header + DATAGRAM_HEADER_BYTES
 
-    @property
-    def wkc_offset(self) -> int:
-        return self.data_offset + self.length
+_AL_STATUS = AL_STATUS
+_OP = int(AlState.OP)
+# FMMU and SM registers: where a device cycle's data go
+_SM_AND_FMMU = (FMMU_BASE, SYNC_MANAGER_BASE + 16 * SYNC_MANAGER_BYTES)
+
+
+def _touches_process_data(slots: list[_Slot]) -> bool:
+    """Whether a frame may see or change what a held device cycle reads and writes: the
+    SM buffers in process RAM (logical datagrams, physical ones from 0x1000) and the
+    FMMU/SM registers. Register reads and other register writes may go first, as they
+    would on a slave whose application is late (AL control requests wait for the
+    firmware anyway)."""
+    lo, hi = _SM_AND_FMMU
+    for slot in slots:
+        cmd = slot.cmd
+        if cmd in LOGICAL or slot.ado + slot.length > PROCESS_RAM:
+            return True
+        if cmd not in _READS_ONLY and slot.ado < hi and lo < slot.ado + slot.length:
+            return True
+    return False
+
+
+def _slots(frame: bytes) -> list[_Slot] | None:
+    """The datagrams of an untagged EtherCAT command frame; ``None`` for anything else
+    (the full decoder then tells a tagged frame from a malformed one). Accepts what
+    :func:`lolacli.wire.frame.decode_frame` accepts for such frames."""
+    n = len(frame)
+    if n < 16 or frame[12] != 0x88 or frame[13] != 0xA4:
+        return None
+    word = frame[14] | frame[15] << 8
+    end = 16 + (word & 0x7FF)
+    if word >> 12 != ECAT_TYPE_COMMANDS or end > n:
+        return None
+    out = []
+    pos = 16
+    unpack = _HEAD.unpack_from
+    while True:
+        if pos + DATAGRAM_HEADER_BYTES > end:
+            return None
+        cmd, _index, adp, ado, lenw = unpack(frame, pos)
+        length = lenw & 0x7FF
+        out.append(_Slot(pos, cmd, length, adp, ado))
+        pos += DATAGRAM_HEADER_BYTES + length + WKC_BYTES
+        if pos > end:
+            return None
+        if not lenw & 0x8000:
+            return out
 
 
 PLAN_CACHE_SIZE = 32
@@ -230,14 +277,23 @@ class Chain:
         self._deferred_t_ns: int | None = None
         self.reachable = len(slaves)
         self._epoch = [0]  # one cell for all slaves: any change invalidates the plans
+        self._addressing = [0]  # one cell for all slaves: configured addresses changed
+        self._pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # firmware work
         for esc in slaves:
             esc.epoch = self._epoch
+            esc.addressing = self._addressing
+            esc.pdi = self._pdi
+        self._stations_at = -1
+        self._stations_map: dict[int, int] = {}
+        self._delays: dict[tuple[tuple[int, ...], int], int] = {}
         self._plans: dict[Key, FramePlan | None] = {}
         self._last_plan: FramePlan | None = None  # the plan the last planned lookup found
         self._plan_epoch = -1
         self._seen: dict[Key, int] = {}
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
+        self._held_from = 0  # ... and the position it goes on from
+        self._plan_later: Key | None = None  # a plan to make after the answer
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
 
@@ -260,6 +316,7 @@ class Chain:
     def _line_changed(self) -> None:
         """Topology and arrival offsets of the slaves the frames reach."""
         self._epoch[0] += 1
+        self._addressing[0] += 1
         self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
         self._port_offsets = self.timing.port_times(0, len(self._active))
@@ -330,69 +387,157 @@ class Chain:
         """
         self.stats.frames += 1
         self._due_link_loss(t_ns)
+        if self._pdi and not defer_cycles:
+            self._run_pdi()  # in-process: the firmware has kept up
         damaged = self.faults.corrupt(len(self._active))  # a damaged frame never takes a plan
-        plan = self._plan(frame) if self.plan_after and damaged is None else None
-        if self._held is not None and (plan is None or not plan.defers_writes):
-            self._run_held()  # this frame's outputs would reach memory before it ran
+        plan = self._plan(frame, defer_cycles) if self.plan_after and damaged is None else None
+        if plan is not None:
+            if self._held is not None and not plan.defers_writes:
+                self._run_held()  # this frame's outputs would reach memory before it ran
+            if self._deferred_dc:
+                self._run_deferred_dc()
+            return self._run_plan(plan, frame, t_ns, defer_cycles)
+        slots = _slots(frame)
+        if slots is None:
+            slots = self._parse(frame)  # tagged, another EtherCAT type, or malformed
+        if self._held is not None and (slots is None or _touches_process_data(slots)):
+            self._run_held()  # the held cycle reads and writes what this frame touches
         if self._deferred_dc:
             self._run_deferred_dc()
-        if plan is not None:
-            return self._run_plan(plan, frame, t_ns, defer_cycles)
-        slots = self._parse(frame)
         if slots is None:
             return None, 0
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
-        buf = bytearray(frame)
-        view = memoryview(buf)
-        times = self._port_offsets
-        logical = any(s.cmd in LOGICAL for s in slots)
-        self._address(slots)
-        if self._core is not None:  # Python runs the frame: ESC state back from the C core
-            self._core.release(_addressed(slots))
-        datas = [view[slot.data_offset : slot.data_offset + slot.length] for slot in slots]
         if not self._active:
             self.stats.dropped += 1  # the link is down at the master: nothing comes back
             return None, 0
-        processing = self._active if damaged is None else self._active[:damaged]
-        for position, (esc, offsets) in enumerate(zip(processing, times, strict=False)):
-            esc.frame_t_ns = t_ns
-            esc.port_offsets = offsets
-            t = t_ns + offsets.port0_ns
-            for slot, data in zip(slots, datas, strict=True):
-                if slot.target is None:
-                    slot.adp, added = esc.process(slot.cmd, slot.adp, slot.ado, data, t)
-                    slot.wkc_added += added
-                elif slot.target == position:
-                    seen = 0 if slot.cmd in _AUTO_INCREMENT_SINGLE else slot.adp
-                    slot.wkc_added += esc.process(slot.cmd, seen, slot.ado, data, t)[1]
-        for slot in slots:
-            if slot.cmd in _AUTO_INCREMENT_SINGLE:  # every slave incremented it
-                slot.adp = (slot.adp + len(processing)) & 0xFFFF
-            _U16.pack_into(buf, slot.header + 2, slot.adp)
-            if slot.wkc_added:
-                (wkc,) = _U16.unpack_from(buf, slot.wkc_offset)
-                _U16.pack_into(buf, slot.wkc_offset, (wkc + slot.wkc_added) & 0xFFFF)
-        for data in datas:
-            data.release()
-        view.release()
+        buf = bytearray(frame)
+        logical = self._run_slots(buf, slots, t_ns, damaged)
         if damaged is not None:
             self._count_damaged(damaged)
         self.tick(t_ns)
         if logical:
             self._deferred_t_ns = t_ns
+            self.stats.logical_frames += 1
             if not defer_cycles:
                 self.run_deferred_cycles()
-        if logical:
-            self.stats.logical_frames += 1
+        elif self._pdi and not defer_cycles:
+            self._run_pdi()
         buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
-        lengths = [slot.length for slot in slots]
-        return bytes(buf), self.timing.round_trip_ns(lengths, len(self._active))
+        return bytes(buf), self._delay_ns(tuple(slot.length for slot in slots))
 
-    def _plan(self, frame: bytes) -> FramePlan | None:
-        """The frame's plan for the current epoch, made when its layout comes often."""
+    def _run_slots(
+        self, buf: bytearray, slots: list[_Slot], t_ns: int, damaged: int | None
+    ) -> bool:
+        """Run the datagrams through the slaves (``damaged``: only that many process the
+        frame); ADP and WKC fields updated in ``buf``. True when a datagram was logical.
+
+        Datagram by datagram, each through the slaves it reaches, which is the order the
+        frame passes them in for every slave (slave-major) as long as slaves meet only
+        through the frame's bytes; a single-slave datagram goes straight to its slave.
+        With the C core, the ESC state it holds of the slaves a datagram reaches comes
+        back to their Esc objects first (one slave for APxx/FPxx, all for the rest)."""
+        view = memoryview(buf)
+        processing = self._active if damaged is None else self._active[:damaged]
+        reached = len(processing)
+        offsets = self._port_offsets
+        core = self._core
+        released = core.released if core is not None else None
+        logical = False
+        for slot in slots:
+            cmd, ado = slot.cmd, slot.ado
+            start = slot.header + DATAGRAM_HEADER_BYTES
+            data = view[start : start + slot.length]
+            added = 0
+            if cmd in _AUTO_INCREMENT_SINGLE:
+                position = (-slot.adp) & 0xFFFF
+                if position < reached:
+                    if released is not None and position not in released:
+                        core.release((position,))  # type: ignore[union-attr]
+                    if cmd == _APRD:
+                        esc = processing[position]
+                        t = t_ns + offsets[position].port0_ns
+                        added = esc.read_addressed(cmd, 0, ado, data, t)
+                    else:
+                        added = self._one(
+                            processing[position], offsets[position], cmd, 0, ado, data, t_ns
+                        )
+                slot.adp = (slot.adp + reached) & 0xFFFF  # every slave incremented it
+            elif cmd in _CONFIGURED_SINGLE:
+                position = self._station_position(slot.adp)
+                if position < reached:
+                    if released is not None and position not in released:
+                        core.release((position,))  # type: ignore[union-attr]
+                    if cmd == _FPRD:
+                        esc = processing[position]
+                        t = t_ns + offsets[position].port0_ns
+                        added = esc.read_addressed(cmd, slot.adp, ado, data, t)
+                    else:
+                        added = self._one(
+                            processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
+                        )
+            else:
+                if core is not None:
+                    core.release()  # broadcast, logical, xRMW: every slave takes part
+                if (
+                    cmd == _BRD
+                    and (got := broadcast_read(processing, offsets, ado, data, t_ns)) is not None
+                ):
+                    added = got
+                    slot.adp = (slot.adp + reached) & 0xFFFF
+                elif (
+                    cmd == _BWR
+                    and (got := broadcast_write(processing, offsets, ado, data, t_ns)) is not None
+                ):
+                    added = got
+                    slot.adp = (slot.adp + reached) & 0xFFFF
+                else:
+                    logical = logical or cmd in LOGICAL
+                    adp = slot.adp
+                    for esc, port in zip(processing, offsets, strict=False):
+                        esc.frame_t_ns = t_ns
+                        esc.port_offsets = port
+                        adp, wkc = esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)
+                        added += wkc
+                    slot.adp = adp
+            data.release()
+            _U16.pack_into(buf, slot.header + 2, slot.adp)
+            if added:
+                at = start + slot.length
+                _U16.pack_into(buf, at, (_U16.unpack_from(buf, at)[0] + added) & 0xFFFF)
+        view.release()
+        return logical
+
+    @staticmethod
+    def _one(
+        esc: Esc, port: PortTimes, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
+    ) -> int:
+        esc.frame_t_ns = t_ns
+        esc.port_offsets = port
+        return esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)[1]
+
+    def _station_position(self, address: int) -> int:
+        """The first position answering configured ``address`` (station address or
+        alias); the number of active slaves when none does."""
+        if self._stations_at != self._addressing[0]:
+            self._stations_map = self._stations()
+            self._stations_at = self._addressing[0]
+        return self._stations_map.get(address, len(self._active))
+
+    def _delay_ns(self, lengths: tuple[int, ...]) -> int:
+        key = (lengths, len(self._active))
+        delay = self._delays.get(key)
+        if delay is None:
+            if len(self._delays) >= 256:
+                self._delays.clear()
+            delay = self._delays[key] = self.timing.round_trip_ns(list(lengths), len(self._active))
+        return delay
+
+    def _plan(self, frame: bytes, defer: bool = False) -> FramePlan | None:
+        """The frame's plan for the current epoch, made when its layout comes often;
+        with ``defer``, made after the answer (this frame takes the general path)."""
         last = self._last_plan
         if last is not None and last.epoch == self._epoch[0] and last.fits(frame):
             return last  # the cyclic frame again: no key to work out
@@ -411,6 +556,15 @@ class Chain:
         self._seen[key] = seen
         if seen < self.plan_after:
             return None
+        if defer:
+            self._plan_later = key
+            return None
+        return self._make_plan(key)
+
+    def _make_plan(self, key: Key) -> FramePlan | None:
+        if self._plan_epoch != self._epoch[0]:
+            self._plans.clear()
+            self._plan_epoch = self._epoch[0]
         if len(self._plans) >= PLAN_CACHE_SIZE:
             self._plans.clear()
         lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
@@ -419,6 +573,8 @@ class Chain:
             key, self._active, self._port_offsets, self._epoch[0], delay_ns, self._deferred_dc
         )
         self._plans[key] = self._last_plan = plan
+        if plan is not None and self._core is not None:
+            self._compiled(plan)  # with the plan (after the answer, where it is made then)
         return plan
 
     def _run_plan(
@@ -495,22 +651,36 @@ class Chain:
             self._core.check_watchdogs(len(self._active), t_ns)
             return
         for esc in self._active:
-            esc.check_watchdog(t_ns)
+            if esc.mem[_AL_STATUS] == _OP:  # only a slave in OP has a watchdog to run out
+                esc.check_watchdog(t_ns)
 
-    def run_deferred_cycles(self) -> None:
+    def run_deferred_cycles(self, should_yield: Callable[[], bool] | None = None) -> bool:
         """Run the work left for after the answer, in order: the application cycle held
-        back by :meth:`hold_deferred_cycle`, what the frame plans left (DC time control
-        loops, writes into the slaves' memories), the cycle the last logical frame asked
-        for."""
+        back by :meth:`hold_deferred_cycle`, the slaves' firmware work, what the frame
+        plans left (DC time control loops, writes into the slaves' memories), the cycle
+        the last logical frame asked for.
+
+        ``should_yield`` is asked between the slaves of that cycle: when it says a frame
+        waits, the rest of the cycle is held as by :meth:`hold_deferred_cycle` (it goes on
+        from the next slave) and the result is False; True when everything ran."""
         if self._held is not None:
             self._run_held()
+        if self._pdi:
+            self._run_pdi()
         if self._deferred_dc:
             self._run_deferred_dc()
         t_ns = self._deferred_t_ns
-        if t_ns is None:
-            return
-        self._deferred_t_ns = None
-        self._cycles(t_ns)
+        if t_ns is not None:
+            self._deferred_t_ns = None
+            stopped = self._cycles(t_ns, 0, should_yield)
+            if stopped is not None:
+                self._held, self._held_from = t_ns, stopped
+                return False
+        if self._plan_later is not None:
+            key, self._plan_later = self._plan_later, None
+            if key not in self._plans or self._plan_epoch != self._epoch[0]:
+                self._make_plan(key)
+        return True
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending
@@ -523,36 +693,58 @@ class Chain:
         if self._deferred_dc:
             self._run_deferred_dc()
         self._held, self._deferred_t_ns = self._deferred_t_ns, None
+        self._held_from = 0
 
     def _run_held(self) -> None:
         t_ns, self._held = self._held, None
+        start, self._held_from = self._held_from, 0
         if t_ns is not None:
-            self._cycles(t_ns)
+            self._cycles(t_ns, start)
 
-    def _cycles(self, t_ns: int) -> None:
-        """One application cycle in every slave the frames reach."""
+    def _cycles(
+        self, t_ns: int, start: int = 0, should_yield: Callable[[], bool] | None = None
+    ) -> int | None:
+        """The application cycle of the slaves the frames reach, from position ``start``
+        on, in line order; ``should_yield`` is asked between slaves (with the C core:
+        between the runs of slaves it cycles in one call and the slaves Python cycles).
+        The position to go on from when it said yes, else ``None``."""
         if self._core is not None:
-            self._core.cycles(len(self._active), t_ns)
-            return
-        for esc in self._active:
-            esc.cycle(t_ns)
+            return self._core.cycles(len(self._active), t_ns, start, should_yield)
+        active = self._active
+        last = len(active) - 1
+        for i in range(start, len(active)):
+            active[i].cycle(t_ns)
+            if should_yield is not None and i < last and should_yield():
+                return i + 1
+        return None
+
+    @property
+    def firmware_pending(self) -> int:
+        """How many pieces of firmware work (AL control requests, mailbox writes) the
+        slaves have taken but not yet handled."""
+        return len(self._pdi)
+
+    def run_firmware(self, limit: int | None = None) -> None:
+        """Handle up to ``limit`` (``None``: all) pieces of pending firmware work, oldest
+        first; work they queue in turn waits for the next call."""
+        work = self._pdi
+        n = len(work) if limit is None else min(limit, len(work))
+        batch = work[:n]
+        del work[:n]
+        core = self._core
+        for function, args in batch:
+            if core is not None:  # the firmware's slave: its ESC state back from the C core
+                core.release_owner(function)
+            function(*args)
+
+    def _run_pdi(self) -> None:
+        while self._pdi:
+            self.run_firmware()
 
     def _run_deferred_dc(self) -> None:
         for work, args in self._deferred_dc:
             work(*args)
         self._deferred_dc.clear()
-
-    def _address(self, slots: list[_Slot]) -> None:
-        """Resolve single-slave datagrams to their position once per frame."""
-        stations: dict[int, int] | None = None
-        for slot in slots:
-            if slot.cmd in _AUTO_INCREMENT_SINGLE:
-                position = (-slot.adp) & 0xFFFF
-                slot.target = position if position < len(self._active) else -1
-            elif slot.cmd in _CONFIGURED_SINGLE:
-                if stations is None:
-                    stations = self._stations()
-                slot.target = stations.get(slot.adp, -1)
 
     def _stations(self) -> dict[int, int]:
         """Configured address -> first position answering it (station address or alias)."""
@@ -581,10 +773,3 @@ class Chain:
             slots.append(_Slot(pos, d.cmd, len(d.data), d.adp, d.ado))
             pos += DATAGRAM_HEADER_BYTES + len(d.data) + WKC_BYTES
         return slots
-
-
-def _addressed(slots: list[_Slot]) -> set[int] | None:
-    """Positions a frame's datagrams reach; ``None``: all (broadcast, logical, xRMW)."""
-    if any(slot.target is None for slot in slots):
-        return None
-    return {slot.target for slot in slots if slot.target is not None and slot.target >= 0}

@@ -17,7 +17,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from lolacli.devices.od import AbortCode, ObjectDictionary
+from lolacli.devices.od import AbortCode, ObjectDictionary, access_flags
 from lolacli.errors import SdoAbortError
 
 _MBX = struct.Struct("<HHBB")
@@ -307,9 +307,7 @@ class SdoServer:
 
     def _entry_description(self, index: int, subindex: int, info: int) -> list[bytes]:
         entry = self.od.entry(index, subindex)
-        access = {"ro": 0x07, "const": 0x07, "wo": 0x38, "rw": 0x3F}.get(entry.access, 0x07)
-        if entry.pdo_mappable:
-            access |= 0x40
+        access = access_flags(entry)
         payload = struct.pack(
             "<HBBHHH", index, subindex, info, entry.data_type, entry.bit_size, access
         )

@@ -29,14 +29,14 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 from array import array
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any
 
 from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
 from lolacli.emulator.plan import FramePlan, _Brd, _DcDistribution, _Logical
-from lolacli.emulator.registers import MEMORY_BYTES
+from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
 
 if TYPE_CHECKING:
     from lolacli.devices.base import Device
@@ -54,6 +54,7 @@ H_N_WATCH, H_WATCH, H_N_ADP, H_ADP, H_N_OPS, H_OPS = 5, 6, 7, 8, 9, 10
 H_WORDS = 16
 OP_LOGICAL, OP_BRD, OP_DC = 1, 2, 3
 PEND_FIRST_SLOT = 2  # pend[0]: work pending, pend[1]: its time
+AL_OP = int(AlState.OP)
 
 
 class SlaveTable(ctypes.Structure):
@@ -229,7 +230,7 @@ class ChainCore:
         self._starts_epoch = -1  # the epoch the held devices' SM buffer starts are for
         self.released: set[int] = set(range(n))  # ESC scalars the Esc objects hold
         self.devices_released: set[int] = set(range(n))  # devices the objects hold
-        self._python_cycles: dict[int, list[Esc]] = {}
+        self._pieces: dict[int, list[tuple[int, int, Esc | None]]] = {}
         self._index = {id(esc): i for i, esc in enumerate(escs)}
         for i, esc in enumerate(escs):
             app = esc.app
@@ -265,7 +266,16 @@ class ChainCore:
         if i not in self.devices_released:
             self._store_device(i)
             self.devices_released.add(i)
-            self._python_cycles.clear()
+            self._pieces.clear()
+
+    def release_owner(self, work: object) -> None:
+        """Give back the ESC scalars of the slave whose firmware ``work`` (a bound method
+        of its Esc) is about to run; of every slave when it is not one of theirs."""
+        i = self._index.get(id(getattr(work, "__self__", None)))
+        if i is None:
+            self.release()
+        elif i not in self.released:
+            self.release((i,))
 
     def release_all(self) -> None:
         """Everything back to the Python objects, counters included."""
@@ -337,7 +347,7 @@ class ChainCore:
         for i in sorted(self.devices_released):
             if i < n and self._load_device(i):
                 self.devices_released.discard(i)
-                self._python_cycles.clear()
+                self._pieces.clear()
 
     def _load_device(self, i: int) -> bool:
         """The device's tables and state into the slave's table; False: Python runs it."""
@@ -428,29 +438,59 @@ class ChainCore:
         return [i for i in range(len(self.escs)) if i not in self.devices_released]
 
     # ------------------------------------------------------------- the work
-    def cycles(self, n: int, t_ns: int) -> None:
-        """The application cycle of the first ``n`` slaves at ``t_ns`` (``Esc.cycle``):
-        in the kernel for the devices it can hold, in Python for the others."""
+    def cycles(
+        self,
+        n: int,
+        t_ns: int,
+        start: int = 0,
+        should_yield: Callable[[], bool] | None = None,
+    ) -> int | None:
+        """The application cycle of the slaves at positions ``start``..``n - 1`` at
+        ``t_ns`` (``Esc.cycle``): in the kernel for the devices it can hold, a run of
+        consecutive ones in one call, in Python for the others. ``should_yield`` is asked
+        after each run and each Python slave but the last; when it says yes, the position
+        to go on from (the rest has not run), else ``None``."""
+        escs = self.escs
         if t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
             for i in range(n):
                 self.release_device(i)
-            for esc in self.escs[:n]:
-                esc.cycle(t_ns)
-            return
-        escs = self.escs
+            for i in range(start, n):
+                escs[i].cycle(t_ns)
+                if should_yield is not None and i < n - 1 and should_yield():
+                    return i + 1
+            return None
         if escs and escs[0].epoch[0] != self._starts_epoch:
             self._refresh_starts()
         if self.devices_released:
             self._acquire_devices(n)
-        self._lib.lolacli_core_cycles(self.address, n, t_ns)
-        python = self._python_cycles.get(n)
-        if python is None:
-            released = self.devices_released
-            python = self._python_cycles[n] = [
-                esc for i, esc in enumerate(self.escs[:n]) if i in released
-            ]
-        for esc in python:
-            esc.cycle(t_ns)
+        pieces = self._pieces.get(n)
+        if pieces is None:
+            pieces = self._pieces[n] = self._cycle_pieces(n)
+        for lo, hi, esc in pieces:
+            if hi <= start:
+                continue
+            if esc is None:
+                lo = max(lo, start)
+                self._lib.lolacli_core_cycles(self.address + 8 * WORDS * lo, hi - lo, t_ns)
+            else:
+                esc.cycle(t_ns)
+            if should_yield is not None and hi < n and should_yield():
+                return hi
+        return None
+
+    def _cycle_pieces(self, n: int) -> list[tuple[int, int, Esc | None]]:
+        """Positions 0..n-1 in line order as (first, end, None) for a run of devices the
+        kernel holds and (i, i + 1, esc) for a slave Python cycles."""
+        pieces: list[tuple[int, int, Esc | None]] = []
+        released = self.devices_released
+        for i, esc in enumerate(self.escs[:n]):
+            if i in released:
+                pieces.append((i, i + 1, esc))
+            elif pieces and pieces[-1][2] is None and pieces[-1][1] == i:
+                pieces[-1] = (pieces[-1][0], i + 1, None)
+            else:
+                pieces.append((i, i + 1, None))
+        return pieces
 
     def check_watchdogs(self, n: int, t_ns: int) -> None:
         """``Esc.check_watchdog`` of the first ``n`` slaves; the kernel looks at those whose
@@ -458,7 +498,8 @@ class ChainCore:
         checks."""
         if len(self.released) == len(self.escs):  # nothing held: Python's own checks
             for esc in self.escs[:n]:
-                esc.check_watchdog(t_ns)
+                if esc.mem[AL_STATUS] == AL_OP:  # only a slave in OP has one to run out
+                    esc.check_watchdog(t_ns)
             return
         if (
             t_ns.__class__ is int

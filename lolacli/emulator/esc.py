@@ -11,13 +11,16 @@ process-data cycles.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from functools import lru_cache
+from typing import Any, Protocol
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.registers import AlState, AlStatusCode
 from lolacli.emulator.sii import SiiLayout, sii_layout
 from lolacli.wire.commands import Command
+from lolacli.wire.mailbox import MAILBOX_HEADER_BYTES, decode_mailbox_header
 from lolacli.wire.registers import decode_system_time_difference
 
 _U16 = struct.Struct("<H")
@@ -38,6 +41,26 @@ PLAN_FREE_REGISTERS = 0x0F00  # digital outputs and user RAM: no frame plan depe
 _unpack_i64 = _I64.unpack_from
 _pack_u32 = _U32.pack_into
 _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
+# command -> how it addresses and what it does, as plain ints (enum lookups are slow)
+_BROADCAST, _AUTO_INCREMENT, _CONFIGURED, _LOGICAL_KIND, _OTHER = range(5)
+_KIND: dict[int, int] = {
+    **{int(c): _BROADCAST for c in (Command.BRD, Command.BWR, Command.BRW)},
+    **{int(c): _AUTO_INCREMENT for c in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW)},
+    **{int(c): _CONFIGURED for c in (Command.FPRD, Command.FPWR, Command.FPRW, Command.FRMW)},
+    **{int(c): _LOGICAL_KIND for c in (Command.LRD, Command.LWR, Command.LRW)},
+}
+_READ, _WRITE, _READ_WRITE, _READ_MULTIPLE_WRITE = range(4)
+_ACCESS: dict[int, int] = {
+    **{int(c): _READ for c in (Command.APRD, Command.FPRD, Command.BRD)},
+    **{int(c): _WRITE for c in (Command.APWR, Command.FPWR, Command.BWR)},
+    **{int(c): _READ_WRITE for c in (Command.APRW, Command.FPRW, Command.BRW)},
+    **{int(c): _READ_MULTIPLE_WRITE for c in (Command.ARMW, Command.FRMW)},
+}
+_ARMW, _FRMW, _BRD, _BRW = int(Command.ARMW), int(Command.FRMW), int(Command.BRD), int(Command.BRW)
+_SYSTEM_TIME = r.DC_SYSTEM_TIME
+_SYSTEM_TIME_END = r.DC_SYSTEM_TIME + 8
+_AL_STATUS = r.AL_STATUS
+_PROCESS_RAM = r.PROCESS_RAM
 _KNOWN_STATES = frozenset(int(s) for s in AlState)
 _SAFEOP = int(AlState.SAFEOP)
 _OP = int(AlState.OP)
@@ -156,7 +179,6 @@ class Esc:
         self.last_port = True
         self.frame_t_ns = 0  # when the current frame left the master
         self.port_offsets: PortTimes | None = None  # its arrival at port 0 / port 1, relative
-        self._readonly = _readonly_mask()
         self._cache: _Config | None = None
         self._pd_starts: tuple[_Config, SiiLayout, int, int] | None = None
         self._view = memoryview(self.mem)
@@ -168,6 +190,16 @@ class Esc:
         # states, topology): the chain's frame plans are valid for one value. A chain
         # shares one cell between its slaves.
         self.epoch: list[int] = [0]
+        # bumped when a station address, alias or alias enable may have changed: the
+        # chain's map of configured addresses is valid for one value (shared like epoch)
+        self.addressing: list[int] = [0]
+        # The slave's firmware side (the PDI): AL control requests and mailbox writes are
+        # taken by the ESC at once (the frame is answered) and handled by the firmware
+        # afterwards, as on hardware. ``None``: handled at once; a list (a chain's): work
+        # queued there as (function, arguments), run by the chain after the answer.
+        self.pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] | None = None
+        self._mailbox_write_counter = 0  # counter of the last mailbox service taken
+        self._mailbox_pending = False  # the write mailbox waits for the firmware
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -183,14 +215,22 @@ class Esc:
         _U16.pack_into(m, r.FEATURES, cfg.features)
         _U16.pack_into(m, r.STATION_ALIAS, self.layout.station_alias)
         _U32.pack_into(m, r.DL_CONTROL, 0x00000001)
-        _U16.pack_into(m, r.PDI_CONTROL, cfg.pdi_control)
+        # PDI control (0x0140) and ESC configuration (0x0141) come from SII word 0 at
+        # power-on (ET1100 datasheet, EEPROM content); an image too short keeps the default
+        sii_pdi = self.sii[0:2] if len(self.sii) >= 2 else b""
+        _U16.pack_into(
+            m, r.PDI_CONTROL, int.from_bytes(sii_pdi, "little") if sii_pdi else cfg.pdi_control
+        )
         _U16.pack_into(m, r.WATCHDOG_DIVIDER, cfg.watchdog_divider)
         _U16.pack_into(m, r.WATCHDOG_TIME_PROCESS_DATA, cfg.watchdog_time_process_data)
         status = r.EEPROM_STATUS_READ_8_BYTES if cfg.eeprom_8_byte_reads else 0
         _U16.pack_into(m, r.EEPROM_CONTROL, status)
         self._mailbox_queue.clear()
+        self._mailbox_write_counter = 0
+        self._mailbox_pending = False
         self._cache = None
         self.epoch[0] += 1
+        self.addressing[0] += 1
         self.outputs_valid = False
         self.pending_op = False
         self._set_al(AlState.INIT, AlStatusCode.NO_ERROR, error=False)
@@ -250,29 +290,47 @@ class Esc:
         """
         self.counters.datagrams += 1
         self._now_ns = t_ns
-        if cmd in _LOGICAL:
-            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
-        if cmd in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW):
+        kind = _KIND.get(cmd, _OTHER)
+        if kind == _BROADCAST:
+            return (adp + 1) & 0xFFFF, self._physical(cmd, ado, data, t_ns, addressed=True)
+        if kind == _AUTO_INCREMENT:
             hit = adp == 0
             new_adp = (adp + 1) & 0xFFFF
-            if not hit and cmd != Command.ARMW:
+            if not hit and cmd != _ARMW:
                 return new_adp, 0
             return new_adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
-        if cmd in (Command.FPRD, Command.FPWR, Command.FPRW, Command.FRMW):
+        if kind == _CONFIGURED:
             hit = self.addressed_configured(adp)
-            if not hit and cmd != Command.FRMW:
+            if not hit and cmd != _FRMW:
                 return adp, 0
             return adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
-        if cmd in (Command.BRD, Command.BWR, Command.BRW):
-            return (adp + 1) & 0xFFFF, self._physical(cmd, ado, data, t_ns, addressed=True)
+        if kind == _LOGICAL_KIND:
+            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
         return adp, 0
+
+    def read_addressed(self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int) -> int:
+        """APRD/FPRD addressed to this slave (``adp`` as it sees it): the WKC increment.
+        Registers other than the DC system time are copied straight; anything else goes
+        through :meth:`process`."""
+        end = ado + len(data)
+        if end <= _SYSTEM_TIME or (_SYSTEM_TIME_END <= ado and end <= _PROCESS_RAM):
+            self.counters.datagrams += 1
+            self._now_ns = t_ns
+            data[:] = self.mem[ado:end]
+            return 1
+        return self.process(cmd, adp, ado, data, t_ns)[1]
 
     # --------------------------------------------------------- physical access
     def _physical(self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool) -> int:
         n = len(data)
         if ado + n > r.MEMORY_BYTES:
             return 0
-        if cmd in (Command.ARMW, Command.FRMW):
+        access = _ACCESS[cmd]
+        if access == _READ:
+            return 1 if self._read(ado, data, t_ns, merge=cmd == _BRD) else 0
+        if access == _WRITE:
+            return 1 if self._write(ado, bytes(data), t_ns) else 0
+        if access == _READ_MULTIPLE_WRITE:
             if ado == r.DC_SYSTEM_TIME and n in (4, 8):  # the DC distribution: hot path
                 if addressed:
                     data[:] = (self.system_time_ns(t_ns) & _MASK64).to_bytes(8, "little")[:n]
@@ -282,78 +340,78 @@ class Esc:
             if addressed:
                 return 1 if self._read(ado, data, t_ns, merge=False) else 0
             return 1 if self._write(ado, bytes(data), t_ns) else 0
-        if cmd in (Command.APRD, Command.FPRD):
-            return 1 if self._read(ado, data, t_ns, merge=False) else 0
-        if cmd == Command.BRD:
-            return 1 if self._read(ado, data, t_ns, merge=True) else 0
-        if cmd in (Command.APWR, Command.FPWR, Command.BWR):
-            return 1 if self._write(ado, bytes(data), t_ns) else 0
         incoming = bytes(data)  # APRW, FPRW, BRW
-        wkc = 1 if self._read(ado, data, t_ns, merge=cmd == Command.BRW) else 0
+        wkc = 1 if self._read(ado, data, t_ns, merge=cmd == _BRW) else 0
         return wkc + (2 if self._write(ado, incoming, t_ns) else 0)
 
     def _read(self, address: int, data: memoryview, t_ns: int, *, merge: bool) -> bool:
         end = address + len(data)
-        for sm in self._mailbox_sms(address, end, write=False):
-            if not self._sm_full(sm):
-                return False
-        if _overlaps(address, end, r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8):
-            _U64.pack_into(self.mem, r.DC_SYSTEM_TIME, self.system_time_ns(t_ns) & (2**64 - 1))
+        mem = self.mem
+        if end > r.PROCESS_RAM:
+            for sm in self._mailbox_sms(address, end, write=False):
+                if not self._sm_full(sm):
+                    return False
+        if address < _SYSTEM_TIME_END and _SYSTEM_TIME < end:
+            _U64.pack_into(mem, _SYSTEM_TIME, self.system_time_ns(t_ns) & _MASK64)
         if merge:
-            n = end - address
-            merged = int.from_bytes(data, "little")
-            merged |= int.from_bytes(self.mem[address:end], "little")
-            data[:] = merged.to_bytes(n, "little")
+            merged = int.from_bytes(data, "little") | int.from_bytes(mem[address:end], "little")
+            data[:] = merged.to_bytes(end - address, "little")
         else:
-            data[:] = self.mem[address:end]
-        self._after_read(address, end)
+            data[:] = mem[address:end]
+        if end > r.PROCESS_RAM:
+            self._after_read(address, end)
         return True
 
     def _write(self, address: int, payload: bytes, t_ns: int) -> bool:
         end = address + len(payload)
-        for sm in self._mailbox_sms(address, end, write=True):
-            if self._sm_full(sm):
-                return False
+        if end > r.PROCESS_RAM:
+            for sm in self._mailbox_sms(address, end, write=True):
+                if self._sm_full(sm):
+                    return False  # a full write mailbox takes nothing (ETG.1000.4 §6.7.1)
         if address >= r.PROCESS_RAM:
             self.mem[address:end] = payload
-        else:
-            self.epoch[0] += 1
-            self._write_registers(address, payload)
-        self._after_write(address, end, payload, t_ns)
+            self._sm_written(address, end)
+            return True
+        self.epoch[0] += 1
+        plan = _register_write(address, end)
+        mem = self.mem
+        for lo, hi in plan.segments:  # the writable bytes
+            mem[lo:hi] = payload[lo - address : hi - address]
+        if plan.effects:
+            self._register_side_effects(plan, address, end, payload, t_ns)
+        if end > r.PROCESS_RAM:
+            self._sm_written(address, end)
         return True
 
-    def _write_registers(self, address: int, payload: bytes) -> None:
-        mem, ro = self.mem, self._readonly
-        for i, b in enumerate(payload):
-            a = address + i
-            if a >= r.PROCESS_RAM or not ro[a]:
-                mem[a] = b
-
-    def _after_write(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
-        if _overlaps(start, end, r.FMMU_BASE, r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES):
+    def _register_side_effects(
+        self, plan: _RegisterWrite, start: int, end: int, payload: bytes, t_ns: int
+    ) -> None:
+        if plan.configuration:
             self._cache = None
             self._watchdog_ns = -1
-        if _overlaps(start, end, r.WATCHDOG_DIVIDER, r.WATCHDOG_TIME_PROCESS_DATA + 2):
+        if plan.watchdog:
             self._watchdog_ns = -1
-        if start < r.PROCESS_RAM:
-            self._register_side_effects(start, end, payload, t_ns)
-        if end > r.PROCESS_RAM:
-            self._sm_written(start, end)
-
-    def _register_side_effects(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
-        for lo, hi in _COUNTER_CLEAR_GROUPS:  # a write into a group clears all of it
-            if _overlaps(start, end, lo, hi):
-                self.mem[lo:hi] = bytes(hi - lo)
-        if _overlaps(start, end, r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2):
+        if plan.addressing:
+            self.addressing[0] += 1
+        for lo, hi in plan.clear_groups:  # a write into a group clears all of it
+            self.mem[lo:hi] = bytes(hi - lo)
+        if plan.eeprom:
             self._eeprom_command()
-        if _overlaps(start, end, r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4):
+        if plan.latch:
             self._latch_receive_times()
-        if _overlaps(start, end, r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8):
+        if plan.system_time:
             self._system_time_written(start, end, payload, t_ns)
-        if _overlaps(start, end, r.SYNC_MANAGER_BASE, r.SYNC_MANAGER_BASE + 16 * 8):
+        if plan.sync_managers:
             self._sm_registers_written(start, end)
-        if _overlaps(start, end, r.AL_CONTROL, r.AL_CONTROL + 1):
-            self._al_control_written(t_ns)
+        if plan.al_control:
+            self._firmware(self._al_control_written)
+
+    def _firmware(self, work: Callable[..., None], *args: Any) -> None:
+        """Hand ``work`` to the slave's firmware: at once, or queued in ``pdi``."""
+        if self.pdi is None:
+            work(*args)
+        else:
+            self.pdi.append((work, args))
 
     # ------------------------------------------------------------ AL states
     def _set_al(self, state: int, code: int, *, error: bool) -> None:
@@ -365,7 +423,7 @@ class Esc:
         self.counters.refused_transitions += 1
         self._set_al(self.al_state, code, error=True)
 
-    def _al_control_written(self, t_ns: int) -> None:
+    def _al_control_written(self) -> None:
         control = self.mem[r.AL_CONTROL]
         requested = control & r.AL_STATE_MASK
         if self.al_error:
@@ -392,7 +450,10 @@ class Esc:
             self._refuse(code)
             return
         if requested == AlState.OP and not self._outputs_ready():
-            self.pending_op = True  # entered with the first valid outputs
+            # entered with the first valid outputs; frame plans (and the chain's C core,
+            # which knows no AL state machine) treat such a slave's outputs event apart
+            self.pending_op = True
+            self.epoch[0] += 1
             return
         self._enter(requested)
 
@@ -423,7 +484,7 @@ class Esc:
 
     def check_watchdog(self, t_ns: int) -> None:
         """In OP without new outputs for the watchdog time: back to SAFEOP, error 0x001B."""
-        if self.mem[r.AL_STATUS] != AlState.OP:
+        if self.mem[_AL_STATUS] != _OP:
             return
         if self._watchdog_ns == -1:
             self._watchdog_ns = self.watchdog_timeout_ns()
@@ -445,6 +506,8 @@ class Esc:
             self.outputs_valid = False
         if state == AlState.INIT:
             self._mailbox_queue.clear()
+            self._mailbox_write_counter = 0
+            self._mailbox_pending = False
             for sm in range(self.config.sync_managers):
                 self.mem[self._sm_address(sm) + 5] &= ~r.SM_STATUS_MAILBOX_FULL
         self._set_al(state, AlStatusCode.NO_ERROR, error=False)
@@ -461,6 +524,7 @@ class Esc:
             self.mem[base + 7] = (self.mem[base + 7] & 0x02) | (0 if on else r.SM_PDI_DEACTIVATE)
         self._cache = None
         self.epoch[0] += 1
+        self._config()  # decoded now, in the firmware's time, not in the next frame's
 
     def _check_mailbox_sms(self) -> int | None:
         layout = self.layout
@@ -545,12 +609,17 @@ class Esc:
             self.mem[addr] &= ~r.SM_STATUS_MAILBOX_FULL
 
     def _sm_registers_written(self, start: int, end: int) -> None:
-        for i in range(self.config.sync_managers):
-            base = self._sm_address(i)
-            if not _overlaps(start, end, base, base + 8):
-                continue
-            if not self.mem[base + 6] & 1:
-                self._set_sm_full(i, False)
+        first = max(0, (start - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES)
+        last = min(
+            self.config.sync_managers, (end - 1 - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES + 1
+        )
+        mem = self.mem
+        for i in range(first, last):
+            base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * i
+            if not mem[base + 6] & 1:
+                mem[base + 5] &= ~r.SM_STATUS_MAILBOX_FULL  # a disabled SM forgets its buffer
+                if i == self.layout.mailbox_out_sm:
+                    self._mailbox_pending = False
             elif i == self.layout.mailbox_in_sm:
                 self._repeat_request(base)
 
@@ -589,20 +658,51 @@ class Esc:
                 if start <= last < end:
                     self._set_sm_full(sm.index, False)
                     self._post_next_mailbox()
+                    if self._mailbox_pending:
+                        self._firmware(self._take_mailbox)
 
     def _outputs_written(self) -> None:
         self.outputs_valid = True
         self._last_outputs_ns = self._now_ns
         if self.pending_op and self.al_state == AlState.SAFEOP:
+            self._firmware(self._enter_requested_op)  # the firmware sees valid outputs
+
+    def _enter_requested_op(self) -> None:
+        """Firmware: OP, requested while the outputs were not yet valid, now that they are."""
+        if self.pending_op and self.al_state == AlState.SAFEOP:
             self._enter(AlState.OP)
 
     # ------------------------------------------------------------- mailbox
     def _mailbox_written(self, sm: SmView) -> None:
+        """The master wrote the last byte of the write mailbox: it is full until the
+        firmware reads it (a second write meanwhile gets WKC 0 and is lost)."""
+        self._set_sm_full(sm.index, True)
+        self._mailbox_pending = True
+        self._firmware(self._take_mailbox)
+
+    def _take_mailbox(self) -> None:
+        """Firmware: read the write mailbox and serve it, once the read mailbox has room
+        for the answer (the slave stack reads it only then). A write with the counter of
+        the service taken last is the master's repeat of a write whose answer it lost:
+        dropped, so the service runs once (counter 0: a master without counters)."""
+        if not self._mailbox_pending:
+            return
+        if self._mailbox_queue or self._sm_full(self.layout.mailbox_in_sm):
+            return  # again when the master has read the read mailbox
+        index = self.layout.mailbox_out_sm
+        sm = self.sync_manager(index)
         request = bytes(self.mem[sm.start : sm.start + sm.length])
+        self._mailbox_pending = False
+        self._set_sm_full(index, False)  # the PDI has read it
+        counter = 0
+        if len(request) >= MAILBOX_HEADER_BYTES:
+            counter = decode_mailbox_header(request).counter
+        if counter and counter == self._mailbox_write_counter:
+            return
+        self._mailbox_write_counter = counter
         self.counters.mailbox_requests += 1
         if self.app is not None:
             self._mailbox_queue.extend(self.app.mailbox_request(request))
-        self._set_sm_full(sm.index, False)  # the PDI has read it
         self._post_next_mailbox()
 
     def _post_next_mailbox(self) -> None:
@@ -655,6 +755,7 @@ class Esc:
     def _fmmu_write(self, f: FmmuEntry, address: int, incoming: memoryview) -> None:
         if f.physical_start < PLAN_FREE_REGISTERS:
             self.epoch[0] += 1  # a write into registers, bypassing their side effects
+            self.addressing[0] += 1
         if _byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(incoming), f.logical_start + f.length_bytes)
@@ -839,6 +940,54 @@ def system_time_loop(
             )
 
 
+def broadcast_read(
+    escs: list[Esc], ports: list[PortTimes], ado: int, data: memoryview, t_ns: int
+) -> int | None:
+    """BRD of registers other than the DC system time through ``escs`` (``ports``: when
+    the frame of time ``t_ns`` reaches each): each ORs its bytes into ``data``; the WKC
+    increment, as :meth:`Esc.process` would give slave by slave. ``None`` for any other
+    range (process RAM and the system time have side effects: :meth:`Esc.process` then)."""
+    end = ado + len(data)
+    if end > _PROCESS_RAM or (ado < _SYSTEM_TIME_END and _SYSTEM_TIME < end):
+        return None
+    merged = int.from_bytes(data, "little")
+    for esc, port in zip(escs, ports, strict=False):
+        esc.counters.datagrams += 1
+        esc._now_ns = t_ns + port.port0_ns
+        merged |= int.from_bytes(esc.mem[ado:end], "little")
+    data[:] = merged.to_bytes(end - ado, "little")
+    return len(escs)
+
+
+def broadcast_write(
+    escs: list[Esc], ports: list[PortTimes], ado: int, data: memoryview, t_ns: int
+) -> int | None:
+    """BWR of registers through ``escs``: the write worked out once for all
+    (:func:`_register_write`), then stored and its side effects run slave by slave, as
+    :meth:`Esc.process` would; the WKC increment. ``None`` for a write that reaches
+    process RAM (sync manager buffers: :meth:`Esc.process` then)."""
+    end = ado + len(data)
+    if end > _PROCESS_RAM:
+        return None
+    payload = bytes(data)
+    plan = _register_write(ado, end)
+    segments = [(lo, hi, payload[lo - ado : hi - ado]) for lo, hi in plan.segments]
+    effects = plan.effects
+    for esc, port in zip(escs, ports, strict=False):
+        t = t_ns + port.port0_ns
+        esc.counters.datagrams += 1
+        esc._now_ns = t
+        esc.epoch[0] += 1
+        mem = esc.mem
+        for lo, hi, part in segments:
+            mem[lo:hi] = part
+        if effects:
+            esc.frame_t_ns = t_ns
+            esc.port_offsets = port
+            esc._register_side_effects(plan, ado, end, payload, t)
+    return len(escs)
+
+
 @dataclass(frozen=True, slots=True)
 class SmView:
     """A sync manager's registers (ETG.1000.4 Table 58)."""
@@ -936,6 +1085,66 @@ def _readonly_mask() -> bytearray:
         mask[base + 5] = 1  # status
         mask[base + 7] = 1  # PDI control
     return mask
+
+
+_READONLY = _readonly_mask()
+_SM_REGISTERS_END = r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES
+
+
+@dataclass(frozen=True, slots=True)
+class _RegisterWrite:
+    """What a master's write to ``[start, end)`` does beyond storing bytes: worked out once
+    per address range (:func:`_register_write`), the same for every ESC."""
+
+    segments: tuple[tuple[int, int], ...]  # writable runs (read-only bytes keep their value)
+    clear_groups: tuple[tuple[int, int], ...]
+    configuration: bool  # FMMU or SM registers: decoded configuration stale
+    watchdog: bool
+    addressing: bool  # station address or alias enable
+    eeprom: bool
+    latch: bool
+    system_time: bool
+    sync_managers: bool
+    al_control: bool
+
+    effects: bool  # any of the above
+
+
+@lru_cache(maxsize=4096)
+def _register_write(start: int, end: int) -> _RegisterWrite:
+    segments: list[tuple[int, int]] = []
+    run: int | None = None
+    for a in range(start, min(end, r.PROCESS_RAM)):
+        if _READONLY[a]:
+            if run is not None:
+                segments.append((run, a))
+                run = None
+        elif run is None:
+            run = a
+    if run is not None:
+        segments.append((run, min(end, r.PROCESS_RAM)))
+    if end > r.PROCESS_RAM:
+        if segments and segments[-1][1] == r.PROCESS_RAM:
+            segments[-1] = (segments[-1][0], end)
+        else:
+            segments.append((r.PROCESS_RAM, end))
+
+    def hit(lo: int, hi: int) -> bool:
+        return _overlaps(start, end, lo, hi)
+
+    clear_groups = tuple(g for g in _COUNTER_CLEAR_GROUPS if hit(*g))
+    flags = (
+        hit(r.FMMU_BASE, _SM_REGISTERS_END),
+        hit(r.WATCHDOG_DIVIDER, r.WATCHDOG_TIME_PROCESS_DATA + 2),
+        hit(r.STATION_ADDRESS, r.STATION_ADDRESS + 2)
+        or hit(r.DL_CONTROL_ALIAS_ENABLE_BYTE, r.DL_CONTROL_ALIAS_ENABLE_BYTE + 1),
+        hit(r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2),
+        hit(r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4),
+        hit(r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
+        hit(r.SYNC_MANAGER_BASE, r.SYNC_MANAGER_BASE + 16 * 8),
+        hit(r.AL_CONTROL, r.AL_CONTROL + 1),
+    )
+    return _RegisterWrite(tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags))
 
 
 __all__ = ["DcClock", "Esc", "EscApplication", "EscConfig", "FmmuEntry", "SmView", "field"]

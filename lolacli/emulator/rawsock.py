@@ -7,10 +7,21 @@ are skipped (``PACKET_OUTGOING``), so on a veth pair only the master's frames ar
 
 The answer goes first; the work the frame left (device cycles, DC control loops, writes
 into the slaves' memories) runs afterwards, once the master had ``grace_s`` to take the
-answer (the server sleeps that long, or until the master's next frame comes). On a host
-where master and emulator share a core the sleep is what lets the master see the answer
-before that work is done. When the next frame comes first, it is answered first and the
+answer (the server watches the socket that long without sleeping, so a frame the master
+sends right after the answer, as in any start-up or mailbox exchange, is answered with no
+wake-up latency). When the next frame comes first, it is answered first and the
 device cycle waits with the outputs it was due (:meth:`Chain.hold_deferred_cycle`).
+The slaves' firmware work (AL state requests, mailbox services) runs the same way: after
+the answer, a piece at a time while no frame waits, at least one piece per frame.
+
+Scheduling: by default the server asks for SCHED_FIFO (priority :data:`DEFAULT_PRIORITY`)
+and keeps normal scheduling where the OS refuses; it blocks on the socket, so it takes a
+core only while it answers. :attr:`RawSocketServer.scheduling` says which it got. The
+collector is off while serving (the chain makes little cyclic garbage); young objects are
+collected in idle moments.
+
+:class:`ServerStats` keeps, per frame, the time from the kernel's receive timestamp to the
+server holding the frame (``wake``), and from there to the answer sent (``service``).
 """
 
 from __future__ import annotations
@@ -20,18 +31,62 @@ import gc
 import os
 import select
 import socket
+import struct
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from lolacli.emulator.chain import Chain
 from lolacli.errors import TransportError
 from lolacli.rawsocket import MAX_FRAME_BYTES, PACKET_OUTGOING, open_socket
 
 DEFAULT_GRACE_S = 100e-6
+DEFAULT_PRIORITY = 10  # SCHED_FIFO priority asked for by default (1..99)
 PR_SET_TIMERSLACK = 29
 TIMER_SLACK_NS = 1000
+SO_TIMESTAMPNS = 35  # Linux: receive timestamps as struct timespec (socket module lacks it)
+SCM_TIMESTAMPNS = SO_TIMESTAMPNS
+_TIMESPEC = struct.Struct("qq")
+YIELD_CHECK_NS = 20_000  # deferred device work looks for a waiting frame this often
+GC_EVERY_FRAMES = 4096  # a young-generation collection in an idle moment after this many
+
+
+class LatencyHistogram:
+    """Durations in 1 µs bins up to 10 ms (beyond: one overflow bin, and the maximum)."""
+
+    BINS = 10_000
+
+    def __init__(self) -> None:
+        self.counts = [0] * (self.BINS + 1)
+        self.n = 0
+        self.max_ns = 0
+
+    def add(self, ns: int) -> None:
+        self.counts[min(max(ns, 0) // 1000, self.BINS)] += 1
+        self.n += 1
+        if ns > self.max_ns:
+            self.max_ns = ns
+
+    def percentile_us(self, p: float) -> float | None:
+        """The upper edge of the bin holding the ``p`` quantile (0..1), in µs."""
+        if not self.n:
+            return None
+        rank = max(1, round(p * self.n))
+        seen = 0
+        for i, c in enumerate(self.counts):
+            seen += c
+            if seen >= rank:
+                return self.max_ns / 1000 if i == self.BINS else float(i + 1)
+        return self.max_ns / 1000
+
+    def summary(self) -> dict[str, float | int | None]:
+        return {
+            "count": self.n,
+            "p50_us": self.percentile_us(0.5),
+            "p99_us": self.percentile_us(0.99),
+            "max_us": self.max_ns / 1000 if self.n else None,
+        }
 
 
 @dataclass(slots=True)
@@ -41,10 +96,16 @@ class ServerStats:
     lost: int = 0
     started_ns: int = 0
     max_service_ns: int = 0
+    wake: LatencyHistogram = field(default_factory=LatencyHistogram)  # kernel rx -> server
+    service: LatencyHistogram = field(default_factory=LatencyHistogram)  # server -> sent
 
 
 class RawSocketServer:
-    """Answers a real master on ``iface`` with the emulated chain."""
+    """Answers a real master on ``iface`` with the emulated chain.
+
+    ``realtime_priority``: ``None`` asks for SCHED_FIFO at :data:`DEFAULT_PRIORITY` and
+    keeps normal scheduling where that is not permitted; 0 keeps normal scheduling; 1..99
+    asks for that priority and fails (TransportError) where it is not permitted."""
 
     def __init__(
         self,
@@ -52,25 +113,40 @@ class RawSocketServer:
         chain: Chain,
         *,
         grace_s: float = DEFAULT_GRACE_S,
-        realtime_priority: int = 0,
+        realtime_priority: int | None = None,
     ) -> None:
         self.iface = iface
         self.chain = chain
         self.grace_s = grace_s
+        self.grace_ns = round(grace_s * 1e9)
+        self._next: tuple[bytes, list[tuple[int, int, bytes]]] | None = None
+        self._poller = select.poll()
+        self._poll_ms = 100
+        self._next_check_ns = 0
         self.realtime_priority = realtime_priority
         self.stats = ServerStats()
+        self.scheduling = "normal"
         self._sock: socket.socket | None = None
+        self._gc_was_enabled = False
+        self._since_gc = 0
 
     def __enter__(self) -> RawSocketServer:
         self._sock = open_socket(self.iface)
+        try:
+            self._sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        except OSError:
+            pass  # no receive timestamps: the wake-up figures stay empty
         _tight_timers()
-        if self.realtime_priority > 0:
-            _realtime(self.realtime_priority)
+        self.scheduling = _scheduling(self.realtime_priority)
         gc.collect()
         gc.freeze()  # the chain lives as long as the server: no collector passes over it
+        self._gc_was_enabled = gc.isenabled()
+        gc.disable()  # no collection in the middle of an answer; see _idle
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if self._gc_was_enabled:
+            gc.enable()
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -87,7 +163,10 @@ class RawSocketServer:
         sock = self._sock
         if sock is None:
             raise TransportError("server not opened (use it as a context manager)")
-        sock.settimeout(poll_s)
+        sock.setblocking(False)  # waits go through poll(): a frame already here is taken at once
+        self._poller = select.poll()
+        self._poller.register(sock, select.POLLIN)
+        self._poll_ms = max(1, round(poll_s * 1000))
         self.stats.started_ns = time.monotonic_ns()
         next_status = time.monotonic() + status_interval_s
         while not should_stop():
@@ -98,18 +177,22 @@ class RawSocketServer:
         return self.stats
 
     def _serve_one(self, sock: socket.socket) -> None:
-        try:
-            frame, address = sock.recvfrom(MAX_FRAME_BYTES)
-        except TimeoutError:
-            self.chain.tick(time.monotonic_ns())  # watchdogs run while the master is silent
-            return
-        except InterruptedError:
-            return
-        except OSError as exc:
-            raise TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}") from None
-        if len(address) > 2 and address[2] == PACKET_OUTGOING:
-            return
+        if self._next is None and not self._poll(sock):
+            if not self._poller.poll(self._poll_ms):
+                self.chain.run_deferred_cycles()  # nothing may wait while the master is silent
+                self.chain.tick(time.monotonic_ns())  # watchdogs run while it is silent
+                gc.collect()
+                return
+            if not self._poll(sock):
+                return  # a frame of our own, or a wake-up for nothing
+        received = self._next
+        self._next = None
+        assert received is not None
+        frame, ancillary = received
         t_ns = time.monotonic_ns()
+        arrived = _arrival_ns(ancillary)
+        if arrived is not None:
+            self.stats.wake.add(time.time_ns() - arrived)
         self.stats.received += 1
         reply, _delay_ns = self.chain.process(frame, t_ns, defer_cycles=True)
         if reply is None:
@@ -119,12 +202,99 @@ class RawSocketServer:
             sock.send(reply)
         except OSError as exc:
             raise TransportError(f"{self.iface}: send failed: {exc.strerror or exc}") from None
+        service_ns = time.monotonic_ns() - t_ns
         self.stats.answered += 1
-        self.stats.max_service_ns = max(self.stats.max_service_ns, time.monotonic_ns() - t_ns)
-        if self.grace_s > 0 and select.select([sock], [], [], self.grace_s)[0]:
+        self.stats.service.add(service_ns)
+        self.stats.max_service_ns = max(self.stats.max_service_ns, service_ns)
+        if self._firmware(sock) or self._spin(sock):
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
             return
-        self.chain.run_deferred_cycles()  # device updates after the answer is on its way
+        # device updates after the answer is on its way, giving way to the next frame
+        if self.chain.run_deferred_cycles(should_yield=self._frame_waiting):
+            self._idle()
+
+    def _poll(self, sock: socket.socket) -> bool:
+        """Take a frame that is already here (kept for the next answer); True if one is."""
+        while True:
+            try:
+                frame, ancillary, _flags, address = sock.recvmsg(
+                    MAX_FRAME_BYTES, 64, socket.MSG_DONTWAIT
+                )
+            except (BlockingIOError, InterruptedError):
+                return False  # nothing here
+            except OSError as exc:
+                raise TransportError(
+                    f"{self.iface}: receive failed: {exc.strerror or exc}"
+                ) from None
+            if len(address) > 2 and address[2] == PACKET_OUTGOING:
+                continue
+            self._next = frame, ancillary
+            return True
+
+    def _receive_failed(self, exc: OSError) -> TransportError:
+        return TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}")
+
+    def _frame_waiting(self) -> bool:
+        """Whether the master's next frame is here (looked for at most every
+        :data:`YIELD_CHECK_NS`, so the check costs little against the work it interrupts)."""
+        now = time.monotonic_ns()
+        if now < self._next_check_ns or self._sock is None:
+            return False
+        self._next_check_ns = now + YIELD_CHECK_NS
+        return self._poll(self._sock)
+
+    def _spin(self, sock: socket.socket) -> bool:
+        """Watch the socket for ``grace_s`` after an answer without sleeping: the master
+        takes the answer meanwhile, and its next frame (in a start-up and a mailbox
+        exchange they come back to back) is answered with no wake-up in between."""
+        deadline = time.monotonic_ns() + self.grace_ns
+        while True:
+            if self._poll(sock):
+                return True
+            if time.monotonic_ns() >= deadline:
+                return False
+
+    def _firmware(self, sock: socket.socket) -> bool:
+        """The slaves' firmware work, a piece at a time while no frame waits (at least
+        one piece per frame, so it never starves). True when a frame waits."""
+        chain = self.chain
+        if not chain.firmware_pending:
+            return False
+        chain.run_firmware(1)
+        while chain.firmware_pending:
+            if self._poll(sock):
+                return True
+            chain.run_firmware(1)
+        return False
+
+    def _idle(self) -> None:
+        self._since_gc += 1
+        if self._since_gc >= GC_EVERY_FRAMES:
+            self._since_gc = 0
+            gc.collect(0)
+
+
+def _arrival_ns(ancillary: list[tuple[int, int, bytes]]) -> int | None:
+    """The kernel's receive timestamp (CLOCK_REALTIME, ns) from SO_TIMESTAMPNS data."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SCM_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = _TIMESPEC.unpack_from(data)
+            return int(sec * 1_000_000_000 + nsec)
+    return None
+
+
+def _scheduling(priority: int | None) -> str:
+    """Apply the scheduling asked for; what the server got, in words."""
+    if priority is None:
+        try:
+            _realtime(DEFAULT_PRIORITY)
+        except TransportError:
+            return "normal (SCHED_FIFO not permitted)"
+        return f"SCHED_FIFO priority {DEFAULT_PRIORITY}"
+    if priority > 0:
+        _realtime(priority)
+        return f"SCHED_FIFO priority {priority}"
+    return "normal"
 
 
 def _realtime(priority: int) -> None:

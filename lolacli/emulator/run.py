@@ -134,21 +134,72 @@ def state_summary(chain: Chain) -> str:
     return " ".join(f"{label}×{n}" for label, n in parts)
 
 
+# A master's start-up, register by register (command, ADO, length; BWR/APWR/FPWR write
+# zeros): the first frames of a real start-up then find the interpreter's specialised code
+# and the ESCs' per-range write plans ready, instead of paying for them in their answer.
+_WARM_UP: tuple[tuple[str, int, int], ...] = (
+    ("BRD", 0x0000, 1), ("BRD", 0x0000, 2), ("BWR", 0x0101, 1), ("BWR", 0x0103, 1),
+    ("BWR", 0x0200, 2), ("BWR", 0x0300, 8), ("BWR", 0x0300, 20), ("BWR", 0x0600, 48),
+    ("BWR", 0x0600, 256), ("BWR", 0x0800, 32), ("BWR", 0x0800, 128), ("BWR", 0x0910, 4),
+    ("BWR", 0x0910, 8), ("BWR", 0x0930, 2), ("BWR", 0x0934, 2), ("BWR", 0x0980, 2),
+    ("BWR", 0x0981, 1), ("BWR", 0x0400, 2), ("BWR", 0x0410, 2), ("BWR", 0x0420, 2),
+    ("BWR", 0x0442, 2), ("BWR", 0x0500, 1), ("BWR", 0x0500, 2), ("BWR", 0x0900, 4),
+    ("BRD", 0x0130, 1), ("BRD", 0x0130, 2), ("BRD", 0x0110, 1), ("BRD", 0x09AE, 1),
+    ("APRD", 0x0140, 2), ("APRD", 0x0010, 2), ("APWR", 0x0100, 2), ("FPRD", 0x0000, 10),
+    ("FPRD", 0x0007, 2), ("FPRD", 0x0008, 2), ("FPRD", 0x0012, 2), ("FPRD", 0x0110, 2),
+    ("FPRD", 0x0130, 2), ("FPRD", 0x0130, 6), ("FPRD", 0x0502, 2), ("FPRD", 0x0508, 4),
+    ("FPRD", 0x0508, 8), ("FPRD", 0x0805, 1), ("FPRD", 0x080D, 1), ("FPRD", 0x080D, 2),
+    ("FPRD", 0x0900, 4), ("FPRD", 0x0904, 4), ("FPRD", 0x0908, 4), ("FPRD", 0x090C, 4),
+    ("FPRD", 0x0918, 8), ("FPWR", 0x0920, 8), ("FPWR", 0x0928, 4), ("FPWR", 0x0500, 1),
+    ("FPWR", 0x0600, 16), ("FPWR", 0x0610, 16), ("FPWR", 0x0800, 8), ("FPWR", 0x0808, 8),
+    ("FPWR", 0x0810, 8), ("FPWR", 0x0818, 8), ("FPWR", 0x0800, 16),
+)  # fmt: skip
+
+
+def warm_up(scratch: Chain) -> None:
+    """Run a master's start-up (:data:`_WARM_UP`, twice) through ``scratch``, a chain made
+    for that alone (of the same ENI as the one to serve: the same device models)."""
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    stations = [1001 + i for i in range(len(scratch.slaves))]
+    t_ns = 0
+    for _ in range(2):
+        for i, station in enumerate(stations):  # addresses first, so FPxx reach a slave
+            d = Datagram.physical(
+                Command.APWR, (-i) & 0xFFFF, 0x0010, station.to_bytes(2, "little")
+            )
+            scratch.process(encode_frame(make_frame([d]), pad=True), t_ns, defer_cycles=True)
+        for name, ado, length in _WARM_UP:
+            cmd = Command[name]
+            adp = stations[0] if name.startswith("FP") else 0
+            data: bytes | int = bytes(length) if name.endswith("WR") else length
+            frame = encode_frame(make_frame([Datagram.physical(cmd, adp, ado, data)]), pad=True)
+            t_ns += 50_000
+            scratch.process(frame, t_ns, defer_cycles=True)
+            scratch.run_deferred_cycles()
+
+
 def serve(
     iface: str,
     chain: Chain,
     should_stop: Callable[[], bool],
     on_status: Callable[[ServerStats], None] | None = None,
     status_interval_s: float = 1.0,
-    on_ready: Callable[[], None] | None = None,
-    realtime_priority: int = 0,
+    on_ready: Callable[[str], None] | None = None,
+    realtime_priority: int | None = None,
+    scratch: Chain | None = None,
 ) -> ServerStats:
     """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
-    ``on_ready`` is called once the socket is open (frames are answered from then on).
-    ``realtime_priority`` > 0 runs the server SCHED_FIFO at that priority (root or
-    CAP_SYS_NICE): with master and emulator on one core, the device work then runs
-    while the master waits for its next cycle instead of when it waits for an answer."""
+    ``on_ready(scheduling)`` is called once the socket is open (frames are answered from
+    then on), with the scheduling the server got. ``realtime_priority``: ``None`` runs
+    SCHED_FIFO where permitted (root or CAP_SYS_NICE) and normal scheduling elsewhere,
+    0 normal scheduling, 1..99 SCHED_FIFO at that priority or a TransportError. A slave
+    does not wait for other processes to yield the core; neither should its stand-in.
+    ``scratch``: a second chain of the same ENI to :func:`warm_up` with first."""
+    if scratch is not None:
+        warm_up(scratch)
     with RawSocketServer(iface, chain, realtime_priority=realtime_priority) as server:
         if on_ready is not None:
-            on_ready()
+            on_ready(server.scheduling)
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)

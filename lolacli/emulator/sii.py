@@ -20,6 +20,7 @@ import struct
 from dataclasses import dataclass, replace
 from enum import IntEnum, IntFlag
 
+from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import Direction, Pdo, Slave, SyncManager
 
@@ -214,6 +215,8 @@ def _general(spec: SiiSpec) -> bytes:
 
 
 def _pdo_category(pdos: list[Pdo], sm_of: dict[int, int]) -> bytes:
+    """PDO entries (ETG.2010 Table 14): a PDO that no sync manager takes by default has
+    SM 0xFF, so a master that maps from the SII leaves it out."""
     out = bytearray()
     for pdo in pdos:
         sm = pdo.sync_manager if pdo.sync_manager is not None else sm_of.get(pdo.index, 0xFF)
@@ -325,7 +328,7 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
                 out.append(SiiSyncManager(0, 0, 0, 0, SmType.UNUSED))
                 continue
             sm, kind = by_index[i]
-            control = sm.control or SM_CONTROL[kind]
+            control = sm.control  # as the ENI states it: 0 stays 0 (buffered, ECAT reads)
             out.append(
                 SiiSyncManager(
                     sm.start_address, sm.length_bytes, control, 1 if sm.enable else 0, kind
@@ -376,7 +379,11 @@ def sii_spec_from_slave(slave: Slave, *, complete_access: bool = False) -> SiiSp
         sync_managers=sms,
         fmmus=(1, 2, 3) if mailbox else (1, 2),
         pdos=slave.pdos,
-        pdo_sync_manager={p.index: sm_of[p.direction] for p in slave.pdos if p.direction in sm_of},
+        pdo_sync_manager={
+            p.index: sm_of[p.direction]
+            for p in slave.pdos
+            if p.direction in sm_of and p in assigned_pdos(slave.pdos, p.direction)
+        },
         dc=slave.dc is not None or mailbox is not None,
     )
 

@@ -7,16 +7,24 @@ slaves: for each ENI slave an SII image (:mod:`lolacli.emulator.sii`), a device 
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable
+from dataclasses import replace
 
 from lolacli.devices import device_for
-from lolacli.devices.base import Device
+from lolacli.devices.base import ASSIGN_RX, ASSIGN_TX, MAPPING_RX, MAPPING_TX, Device
 from lolacli.emulator.chain import Chain, ChainTiming, Faults
 from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.esc import DcClock, Esc
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
-from lolacli.eni.model import Eni, Slave
+from lolacli.eni.model import CoeInitCmd, Direction, Eni, Pdo, PdoEntry, Slave
+
+ASSIGN_OBJECTS = {Direction.OUTPUT: ASSIGN_RX, Direction.INPUT: ASSIGN_TX}
+DEFAULT_PDO = {Direction.OUTPUT: MAPPING_RX, Direction.INPUT: MAPPING_TX}
+FILLER_OBJECT = {Direction.OUTPUT: 0x5FFE, Direction.INPUT: 0x5FFF}
+_FILLER_TYPES = ((32, "UDINT"), (16, "UINT"), (8, "USINT"))
+ENTRIES_PER_PDO = 8
 
 
 class SlaveApplication:
@@ -41,6 +49,7 @@ class SlaveApplication:
     def state_changed(self, state: AlState) -> None:
         if self.before_use is not None:
             self.before_use()
+        self.device.od.al_state = int(state)  # SDO access rights follow the AL state
         self.device.state_changed(int(state))
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
@@ -51,10 +60,12 @@ class SlaveApplication:
 
 def build_slave(slave: Slave, *, drift_ppb: int = 0, start_ns: int = 0) -> Esc:
     """The ESC of one ENI slave with its device behind it."""
+    slave = with_process_data_pdos(slave)
     sii = sii_from_slave(slave, complete_access=True)  # real CiA 402 drives offer it
     device = device_for(slave)
     mailbox_in = slave.mailbox.in_length_bytes if slave.mailbox is not None else 0
     app = SlaveApplication(device, mailbox_in)
+    device.od.al_state = int(AlState.INIT)
     return Esc(sii, app=app, clock=DcClock(start_ns=start_ns, drift_ppb=drift_ppb))
 
 
@@ -79,3 +90,80 @@ def build_chain(
 def device_of(esc: Esc) -> Device | None:
     app = esc.app
     return app.device if isinstance(app, SlaveApplication) else None
+
+
+def with_process_data_pdos(slave: Slave) -> Slave:
+    """The slave with PDOs for process data its ENI gives only as sizes.
+
+    An ENI may describe a slave's process image without its PDOs (``<ProcessData>`` with
+    ``<Send>``/``<Recv>`` bit lengths, the PDOs assigned by CoE InitCmds writing
+    0x1C12/0x1C13). A master that maps from the slave must still find that many bytes:
+    the PDOs the InitCmds assign (else 0x1600/0x1A00), the first ones filled with
+    unsigned entries of a manufacturer-specific object 0x5FFE (outputs) / 0x5FFF (inputs)
+    up to the ENI's size, the others empty."""
+    if slave.pdos:
+        return slave
+    pdos: list[Pdo] = []
+    for direction, bits in (
+        (Direction.OUTPUT, slave.outputs_bits),
+        (Direction.INPUT, slave.inputs_bits),
+    ):
+        if bits <= 0:
+            continue
+        indexes = _coe_assigned(slave, ASSIGN_OBJECTS[direction]) or [DEFAULT_PDO[direction]]
+        entries = _filler_entries(FILLER_OBJECT[direction], bits)
+        sm = _process_sm(slave, direction)
+        for k, index in enumerate(indexes):
+            chunk = entries[k * ENTRIES_PER_PDO : (k + 1) * ENTRIES_PER_PDO]
+            if k == len(indexes) - 1:
+                chunk = entries[k * ENTRIES_PER_PDO :]
+            name = f"{'Rx' if direction == Direction.OUTPUT else 'Tx'}PDO 0x{index:04X}"
+            pdos.append(Pdo(index, name, direction, sm, tuple(chunk)))
+    return replace(slave, pdos=tuple(pdos))
+
+
+def _filler_entries(index: int, bits: int) -> list[PdoEntry]:
+    out: list[PdoEntry] = []
+    left = bits
+    while left > 0:
+        size, name = next(((b, n) for b, n in _FILLER_TYPES if left >= b), (left, ""))
+        out.append(PdoEntry(index, len(out) + 1, size, f"Process data {len(out) + 1}", name))
+        left -= size
+    return out
+
+
+def _process_sm(slave: Slave, direction: Direction) -> int | None:
+    kind = "outputs" if direction == Direction.OUTPUT else "inputs"
+    typed = next((m.index for m in slave.sync_managers if m.kind.lower() == kind), None)
+    if typed is not None:
+        return typed
+    return 2 if direction == Direction.OUTPUT else 3
+
+
+def _coe_assigned(slave: Slave, assign: int) -> list[int]:
+    """The PDO indexes the slave's CoE InitCmds leave in ``assign`` (0x1C12/0x1C13), in
+    order: complete-access writes of the whole object and single sub-index writes."""
+    if slave.mailbox is None:
+        return []
+    entries: dict[int, int] = {}
+    count = 0
+    for cmd in slave.mailbox.coe_init_cmds:
+        if cmd.index != assign or cmd.ccs != 1:
+            continue
+        count, entries = _apply_assign_write(cmd, count, entries)
+    return [entries[n] for n in range(1, count + 1) if entries.get(n)]
+
+
+def _apply_assign_write(
+    cmd: CoeInitCmd, count: int, entries: dict[int, int]
+) -> tuple[int, dict[int, int]]:
+    data = cmd.data
+    if cmd.complete_access and cmd.subindex == 0 and len(data) >= 2:
+        n = data[0]
+        values = [struct.unpack_from("<H", data, 2 + 2 * i)[0] for i in range((len(data) - 2) // 2)]
+        return n, {i + 1: v for i, v in enumerate(values[:n])}
+    if cmd.subindex == 0 and data:
+        return data[0], entries
+    if len(data) >= 2:
+        return count, {**entries, cmd.subindex: struct.unpack_from("<H", data)[0]}
+    return count, entries

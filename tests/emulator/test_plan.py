@@ -16,7 +16,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lolacli.devices.cia402 import Cia402Drive
 from lolacli.emulator.chain import Chain
+from lolacli.emulator.core import core_available
 from lolacli.emulator.plan import layout_check, layout_key
 from lolacli.emulator.slave import build_chain
 from lolacli.eni.model import Eni
@@ -25,14 +27,19 @@ from lolacli.wire.commands import Command as C
 from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
 from tests.emulator.bus import EXAMPLES, Bus
 
+ENGINES = [
+    "python",
+    pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="C core not built")),
+]
+
 
 class Twin:
     """Looks like a chain to :class:`Bus`; runs every frame through both chains."""
 
-    def __init__(self, eni: Eni) -> None:
-        self.fast = build_chain(eni, drift_ppb=20)
+    def __init__(self, eni: Eni, engine: str | None = None) -> None:
+        self.fast = build_chain(eni, drift_ppb=20, engine=engine)
         self.fast.plan_after = 1
-        self.slow = build_chain(eni, drift_ppb=20)
+        self.slow = build_chain(eni, drift_ppb=20, engine=engine)
         self.slow.plan_after = 0
         self.slaves = self.fast.slaves
         self.timing = self.fast.timing
@@ -105,10 +112,11 @@ def _random_frame(rng: random.Random, slaves: int, logical_bytes: int) -> bytes:
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml", "ek1100_io.xml"])
-def test_plans_answer_like_the_general_path(name: str) -> None:
+def test_plans_answer_like_the_general_path(name: str, engine: str) -> None:
     eni = load_eni(EXAMPLES / name)
-    twin = Twin(eni)
+    twin = Twin(eni, engine)
     bus = Bus(twin)  # type: ignore[arg-type]
     rng = random.Random(name)
     bus.bring_up(eni)
@@ -244,3 +252,64 @@ def test_layout_check_agrees_with_layout_key(a, b, noise, pad) -> None:  # type:
     assert check(first)
     for other in (frame(b), frame(b) + noise, frame(b)[: len(frame(b)) - len(noise)], first[:-1]):
         assert check(other) == (layout_key(other) == key)
+
+
+class _OwnStep(Cia402Drive):
+    """A drive with a step of its own: the C core leaves its cycle to Python."""
+
+    def step(self, t_ns: int) -> None:
+        super().step(t_ns)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_deferred_cycle_that_gives_way_goes_on_where_it_stopped(engine: str) -> None:
+    """A server runs the application cycle slave by slave and stops when the next frame
+    waits; the rest runs before anything touches those slaves. After the same frames,
+    every slave ends where it ends when the cycles always run whole (in the reference).
+    The C core runs the devices it holds in one call per run of consecutive slaves, so it
+    gives way only around the slaves Python cycles (here two drives with a step of their
+    own); the Python engine between any two slaves."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    whole, parts = build_chain(eni, engine="python"), build_chain(eni, engine=engine)
+    for chain in (whole, parts):
+        for position in (5, 12):
+            chain._slaves[position].app.device.__class__ = _OwnStep  # type: ignore[union-attr]
+    buses = [Bus(whole), Bus(parts)]
+    for bus in buses:
+        bus.bring_up(eni)
+    rng = random.Random(5)
+    size = eni.cyclic_frames[0].commands[0].data_length_bytes
+    stopped = 0
+    asked = 30 if engine == "python" else 5  # questions per cycle: 24, or 4 (5 pieces)
+    for k in range(40):
+        image = bytearray(size)
+        for drive in range(0, min(size - 6, 21 * 13), 13):
+            struct.pack_into("<Hbi", image, drive, (0x06, 0x07, 0x0F)[min(k, 2)], 8, 100 * k)
+        frame = encode_frame(
+            make_frame(
+                [
+                    Datagram.logical(c.cmd, c.logical_address, bytes(image[:size]))
+                    if c.logical_address is not None
+                    else Datagram.physical(c.cmd, c.adp or 0, c.ado or 0, c.data_length_bytes)
+                    for c in eni.cyclic_frames[0].commands
+                ]
+            ),
+            pad=True,
+        )
+        t_ns = buses[0].t_ns + (k + 1) * 1_000_000
+        whole.process(frame, t_ns, defer_cycles=True)
+        whole.run_deferred_cycles()
+        parts.process(frame, t_ns, defer_cycles=True)
+        after = rng.randrange(1, asked)
+        calls = iter(range(after, -1, -1))
+        if not parts.run_deferred_cycles(should_yield=lambda c=calls: next(c, 0) == 0):
+            stopped += 1
+    parts.run_deferred_cycles()
+    assert stopped > 10  # most cycles gave way somewhere in the line
+    if engine == "c":  # the other drives' cycles ran in the core
+        core = parts._core
+        assert core is not None
+        assert core.held_devices() == [i for i in range(len(eni.slaves)) if i not in (5, 12)]
+    for i, (a, b) in enumerate(zip(whole.slaves, parts.slaves, strict=True)):
+        assert a.mem == b.mem, f"slave {i}"
+        assert a.counters == b.counters, f"slave {i}"

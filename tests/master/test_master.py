@@ -33,9 +33,10 @@ from tests.emulator.bus import EXAMPLES
 #: corpus ENIs whose chain our emulator cannot take to OP, the InitCmd that is refused and
 #: why that is right (the master reports the emulated slave's answer faithfully)
 REFUSED = {
-    # the ENI checks ESC configuration 0x0141 = 0x0C (the Elmo ESI's ConfigData 050C...);
-    # the emulated ESC reports 0x00 because it does not load 0x0140/0x0141 from SII word 0
-    "rocos-ethercat__eni1.xml": ("IP", "check PDI", None),
+    # the ENI gives the Elmo drive's process data only as sizes (no PDOs, no CiA 402
+    # entries), so the emulated device is a generic one; a CoE InitCmd writes 0x6060
+    # (modes of operation), which it lacks: abort 0x06020000, as such a slave would answer
+    "rocos-ethercat__eni1.xml": ("PS", "0x6060:00", None),
     # a CoE InitCmd writes the I/O module's manufacturer object 0x2001 (pin/port layout),
     # which the emulated device's object dictionary (built from the ENI's PDOs) lacks:
     # abort 0x06020000 "object does not exist", as a real slave without it would answer
