@@ -711,7 +711,7 @@ class Esc:
         if not self._mailbox_queue or self._sm_full(index) or not sm.enabled:
             return
         message = self._mailbox_queue.pop(0)[: sm.length]
-        self.mem[sm.start : sm.start + sm.length] = message + bytes(sm.length - len(message))
+        self._store(sm.start, message + bytes(sm.length - len(message)))
         self._last_mailbox_in = message
         self._set_sm_full(index, True)
 
@@ -797,7 +797,14 @@ class Esc:
             outputs = bytes(self._view[outputs_start : outputs_start + outputs_bytes])
         inputs = app.cycle(outputs, t_ns)
         if inputs_bytes:
-            self.mem[inputs_start : inputs_start + len(inputs)] = inputs
+            self._store(inputs_start, inputs)
+
+    def _store(self, start: int, data: bytes) -> None:
+        """``data`` into memory from ``start``, as far as the memory goes (a master may
+        place an SM buffer across its end; the memory never grows)."""
+        end = min(start + len(data), r.MEMORY_BYTES)
+        if start < end:
+            self.mem[start:end] = data[: end - start]
 
     def _process_data_starts(self) -> tuple[int, int]:
         """Where the output and input SM buffers start (cached with the SM configuration)."""

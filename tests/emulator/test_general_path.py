@@ -15,6 +15,7 @@ import struct
 import pytest
 
 from lolacli.emulator.chain import Chain
+from lolacli.emulator.core import core_available
 from lolacli.emulator.slave import build_chain
 from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
@@ -87,10 +88,20 @@ def _random_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
 
 
+@pytest.mark.parametrize(
+    "engine",
+    [
+        "python",
+        pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="no C core")),
+    ],
+)
 @pytest.mark.parametrize("name", ["lola.xml", "ek1100_io.xml"])
-def test_general_path_answers_like_the_slave_major_reference(name: str) -> None:
+def test_general_path_answers_like_the_slave_major_reference(name: str, engine: str) -> None:
+    """(With the C core holding the slaves between cyclic frames: tests/emulator/test_core.py,
+    ``register_traffic``.)"""
     eni = load_eni(EXAMPLES / name)
-    fast, slow = build_chain(eni, drift_ppb=10), build_chain(eni, drift_ppb=10)
+    fast = build_chain(eni, drift_ppb=10, engine=engine)
+    slow = build_chain(eni, drift_ppb=10, engine="python")
     fast.plan_after = slow.plan_after = 0
     rng = random.Random(11)
     stations = [s.station_address for s in eni.slaves]
