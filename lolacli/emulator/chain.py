@@ -305,6 +305,12 @@ class Chain:
             self._core.release_all()
         return self._slaves
 
+    def al_statuses(self) -> list[int]:
+        """The AL status register (0x0130) of every slave, read from the ESC memories
+        (which the C core shares: nothing is given back, so a status line costs no
+        frame its held state)."""
+        return [esc.mem[AL_STATUS] for esc in self._slaves]
+
     def use_sii(self, position: int, image: bytes) -> None:
         """Give the slave at 1-based ``position`` another SII image, then power it on again
         (so the ESC's alias and layout come from the new image)."""

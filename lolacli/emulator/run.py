@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from lolacli.emulator.chain import Chain, Faults
 from lolacli.emulator.rawsock import RawSocketServer, ServerStats
-from lolacli.emulator.registers import AlState
+from lolacli.emulator.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
 from lolacli.emulator.sii import sii_from_esi_device
 from lolacli.emulator.slave import build_chain
 from lolacli.eni.esi import EsiDevice, EsiFile
@@ -125,8 +125,9 @@ def state_summary(chain: Chain) -> str:
     """Slave states as a compact run-length string, e.g. ``OP×24 SAFEOP!×1``."""
     names = {int(s): s.name for s in AlState}
     parts: list[tuple[str, int]] = []
-    for esc in chain.slaves:
-        label = names.get(esc.al_state, f"0x{esc.al_state:X}") + ("!" if esc.al_error else "")
+    for status in chain.al_statuses():
+        state = status & AL_STATE_MASK
+        label = names.get(state, f"0x{state:X}") + ("!" if status & AL_ERROR_INDICATOR else "")
         if parts and parts[-1][0] == label:
             parts[-1] = (label, parts[-1][1] + 1)
         else:

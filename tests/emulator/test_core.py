@@ -40,6 +40,7 @@ from lolacli.emulator.core import ChainCore, CompiledPlan, SlaveTable, core_avai
 from lolacli.emulator.esc import Esc
 from lolacli.emulator.plan import layout_key
 from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.run import state_summary
 from lolacli.emulator.slave import build_chain, device_of
 from lolacli.eni.model import Eni
 from lolacli.errors import UsageError, WireError
@@ -718,6 +719,27 @@ def test_firmware_work_runs_on_the_state_the_core_gave_back() -> None:
     chain.run_firmware()
     assert core.released == {3}
     assert seen == [(True, bus.t_ns - 50_000 + chain._port_offsets[3].port0_ns)]
+
+
+def test_the_status_line_leaves_the_core_its_state() -> None:
+    """``bus emulate`` prints the slaves' states every second from the shared memories:
+    the core keeps what it holds (giving all back and taking it again costs ~60 µs in the
+    middle of serving)."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni, engine="c")
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    for _ in range(3):
+        bus.cycle(eni)
+    chain.stuck_in_safeop(2)
+    bus.fpwr(eni.slaves[1].station_address, 0x0120, b"\x04\x00")
+    bus.fpwr(eni.slaves[1].station_address, 0x0120, b"\x08\x00")
+    for _ in range(3):
+        bus.cycle(eni)
+    core = chain._core
+    assert core is not None and not core.released and core.held_devices()
+    assert state_summary(chain) == "OP×1 SAFEOP!×1 OP×23"
+    assert not core.released and core.held_devices()
 
 
 def test_a_slave_that_starts_waiting_for_op_invalidates_the_plans() -> None:
