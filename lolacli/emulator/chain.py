@@ -26,6 +26,7 @@ from lolacli.emulator.core import ChainCore, core_available
 from lolacli.emulator.esc import Esc, PortTimes, broadcast_read, broadcast_write
 from lolacli.emulator.plan import (
     NOT_COMPILED,
+    PLANNABLE,
     Deferred,
     FramePlan,
     Key,
@@ -160,6 +161,7 @@ class ChainStats:
 
 _READS_ONLY = frozenset({Command.APRD, Command.FPRD, Command.BRD})
 _APRD, _FPRD, _BRD, _BWR = int(Command.APRD), int(Command.FPRD), int(Command.BRD), int(Command.BWR)
+_PLANNABLE = frozenset(int(c) for c in PLANNABLE)
 _AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
 _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
 
@@ -548,8 +550,8 @@ class Chain:
         if last is not None and last.epoch == self._epoch[0] and last.fits(frame):
             return last  # the cyclic frame again: no key to work out
         key = layout_key(frame)
-        if key is None:
-            return None
+        if key is None or not all(key[i] in _PLANNABLE for i in range(2, len(key), 4)):
+            return None  # register frames: the general path, no plan to count towards
         if self._plan_epoch != self._epoch[0]:
             self._plans.clear()
             self._plan_epoch = self._epoch[0]

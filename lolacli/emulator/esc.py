@@ -477,7 +477,11 @@ class Esc:
         """Process-data watchdog: (divider + 2) × 40 ns × 0x0420, when the output SM
         enables it (control bit 6) and the time is not 0 (ET1100 datasheet §2.31)."""
         time_ticks = self.u16(r.WATCHDOG_TIME_PROCESS_DATA)
-        sm = self._config().sms[self.layout.outputs_sm]
+        index = self.layout.outputs_sm
+        if self._cache is None and index < self.config.sync_managers:
+            sm = self.sync_manager(index)  # that one SM, not the whole configuration
+        else:
+            sm = self._config().sms[index]
         if not time_ticks or not sm.length or not sm.control & r.SM_CONTROL_WATCHDOG:
             return None
         return (self.u16(r.WATCHDOG_DIVIDER) + 2) * 40 * time_ticks
