@@ -12,6 +12,7 @@ start-up and 500 µs in the cyclic loop, as KickCAT's own examples set it after 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -20,12 +21,19 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 from lolacli.devices.cia402 import Cia402Drive
 from tests.emulator.bus import EXAMPLES
+from tests.emulator.master_capture import (
+    TARGET_P99_NS,
+    MasterCapture,
+    realtime_ns,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = [pytest.mark.root, pytest.mark.slow]
@@ -157,6 +165,30 @@ def _cycles(master, n: int, period_s: float, timeout_us: int = 2000, poll=None) 
     return bad
 
 
+SOEM_TIMEOUT_NS = 2_000_000  # EC_TIMEOUTRET, pysoem's receive_processdata(2000)
+
+
+def _pysoem_cycles(master, n: int, poll=None) -> list[MasterError]:  # type: ignore[no-untyped-def]
+    """``n`` cycles at 1 kHz; a cycle whose frame did not come back (-1, EC_NOFRAME) or
+    came back with another working counter than expected, with its time."""
+    errors = []
+    next_t = time.perf_counter()
+    for i in range(n):
+        t0 = realtime_ns()
+        master.send_processdata()
+        wkc = master.receive_processdata(2000)
+        if wkc != master.expected_wkc:
+            why = "no frame within 2 ms" if wkc == -1 else f"WKC {wkc} in cycle {i}"
+            errors.append(MasterError(t0, realtime_ns(), why, SOEM_TIMEOUT_NS))
+        if poll is not None:
+            poll(i)
+        next_t += 0.001
+        delay = next_t - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    return errors
+
+
 def test_pysoem_single_drive(veth, pysoem) -> None:
     from lolacli.files import load_eni
 
@@ -164,7 +196,10 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
     eni = load_eni(eni_path)
     proc = _emulate(veth[1], eni_path)
     master = pysoem.Master()
+    capture = MasterCapture(veth[0])
     try:
+        capture.__enter__()
+        t0 = realtime_ns()
         master.open(veth[0])
         assert master.config_init() == len(eni.slaves) == 1
         slave = master.slaves[0]
@@ -181,7 +216,9 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         _to_op(master, pysoem)
         assert master.expected_wkc == eni.cyclic_frames[0].commands[0].expected_wkc == 3
         # process data: enable the drive, command a position, see it followed
-        assert _cycles(master, CYCLES, 0.001) == []  # 10 s at 1 kHz
+        t1 = realtime_ns()
+        errors = _pysoem_cycles(master, CYCLES)  # 10 s at 1 kHz
+        t2 = realtime_ns()
         for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F):
             slave.output = struct.pack("<HbiI", cw, 8, 4242, 0)
             master.send_processdata()
@@ -190,9 +227,15 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         assert status & 0x6F == 0x27 and mode == 8 and actual == 4242
         master.state = pysoem.INIT_STATE
         master.write_state()
+        capture.__exit__()
+        emulator = _stop(proc)
+        phases = [(t0, t1, SOEM_TIMEOUT_NS, False), (t1, t2, SOEM_TIMEOUT_NS, True)]
+        _judge(capture, emulator, phases, errors, CYCLES)
     finally:
         master.close()
-        _stop(proc)
+        capture.close()
+        if proc.returncode is None:
+            _stop(proc)
 
 
 def test_pysoem_lola_chain(veth, pysoem) -> None:
@@ -202,7 +245,10 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
     eni = load_eni(eni_path)
     proc = _emulate(veth[1], eni_path)
     master = pysoem.Master()
+    capture = MasterCapture(veth[0])
     try:
+        capture.__enter__()
+        t0 = realtime_ns()
         master.open(veth[0])
         assert master.config_init() == 25
         identities = [(s.man, s.id) for s in master.slaves]
@@ -214,10 +260,18 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
         _drive_sdo_checks(master.slaves[4], pysoem)  # a joint drive in mid-line
         _to_op(master, pysoem)
         assert master.expected_wkc == 70 == eni.cyclic_frames[0].commands[0].expected_wkc
-        assert _cycles(master, CYCLES, 0.001) == []  # 10 s at 1 kHz
+        t1 = realtime_ns()
+        errors = _pysoem_cycles(master, CYCLES)  # 10 s at 1 kHz
+        t2 = realtime_ns()
+        capture.__exit__()
+        emulator = _stop(proc)
+        phases = [(t0, t1, SOEM_TIMEOUT_NS, False), (t1, t2, SOEM_TIMEOUT_NS, True)]
+        _judge(capture, emulator, phases, errors, CYCLES)
     finally:
         master.close()
-        _stop(proc)
+        capture.close()
+        if proc.returncode is None:
+            _stop(proc)
 
 
 def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(veth, pysoem) -> None:
@@ -229,7 +283,10 @@ def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(veth, pysoem) -> None:
     eni = load_eni(EXAMPLES / "lola.xml")
     proc = _emulate(veth[1], EXAMPLES / "lola.xml")
     master = pysoem.Master()
+    capture = MasterCapture(veth[0])
     try:
+        capture.__enter__()
+        t0 = realtime_ns()
         master.open(veth[0])
         assert master.config_init() == 25
         master.config_map()
@@ -239,25 +296,66 @@ def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(veth, pysoem) -> None:
         def poll(i: int) -> None:
             with_mailbox[i % len(with_mailbox)].mbx_receive()
 
-        bad = _cycles(master, int(SOAK_S * 1000), 0.001, poll=poll)
-        assert bad == []
+        cycles = int(SOAK_S * 1000)
+        t1 = realtime_ns()
+        errors = _pysoem_cycles(master, cycles, poll=poll)
+        t2 = realtime_ns()
         master.read_state()
         assert [s.state for s in master.slaves] == [pysoem.OP_STATE] * 25
+        capture.__exit__()
+        emulator = _stop(proc)
+        phases = [(t0, t1, SOEM_TIMEOUT_NS, False), (t1, t2, SOEM_TIMEOUT_NS, True)]
+        _judge(capture, emulator, phases, errors, cycles)
     finally:
         master.close()
-        _stop(proc)
+        capture.close()
+        if proc.returncode is None:
+            _stop(proc)
 
 
-def _kickcat_cycles(bus, kickcat, link, n: int) -> list[tuple[int, str]]:
+KICKCAT_LINK_TIMEOUT_NS = 2_000_000  # KickCAT's default link timeout (start-up)
+KICKCAT_CYCLIC_TIMEOUT_NS = 500_000  # its examples' timeout in the cyclic loop
+KICKCAT_STARTS = 10  # start-ups tried, each one that timed out with every answer in time
+MASTER_TIMEOUTS_PER_CYCLE = 0.01  # at most 1 % of cycles may time out at the master
+
+
+@dataclass(frozen=True, slots=True)
+class MasterError:
+    """A call of the master that raised: when (CLOCK_REALTIME, as the capture) and why."""
+
+    start_ns: int
+    end_ns: int
+    message: str
+    deadline_ns: int
+
+
+def _kickcat_start(kickcat, iface: str, start, errors: list[MasterError]):  # type: ignore[no-untyped-def]
+    """KickCAT's bus and link after ``start(bus)`` went through; a start-up that raised is
+    tried again (at most KICKCAT_STARTS in all), each failure kept for the verdict."""
+    for _ in range(KICKCAT_STARTS):
+        link = kickcat.create_link(iface, "")  # default link timeout: 2 ms
+        bus = kickcat.Bus(link)
+        t0 = realtime_ns()
+        try:
+            start(bus)
+        except RuntimeError as exc:
+            errors.append(MasterError(t0, realtime_ns(), str(exc)[:120], KICKCAT_LINK_TIMEOUT_NS))
+            continue
+        return bus, link
+    pytest.fail(f"KickCAT did not start: {[e.message for e in errors]}")
+
+
+def _kickcat_cycles(bus, link, n: int) -> list[MasterError]:  # type: ignore[no-untyped-def]
     """``n`` cycles at 1 kHz with the 500 µs link timeout of KickCAT's examples."""
-    link.set_timeout(0.0005)
+    link.set_timeout(KICKCAT_CYCLIC_TIMEOUT_NS / 1e9)
     errors = []
     next_t = time.perf_counter()
-    for i in range(n):
+    for _ in range(n):
+        t0 = realtime_ns()
         try:
             bus.process_data()  # raises on a lost datagram or a working-counter mismatch
         except RuntimeError as exc:
-            errors.append((i, str(exc)[:80]))
+            errors.append(MasterError(t0, realtime_ns(), str(exc)[:120], KICKCAT_CYCLIC_TIMEOUT_NS))
         next_t += 0.001
         delay = next_t - time.perf_counter()
         if delay > 0:
@@ -265,12 +363,92 @@ def _kickcat_cycles(bus, kickcat, link, n: int) -> list[tuple[int, str]]:
     return errors
 
 
+@contextmanager
+def _realtime_master() -> Iterator[str]:
+    """KickCAT's thread at SCHED_FIFO 5 (below the emulator's 10) where permitted, as a
+    real-time master is deployed; normal scheduling again afterwards. KickCAT reads its
+    socket in a loop that sleeps 20 µs and gives up when a sleep ends past its deadline
+    without a last look at the socket: with normal scheduling on a saturated 2-core host
+    such a sleep lasts milliseconds now and then while the answer waits in the socket
+    (tests/emulator/master_capture.py; the capture check below tells the two apart)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(5))
+    except (OSError, AttributeError):
+        yield "normal"
+        return
+    try:
+        yield "SCHED_FIFO 5"
+    finally:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+LATE_ANSWERS = 0.001  # answers past the master's deadline, per frame: host stalls only
+
+
+def _emulator_times(text: str) -> dict[str, tuple[int, int, int]]:
+    """The emulator's own reply times at stop ("wake-up"/"answer": p50, p99, max µs)."""
+    found = re.findall(r"(wake-up|answer) p50 (\d+) µs, p99 (\d+) µs, max (\d+) µs", text)
+    return {name: (int(a), int(b), int(c)) for name, a, b, c in found}
+
+
+def _judge(
+    capture: MasterCapture,
+    emulator: str,
+    phases: list[tuple[int, int, int, bool]],
+    errors: list[MasterError],
+    cycles: int,
+) -> None:
+    """The emulator judged apart from the master's own verdict.
+
+    From the capture of the master's side (kernel timestamps): every frame answered; per
+    phase ((start, end, the master's deadline, cyclic)) the answers past the deadline no
+    more frequent than the host's own stalls (LATE_ANSWERS: on this 2-core PREEMPT_NONE
+    VM under load even a SCHED_FIFO C sleeper wakes > 500 µs late about once in 10^4
+    wake-ups); in the cyclic phase the median within the issue's 150 µs and the p99
+    within the master's deadline. From the emulator's own figures (its socket's receive
+    timestamp to the answer sent): the p99 of its service within 150 µs. The maxima are
+    the host's and are reported, not asserted. The master's errors: never a wrong
+    working counter; a time-out only where the capture shows every frame of its window
+    answered; at most 1 % of the cycles."""
+    report = capture.report()
+    if not capture.available:
+        assert not errors, errors[:3]
+        return
+    assert report.exchanges, "nothing captured"
+    assert report.unanswered() == [], report.unanswered()[:3]
+    figures, late = [], []
+    for start, end, deadline, cyclic in phases:
+        window = report.between(start, end)
+        late += report.late_in(start, end, deadline)
+        p50, p99 = report.percentile_ns(0.5, window), report.percentile_ns(0.99, window)
+        figures.append((p50 / 1000, p99 / 1000))
+        if cyclic:
+            assert p50 <= TARGET_P99_NS and p99 <= deadline, (p50, p99, report.summary())
+    assert len(late) <= max(2, LATE_ANSWERS * len(report.exchanges)), late[:5]
+    times = _emulator_times(emulator)
+    assert times.get("answer", (0, 0, 0))[1] <= TARGET_P99_NS / 1000, emulator
+    for e in errors:
+        assert "WKC" not in e.message.upper() and "working counter" not in e.message, e
+        assert all(x.reply_ns is not None for x in report.between(e.start_ns, e.end_ns)), e
+    assert len(errors) <= max(1, MASTER_TIMEOUTS_PER_CYCLE * cycles), errors[:5]
+    note = f"at the master: {report.summary()}; p50/p99 per phase {figures}; late {len(late)}; "
+    note += f"master time-outs {len(errors)} {[e.message for e in errors[:2]]}; emulator {times}"
+    sys.stderr.write(note + "\n")
+    log = os.environ.get("LOLACLI_MASTER_LOG")  # one JSON line per run, for repeat runs
+    if log:
+        with open(log, "a") as f:
+            record = {"phases": figures, "late": len(late), "errors": len(errors), "note": note}
+            f.write(json.dumps(record) + "\n")
+
+
 def test_kickcat_single_drive(veth) -> None:
+    """KickCAT with its default timeouts; the emulator judged on the capture (_judge)."""
     kickcat = pytest.importorskip("kickcat")
     proc = _emulate(veth[1], EXAMPLES / "single_drive.xml")
-    try:
-        link = kickcat.create_link(veth[0], "")  # default link timeout: 2 ms
-        bus = kickcat.Bus(link)
+    errors: list[MasterError] = []
+    capture = MasterCapture(veth[0])
+
+    def start(bus) -> None:  # type: ignore[no-untyped-def]
         bus.init(0.1)
         slaves = bus.slaves()
         assert len(slaves) == 1
@@ -278,20 +456,36 @@ def test_kickcat_single_drive(veth) -> None:
         assert (slaves[0].input_size, slaves[0].output_size) == (11, 11)
         bus.request_state(kickcat.State.SAFE_OP)
         bus.wait_for_state(kickcat.State.SAFE_OP, 1.0)
-        raw = bus.read_sdo(slaves[0], 0x1000, 0, kickcat.Access.PARTIAL, 4, 0.1)
-        assert struct.unpack("<I", raw)[0] == 0x00020192
-        # (KickCAT 2.5 crashes on segmented uploads, fixed upstream after 2.5: not asked)
-        raw = bus.read_sdo(slaves[0], 0x100A, 0, kickcat.Access.PARTIAL, 64, 0.1)
-        assert raw == b"lolacli emulator"
-        slaves[0].set_output_bytes(struct.pack("<HbiI", 0, 8, 0, 0))
-        bus.process_data_no_check()
-        bus.request_state(kickcat.State.OPERATIONAL)
-        bus.wait_for_state(kickcat.State.OPERATIONAL, 1.0, lambda: bus.process_data_no_check())
-        assert _kickcat_cycles(bus, kickcat, link, CYCLES) == []
+
+    try:
+        with capture, _realtime_master():
+            t0 = realtime_ns()
+            bus, link = _kickcat_start(kickcat, veth[0], start, errors)
+            slaves = bus.slaves()
+            raw = bus.read_sdo(slaves[0], 0x1000, 0, kickcat.Access.PARTIAL, 4, 0.1)
+            assert struct.unpack("<I", raw)[0] == 0x00020192
+            # (KickCAT 2.5 crashes on segmented uploads, fixed upstream after 2.5: not asked)
+            raw = bus.read_sdo(slaves[0], 0x100A, 0, kickcat.Access.PARTIAL, 64, 0.1)
+            assert raw == b"lolacli emulator"
+            slaves[0].set_output_bytes(struct.pack("<HbiI", 0, 8, 0, 0))
+            bus.process_data_no_check()
+            bus.request_state(kickcat.State.OPERATIONAL)
+            bus.wait_for_state(kickcat.State.OPERATIONAL, 1.0, lambda: bus.process_data_no_check())
+            t1 = realtime_ns()
+            errors += _kickcat_cycles(bus, link, CYCLES)
+            t2 = realtime_ns()
         status = struct.unpack_from("<H", slaves[0].input_data)[0]
         assert status & 0x4F == 0x40  # switch on disabled, as after power-up
+        emulator = _stop(proc)
+        phases = [
+            (t0, t1, KICKCAT_LINK_TIMEOUT_NS, False),
+            (t1, t2, KICKCAT_CYCLIC_TIMEOUT_NS, True),
+        ]
+        _judge(capture, emulator, phases, errors, CYCLES)
     finally:
-        _stop(proc)
+        capture.close()
+        if proc.returncode is None:
+            _stop(proc)
 
 
 def test_emulate_reports_missing_interface(cli) -> None:
@@ -301,14 +495,17 @@ def test_emulate_reports_missing_interface(cli) -> None:
 
 
 def test_kickcat_lola_chain(veth) -> None:
+    """KickCAT with its default timeouts on the LOLA chain; the emulator judged on the
+    capture (_judge)."""
     kickcat = pytest.importorskip("kickcat")
     from lolacli.files import load_eni
 
     eni = load_eni(EXAMPLES / "lola.xml")
     proc = _emulate(veth[1], EXAMPLES / "lola.xml")
-    try:
-        link = kickcat.create_link(veth[0], "")  # default link timeout: 2 ms
-        bus = kickcat.Bus(link)
+    errors: list[MasterError] = []
+    capture = MasterCapture(veth[0])
+
+    def start(bus) -> None:  # type: ignore[no-untyped-def]
         bus.init(0.1)
         slaves = bus.slaves()
         assert len(slaves) == 25
@@ -319,16 +516,32 @@ def test_kickcat_lola_chain(veth) -> None:
         ]
         bus.request_state(kickcat.State.SAFE_OP)
         bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
-        raw = bus.read_sdo(slaves[3], 0x1000, 0, kickcat.Access.PARTIAL, 4, 0.1)
-        assert struct.unpack("<I", raw)[0] == 0x00020192  # Joint04: a CiA 402 servo drive
-        for s in slaves:
-            s.set_output_bytes(bytes(s.output_size))
-        bus.process_data_no_check()
-        bus.request_state(kickcat.State.OPERATIONAL)
-        bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, lambda: bus.process_data_no_check())
-        assert _kickcat_cycles(bus, kickcat, link, CYCLES) == []
+
+    try:
+        with capture, _realtime_master():
+            t0 = realtime_ns()
+            bus, link = _kickcat_start(kickcat, veth[0], start, errors)
+            slaves = bus.slaves()
+            raw = bus.read_sdo(slaves[3], 0x1000, 0, kickcat.Access.PARTIAL, 4, 0.1)
+            assert struct.unpack("<I", raw)[0] == 0x00020192  # Joint04: a CiA 402 servo drive
+            for s in slaves:
+                s.set_output_bytes(bytes(s.output_size))
+            bus.process_data_no_check()
+            bus.request_state(kickcat.State.OPERATIONAL)
+            bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, lambda: bus.process_data_no_check())
+            t1 = realtime_ns()
+            errors += _kickcat_cycles(bus, link, CYCLES)
+            t2 = realtime_ns()
+        emulator = _stop(proc)
+        phases = [
+            (t0, t1, KICKCAT_LINK_TIMEOUT_NS, False),
+            (t1, t2, KICKCAT_CYCLIC_TIMEOUT_NS, True),
+        ]
+        _judge(capture, emulator, phases, errors, CYCLES)
     finally:
-        _stop(proc)
+        capture.close()
+        if proc.returncode is None:
+            _stop(proc)
 
 
 @pytest.fixture(scope="module")

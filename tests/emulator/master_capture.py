@@ -1,0 +1,166 @@
+"""The emulator's reply times, seen from the master's side of the veth pair.
+
+A real master's own verdict mixes two things: whether the slaves answered in time, and
+whether the master's process was running when they did. KickCAT, for one, polls its
+socket with a 20 µs sleep and gives up when a sleep ends past its deadline, without a last
+look at the socket; on a loaded host such a sleep can last milliseconds while the answer
+waits in the socket buffer. :class:`MasterCapture` records the master's side with dumpcap
+(kernel timestamps, CLOCK_REALTIME) so a test can judge the emulator strictly on its own
+(every frame answered, each within the master's deadline, the latency percentiles) and
+tell a master's time-out from a late answer (:meth:`CaptureReport.late_in`).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+TARGET_P99_NS = 150_000  # issue 9: reply latency p99 <= 150 µs
+TARGET_MAX_NS = 1_000_000  # ... and max <= 1 ms
+
+
+@dataclass(frozen=True, slots=True)
+class Exchange:
+    sent_ns: int  # the master's frame on the wire (kernel timestamp, CLOCK_REALTIME)
+    reply_ns: int | None  # its answer, None: none came
+    kind: str  # the frame's commands, e.g. "FPRD" or "FRMW+LRW"
+
+    @property
+    def latency_ns(self) -> int | None:
+        return None if self.reply_ns is None else self.reply_ns - self.sent_ns
+
+
+@dataclass(slots=True)
+class CaptureReport:
+    exchanges: list[Exchange] = field(default_factory=list)
+
+    def between(self, start_ns: int, end_ns: int) -> list[Exchange]:
+        return [e for e in self.exchanges if start_ns <= e.sent_ns <= end_ns]
+
+    def unanswered(self) -> list[Exchange]:
+        return [e for e in self.exchanges if e.reply_ns is None]
+
+    def late_in(self, start_ns: int, end_ns: int, deadline_ns: int) -> list[Exchange]:
+        """Frames sent in the window whose answer did not come within ``deadline_ns``."""
+        return [
+            e
+            for e in self.between(start_ns, end_ns)
+            if e.latency_ns is None or e.latency_ns > deadline_ns
+        ]
+
+    def percentile_ns(self, p: float, exchanges: list[Exchange] | None = None) -> int:
+        values = sorted(
+            e.latency_ns for e in (exchanges or self.exchanges) if e.latency_ns is not None
+        )
+        return values[min(len(values) - 1, int(p * len(values)))] if values else 0
+
+    def summary(self) -> str:
+        by_kind: dict[str, list[Exchange]] = {}
+        for e in self.exchanges:
+            by_kind.setdefault(e.kind, []).append(e)
+        parts = []
+        for kind, group in sorted(by_kind.items(), key=lambda kv: -len(kv[1])):
+            parts.append(
+                f"{kind} n={len(group)} p50={self.percentile_ns(0.5, group) / 1000:.0f} "
+                f"p99={self.percentile_ns(0.99, group) / 1000:.0f} "
+                f"max={self.percentile_ns(1.0, group) / 1000:.0f} µs"
+            )
+        return "; ".join(parts)
+
+
+def read_exchanges(path: Path) -> list[Exchange]:
+    """Request/answer pairs of a master-side capture. The answer to a pending frame is the
+    next one with the same command/index/length sequence whose source MAC's local bit,
+    a working counter or an ADP differs (a master whose own MAC has the local bit set,
+    as KickCAT's, is told by the WKC/ADP an ESC changes); an identical frame is the
+    master sending again, the first copy unanswered."""
+    from lolacli.capture.reader import iter_frames
+    from lolacli.errors import WireError
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import decode_frame
+
+    pending: dict[tuple[tuple[int, int, int], ...], tuple[int, bytes, tuple[int, ...], str]] = {}
+    out: list[Exchange] = []
+    for frame in iter_frames(path):
+        try:
+            datagrams = decode_frame(frame.data).datagrams
+        except WireError:
+            continue
+        key = tuple((d.cmd, d.index, len(d.data)) for d in datagrams)
+        fields = tuple(v for d in datagrams for v in (d.wkc, d.adp))
+        first = pending.get(key)
+        if first is not None:
+            if (frame.data[6] ^ first[1][6]) & 0x02 or fields != first[2]:
+                del pending[key]
+                out.append(Exchange(first[0], frame.timestamp_ns, first[3]))
+                continue
+            out.append(Exchange(first[0], None, first[3]))  # sent again
+        names: list[str] = []
+        for d in datagrams:
+            try:
+                name = Command(d.cmd).name
+            except ValueError:
+                name = f"0x{d.cmd:02X}"
+            if name not in names:
+                names.append(name)
+        pending[key] = (frame.timestamp_ns, frame.data[:12], fields, "+".join(sorted(names)))
+    out += [Exchange(t, None, kind) for t, _mac, _fields, kind in pending.values()]
+    out.sort(key=lambda e: e.sent_ns)
+    return out
+
+
+class MasterCapture:
+    """dumpcap on the master's interface while the block runs; ``report()`` afterwards.
+    Skips (``available``: False) where dumpcap is missing."""
+
+    def __init__(self, iface: str) -> None:
+        self.iface = iface
+        self.available = shutil.which("dumpcap") is not None
+        self._folder = tempfile.TemporaryDirectory(prefix="lolacli-master-capture-")
+        self.path = Path(self._folder.name) / "master.pcapng"
+        self._proc: subprocess.Popen[bytes] | None = None
+
+    def __enter__(self) -> MasterCapture:
+        if not self.available:
+            return self
+        self._proc = subprocess.Popen(
+            ["dumpcap", "-q", "-i", self.iface, "-w", str(self.path)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+        )
+        deadline = time.monotonic() + 10
+        # capturing once the file holds its section header and interface description
+        while time.monotonic() < deadline:
+            if self.path.exists() and self.path.stat().st_size > 0:
+                break
+            if self._proc.poll() is not None:
+                break
+            time.sleep(0.02)
+        time.sleep(0.3)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._proc is not None:
+            time.sleep(0.2)  # the last answers reach the capture
+            self._proc.terminate()
+            self._proc.wait(timeout=20)
+            self._proc = None
+
+    def report(self) -> CaptureReport:
+        if not self.available or not self.path.exists():
+            return CaptureReport()
+        return CaptureReport(read_exchanges(self.path))
+
+    def close(self) -> None:
+        """dumpcap stopped (when the block was left early) and the capture removed."""
+        self.__exit__()
+        self._folder.cleanup()
+
+
+def realtime_ns() -> int:
+    """The capture's clock (kernel packet timestamps are CLOCK_REALTIME)."""
+    return time.time_ns()
