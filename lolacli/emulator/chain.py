@@ -549,6 +549,8 @@ class Chain:
         last = self._last_plan
         if last is not None and last.epoch == self._epoch[0] and last.fits(frame):
             return last  # the cyclic frame again: no key to work out
+        if len(frame) > 16 and frame[16] not in _PLANNABLE:
+            return None  # the first datagram takes the general path: so does the frame
         key = layout_key(frame)
         if key is None or not all(key[i] in _PLANNABLE for i in range(2, len(key), 4)):
             return None  # register frames: the general path, no plan to count towards
