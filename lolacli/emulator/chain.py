@@ -11,6 +11,16 @@ A frame layout that repeats (the cyclic frame) is answered through a frame plan
 ``defer_cycles`` the work that does not shape the answer (device cycles, the DC control
 loops of the non-reference slaves, a plan's writes into the slaves' memories) waits for
 :meth:`Chain.run_deferred_cycles`; it always runs before anything else touches the slaves.
+
+As on hardware, the slaves' firmware (AL control requests, mailbox services, OP entered on
+the first valid outputs) works after the frame that asked for it: a frame that writes AL
+control and reads AL status sees the old state (:meth:`Chain.run_firmware`).
+
+With the C core (:mod:`lolacli.emulator.core`, engine ``c``) the planned frames, their
+deferred work, the watchdogs and the device cycles run in C on state the core holds; the
+general path and the firmware give back the ESC state of each slave they touch first,
+and a device goes back to Python before Python uses it. Both engines give the same bytes
+and states (tests/emulator/test_core.py).
 """
 
 from __future__ import annotations
