@@ -410,7 +410,10 @@ class _Logical(_Op):
             return False
         if any(esc.pending_op for esc, _, _ in self.events):
             return False
-        written = {(id(s.esc), p, q) for s in self.steps for p, q in s.write_memory}
+        written: dict[int, list[tuple[int, int]]] = {}  # per slave: the ranges written
+        for s in self.steps:
+            if s.write_memory:
+                written.setdefault(id(s.esc), []).extend(s.write_memory)
         for op in [self, *later]:
             if not isinstance(op, _Logical):
                 if isinstance(op, _Brd) and op.hi > PLAN_FREE_REGISTERS:
@@ -419,9 +422,12 @@ class _Logical(_Op):
             for s in op.steps:
                 if s.generic:
                     return False
+                ranges = written.get(id(s.esc))
+                if not ranges:
+                    continue
                 later_writes = s.write_memory if op is not self else []
                 for p, q in [*s.read_memory, *later_writes]:
-                    if any(i == id(s.esc) and p < wq and wp < q for i, wp, wq in written):
+                    if any(p < wq and wp < q for wp, wq in ranges):
                         return False
         return True
 
