@@ -428,7 +428,7 @@ def _judge(
     timestamp to the answer sent): the p99 of its service within 150 µs. The maxima are
     the host's and are reported, not asserted. The master's errors: never a wrong
     working counter; a time-out only where the capture shows every frame of its window
-    answered; at most 1 % of the cycles."""
+    answered; at most MASTER_TIMEOUTS_PER_CYCLE of the cycles."""
     report = capture.report()
     if not capture.available:
         assert not errors, errors[:3]
