@@ -63,7 +63,8 @@ def analyze_cmd(
         model = load_eni(eni)
     with _Progress(file, quiet=False) as progress:
         report = analyze_file(
-            file, eni=model, progress=progress, engine=engine, keep_series=plot is not None
+            file, eni=model, progress=progress, engine=engine, keep_series=plot is not None,
+            max_lost=max_lost, max_wkc_mismatches=max_wkc,
         )
     data = report.to_dict()
     if fmt is OutputFormat.json:
@@ -75,8 +76,7 @@ def analyze_cmd(
 
         for written in write_plots(report, plot):
             sys.stderr.write(f"lolacli: wrote {written}\n")
-    failed = data["lost_frames"] > max_lost or data["wkc_mismatches"] > max_wkc
-    if failed:
+    if report.failed:
         raise typer.Exit(1)
 
 

@@ -160,18 +160,23 @@ def test_c_kernel_refuses_state_it_would_index_out_of_bounds_with():
     def call(st=None, pn=None, ifs=ifs, n_if=1):
         st = z(S.S_SIZE) if st is None else st
         pn = z(slots) if pn is None else pn
+        obs = 2 * slots
         return k.scan(np.zeros(8, np.uint8), 0, 8, True, 1, False, False, ifs, n_if, st,
-                      z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH),
-                      z(slots * S.DEPTH), z(slots), z(slots), z(slots), z(slots), z(rows),
+                      z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH * S.PCOLS),
+                      z(slots), z(slots), z(obs), z(obs), z(obs * S.OCOLS), z(rows),
                       z(rows), z(rows), z(rows), z(rows), z(rows), z(rows * S.MBX_COLS),
-                      z(rows * S.WKC_COLS))
+                      z(rows * S.CFG_COLS), z(rows * S.EVICT_COLS))
 
     assert call()[1] == S.ST_CORRUPT  # 8 zero bytes: a block of length 0
     negative_row = z(S.S_SIZE)
     negative_row[S.S_N_DC] = -1
+    negative_counts = [z(S.S_SIZE) for _ in range(3)]
+    for st, i in zip(negative_counts, (S.S_N_CFG, S.S_BACKWARDS, S.S_MALFORMED), strict=True):
+        st[i] = -1  # these index st and the output rows
     deep = z(slots)
     deep[7] = S.DEPTH + 1
-    for bad in (dict(st=negative_row), dict(pn=deep), dict(n_if=-1),
+    for bad in (dict(st=negative_row), *(dict(st=st) for st in negative_counts), dict(pn=deep),
+                dict(n_if=-1),
                 dict(ifs=np.array([0, 1, 0, 0, 1], np.int64)),        # divisor 0
                 dict(ifs=np.array([1, -3, 0, 0, 1], np.int64)),       # negative shift
                 dict(ifs=np.array([0, 1, 1, 1 << 62, 1], np.int64))):  # offset overflows
