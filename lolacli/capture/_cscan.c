@@ -63,7 +63,9 @@
 #define S_BACKWARDS 41
 #define S_BACK_F0 42
 #define S_MALF_F0 45
-#define S_SIZE 48
+#define S_CYC_BYTES 48
+#define S_BRD_MAX 49
+#define S_SIZE 64
 
 /* return codes */
 #define ST_NEED_MORE 0
@@ -361,6 +363,7 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         q += 12 + ln;
         if ((lw & 0x8000) == 0) break;
     }
+    i64 qend = q;
     st[S_ECAT] += 1;
     st[S_DGRAMS] += n;
     int infer = ret < 0;
@@ -414,6 +417,10 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
             st[S_CYC_N] += 1;
             st[S_CYC_LAST_TS] = ts;
             cbit = 1;
+            /* Ethernet header 14 + EtherCAT header and datagrams + FCS 4, at least 64 */
+            i64 fb = 18 + qend - p;
+            if (fb < 64) fb = 64;
+            if (fb > st[S_CYC_BYTES]) st[S_CYC_BYTES] = fb;
         }
         push(t, kp, ts, (frame << 1) | cbit, ev);
         for (i64 j = 0; j < n; j++) {
@@ -446,6 +453,7 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         i64 ado = u16le(buf, q + 4);
         i64 ln = u16le(buf, q + 6) & 0x7FF;
         i64 wkc = u16le(buf, q + 10 + ln);
+        if ((cmd == 7 || cmd == 8) && wkc > st[S_BRD_MAX]) st[S_BRD_MAX] = wkc;
         if (cyc) {
             st[S_WKC_OBS] += 1;
             observe(t, KIND_WKC, cmd, addr_key(cmd, u32le(buf, q + 2)), ln, wkc, 0, frame);

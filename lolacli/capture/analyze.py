@@ -175,6 +175,12 @@ class CaptureReport:
                  "answered": r.answered, "last_frame": r.last_frame}
                 for r in self.al_status
             ],
+            "bus_seen": {
+                # every slave increments a broadcast's WKC once: the slaves on the line
+                "slaves": c["brd_wkc_max"] or None,
+                "slaves_from": "the highest WKC of a BRD/BWR" if c["brd_wkc_max"] else None,
+                "cyclic_frame_bytes": c["cyclic_frame_bytes"] or None,
+            },
             "master_layout": {
                 "stations_assigned": len(self.layout.stations),
                 "fmmu_writes": len(self.layout.fmmu_writes),
@@ -581,6 +587,8 @@ class _Pass:
             "non_ethernet_packets": st[S.S_NON_ETH],
             "skipped_blocks": st[S.S_SKIPPED],
             "cyclic_pairs": sum(int(c.size) for c in self.rt_cyclic),
+            "brd_wkc_max": st[S.S_BRD_MAX],
+            "cyclic_frame_bytes": st[S.S_CYC_BYTES],
         }
         keep = self.keep_series
         all_rt = self.rt_cyclic + self.rt_other

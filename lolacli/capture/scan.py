@@ -88,7 +88,9 @@ S_TS_SEEN = 40
 S_BACKWARDS = 41
 S_BACK_F0 = 42  # frame numbers of the first BACK_KEEP backward steps
 S_MALF_F0 = 45  # frame numbers of the first BACK_KEEP malformed frames
-S_SIZE = 48
+S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (DESIGN.md)
+S_BRD_MAX = 49  # the highest WKC a BRD/BWR came back with: the slaves on the line
+S_SIZE = 64
 
 # --- kernel return codes -----------------------------------------------------------------
 ST_NEED_MORE = 0
@@ -402,6 +404,7 @@ def _ecat(
         q += 12 + ln
         if (lw & 0x8000) == 0:
             break
+    qend = q
     st[S_ECAT] += 1
     st[S_DGRAMS] += n
     infer = ret < 0
@@ -459,6 +462,12 @@ def _ecat(
             st[S_CYC_N] += 1
             st[S_CYC_LAST_TS] = ts
             cbit = 1
+            # Ethernet header 14 + EtherCAT header and datagrams + FCS 4, at least 64
+            fb = 18 + qend - p
+            if fb < 64:
+                fb = 64
+            if fb > st[S_CYC_BYTES]:
+                st[S_CYC_BYTES] = fb
         _push(pk, pn, pv, st, hp, ts, (frame << 1) | cbit, ev, o_evict)
         for j in range(n):
             q = dg[j]
@@ -488,6 +497,8 @@ def _ecat(
         ado = _u16(buf, q + 4, False)
         ln = _u16(buf, q + 6, False) & 0x7FF
         wkc = _u16(buf, q + 10 + ln, False)
+        if (cmd == 7 or cmd == 8) and wkc > st[S_BRD_MAX]:
+            st[S_BRD_MAX] = wkc
         if cyc:
             st[S_WKC_OBS] += 1
             _observe(wk, wn, wv, st, KIND_WKC, cmd, _addr_key(cmd, _u32(buf, q + 2, False)),

@@ -36,6 +36,7 @@ _ONE_SLAVE_RW: dict[int, int] = {Command.APRD: 1, Command.APWR: 1, Command.FPRD:
                  Command.APRW: 3, Command.FPRW: 3}
 _BROADCAST: dict[int, int] = {Command.BRD: 1, Command.BWR: 1, Command.BRW: 3}
 ENI_BASES = ("eni", "eni+capture-fmmu", "eni-fmmu", "eni-addressing")
+S_DC_SYSTIME = 0x0910
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,8 +203,13 @@ def _from_fmmus(d: DatagramVerdict, fmmus: dict[Target, list[Any]],
     return total, outs, ins
 
 
-def _coverage_note(outs: int, ins: int, where: str) -> str:
-    return f"{outs} slaves' outputs and {ins} slaves' inputs covered ({where})"
+def _coverage_note(cmd: int, outs: int, ins: int, where: str) -> str:
+    parts = []
+    if cmd in (Command.LRW, Command.LWR):
+        parts.append(f"{outs} slaves' outputs" + (" x 2" if cmd == Command.LRW else ""))
+    if cmd in (Command.LRW, Command.LRD):
+        parts.append(f"{ins} slaves' inputs")
+    return " + ".join(parts) + f" ({where})"
 
 
 def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Any]]) -> None:
@@ -211,7 +217,7 @@ def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Any]]) -> Non
         total, outs, ins = _from_fmmus(d, capture_fmmus)
         if outs or ins:
             d.expected, d.basis = total, "capture-fmmu"
-            d.note = _coverage_note(outs, ins, "the master's FMMU writes in the capture")
+            d.note = _coverage_note(d.cmd, outs, ins, "the master's FMMU writes in the capture")
             return
     d.expected = max(o.wkc for o in d.observed)
     d.basis = "max-seen"
@@ -219,13 +225,27 @@ def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Any]]) -> Non
               + (", no FMMU of the master covers it)" if d.logical and capture_fmmus else ")"))
 
 
-def _eni_command(d: DatagramVerdict, eni: Eni) -> int | None:
+_READ_MULTIPLE_WRITE = (Command.ARMW, Command.FRMW)
+
+
+def _eni_command(d: DatagramVerdict, eni: Eni) -> tuple[int, str] | None:
+    """The ENI's ``<Cnt>`` of the same cyclic command, and a note. Distributing the DC
+    system time (0x0910) by ARMW or FRMW is one job: a master may pick either (SOEM sends
+    FRMW from the reference clock's station where the ENI has ARMW); both count the slaves
+    that read or write it, so the ENI's count holds for the other command as well."""
     from lolacli.capture.scan import _addr_key
 
     for task in eni.cyclic:
         for frame in task.frames:
             for c in frame.commands:
-                if c.cmd != d.cmd or c.data_length_bytes != d.length_bytes:
+                if c.data_length_bytes != d.length_bytes:
+                    continue
+                if c.cmd != d.cmd:
+                    dc = (c.cmd in _READ_MULTIPLE_WRITE and d.cmd in _READ_MULTIPLE_WRITE
+                          and c.ado == d.address >> 16 == S_DC_SYSTIME)
+                    if dc and c.expected_wkc is not None:
+                        return c.expected_wkc, (f"the ENI's <Cnt> of its {mnemonic(c.cmd)} "
+                                                "of the DC system time (same register)")
                     continue
                 if c.logical_address is not None:
                     address = c.logical_address
@@ -233,7 +253,7 @@ def _eni_command(d: DatagramVerdict, eni: Eni) -> int | None:
                     address = ((c.ado or 0) << 16) | (c.adp or 0)
                 key = _addr_key(c.cmd, address & 0xFFFFFFFF)
                 if key == d.address and c.expected_wkc is not None:
-                    return c.expected_wkc
+                    return c.expected_wkc, "the ENI's <Cnt> for this cyclic command"
     return None
 
 
@@ -252,9 +272,10 @@ def eni_slave(eni: Eni, layout: MasterLayout, slave: Target) -> Slave | None:
 
 def _from_eni(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
               capture_fmmus: dict[Target, list[Any]]) -> None:
-    cnt = _eni_command(d, eni)
-    if cnt is not None:
-        d.expected, d.basis, d.note = cnt, "eni", "the ENI's <Cnt> for this cyclic command"
+    found = _eni_command(d, eni)
+    if found is not None:
+        d.expected, d.note = found
+        d.basis = "eni"
         return
     if d.logical:
         _eni_logical(d, eni, layout, capture_fmmus)
@@ -283,7 +304,7 @@ def _eni_logical(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
         total, outs, ins = _from_fmmus(d, capture_fmmus, weight)
         if outs or ins:
             d.expected, d.basis = total, "eni+capture-fmmu"
-            d.note = _coverage_note(outs, ins, "the master's FMMU writes in the capture, "
+            d.note = _coverage_note(d.cmd, outs, ins, "the master's FMMU writes in the capture, "
                                     "slaves' data from the ENI")
             return
     eni_fmmus = {Target("position", s.position - 1): [f for f in s.fmmus if f.enable]
@@ -291,7 +312,7 @@ def _eni_logical(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
     total, outs, ins = _from_fmmus(d, eni_fmmus)
     if outs or ins:
         d.expected, d.basis = total, "eni-fmmu"
-        d.note = _coverage_note(outs, ins, "the ENI's FMMUs")
+        d.note = _coverage_note(d.cmd, outs, ins, "the ENI's FMMUs")
         return
     d.note = ("cannot tell: the master's FMMU writes are not in the capture and the "
               "datagram lies outside the ENI's logical layout"
