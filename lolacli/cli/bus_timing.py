@@ -133,15 +133,16 @@ def timing_cmd(
             raise
         # the capture's own numbers do not fit a round trip (a veth has no wire time)
         raise InputError(f"{e}; from {measured_from}", path=str(capture)) from None
+    caution = _calibration_warning(result)
     doc = result.to_dict() | {
         "source": line.source,
         "measured_from": measured_from,
         "sources": {"frame_bytes": line.frame_bytes_from, "slaves": line.slaves_from,
                     "measured": measured_from},
-        "calibration_warning": _calibration_warning(result),
+        "calibration_warning": caution,
     }
-    if doc["calibration_warning"]:
-        warn(doc["calibration_warning"])
+    if caution:
+        warn(caution)
     if fmt is OutputFormat.json:
         emit_json(doc)
     else:

@@ -141,8 +141,8 @@ def _al_status(console: Any, d: dict[str, Any]) -> None:
         who = "BRD" if r["station"] is None else f"0x{r['station']:04X}"
         by_state.setdefault(r["state"], []).append(who)
     parts = []
-    for state, who in by_state.items():
-        shown = ", ".join(who[:8]) + (f" and {len(who) - 8} more" if len(who) > 8 else "")
+    for state, names in by_state.items():
+        shown = ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else "")
         parts.append(f"{state}: {shown}")
     console.print("AL status, last read per slave — " + "; ".join(parts))
 
