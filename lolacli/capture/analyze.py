@@ -639,7 +639,8 @@ class _Pass:
             return "inferred"
         if st[S.S_DIR_PT] == 0:
             return "mac"
-        return "packet_type" if st[S.S_DIR_PT] == st[S.S_ECAT] else "packet_type+mac"
+        # (frames of other EtherCAT types count here too, not in S_ECAT)
+        return "packet_type" if st[S.S_DIR_PT] >= st[S.S_ECAT] else "packet_type+mac"
 
     def _fate(self, all_rt: list[np.ndarray], rt_stats: dict[str, Any] | None,
               given: int | None, end_ts: int) -> FrameFate:
