@@ -65,6 +65,7 @@
 #define S_MALF_F0 45
 #define S_CYC_BYTES 48
 #define S_BRD_MAX 49
+#define S_RT_EST 50
 #define S_SIZE 64
 
 /* return codes */
@@ -96,6 +97,8 @@
 #define KIND_AL_STATUS 2
 #define MAX_RECORD (16 * 1024 * 1024)
 #define BURST_GAP_NS 1000000
+#define ECHO_ROUND_TRIPS 10
+#define ECHO_WINDOW_NS 1000000
 #define FNV_HI 0x100
 #define FNV_LO 0x1B3
 #define SEED_PAIR 0x2545F4914F6CDD1DLL
@@ -398,8 +401,18 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         ret = 0;
         i64 i = slot(t->pk, t->p_len, kp);
         if (t->pk[i] != 0 && t->pn[i] > 0) {
-            i64 e = t->pv[(i * DEPTH + t->pn[i] - 1) * PCOLS + 2];
-            if ((ev >> 17) >= (e >> 17) && (inc == 0 || (ev & 0xFFFF) != (e & 0xFFFF))) ret = 1;
+            i64 tp = (i * DEPTH + t->pn[i] - 1) * PCOLS;
+            i64 e = t->pv[tp + 2];
+            if (inc == 0 || (ev & 0xFFFF) != (e & 0xFFFF)) {
+                if ((ev >> 17) > (e >> 17)) {
+                    ret = 1;
+                } else if ((ev >> 17) == (e >> 17)) {
+                    /* as it was: an echo only within the echo window (see scan.py) */
+                    i64 window = ECHO_ROUND_TRIPS * st[S_RT_EST];
+                    if (window < ECHO_WINDOW_NS) window = ECHO_WINDOW_NS;
+                    if (ts - t->pv[tp] <= window) ret = 1;
+                }
+            }
         }
     }
     if (ret == 0) {
@@ -444,6 +457,11 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         t->o_rtfr[r] = t->pv[e + 1];
         st[S_N_RT] = r + 1;
         st[S_PAIRS] += 1;
+        if (infer) {
+            i64 rt = ts - t->pv[e];
+            if (rt < 0) rt = 0;
+            st[S_RT_EST] = st[S_PAIRS] == 1 ? rt : (7 * st[S_RT_EST] + rt) >> 3;
+        }
     } else {
         st[S_UNMATCHED_RET] += 1;
     }

@@ -41,7 +41,10 @@ BLOCK_OPB = 2
 BLOCK_SPB = 3
 BLOCK_EPB = 6
 OPT_END = 0
+OPT_IF_NAME = 2
+OPT_IF_DESCRIPTION = 3
 OPT_IF_TSRESOL = 9
+OPT_IF_OS = 12
 OPT_IF_TSOFFSET = 14
 
 PCAP_HEADER_BYTES = 24
@@ -66,6 +69,9 @@ class Interface:
     snaplen: int = 0
     tsresol: int = 6
     tsoffset_s: int = 0
+    name: str = ""  # if_name, if_description, if_os (the capturing host)
+    description: str = ""
+    os: str = ""
 
     @property
     def is_ethernet(self) -> bool:
@@ -208,6 +214,7 @@ def parse_idb(block: bytes | memoryview, big: bool) -> Interface:
     link_type, _reserved, snaplen = struct.unpack_from(order + "HHI", block, 8)
     tsresol = 6
     tsoffset = 0
+    texts = {OPT_IF_NAME: "", OPT_IF_DESCRIPTION: "", OPT_IF_OS: ""}
     pos, end = 16, total - 4
     while pos + 4 <= end:
         code, length = struct.unpack_from(order + "HH", block, pos)
@@ -218,8 +225,11 @@ def parse_idb(block: bytes | memoryview, big: bool) -> Interface:
             tsresol = value[0]
         elif code == OPT_IF_TSOFFSET and length >= 8:
             tsoffset = struct.unpack_from(order + "q", value)[0]
+        elif code in texts:
+            texts[code] = value.decode("utf-8", "replace")
         pos += 4 + length + (-length % 4)
-    return Interface(link_type, snaplen, tsresol, tsoffset)
+    return Interface(link_type, snaplen, tsresol, tsoffset, texts[OPT_IF_NAME],
+                     texts[OPT_IF_DESCRIPTION], texts[OPT_IF_OS])
 
 
 @dataclass(slots=True)

@@ -32,7 +32,10 @@ cooked captures (SLL/SLL2: 4 = sent by this host) and the locally administered b
 source MAC of Ethernet frames; 1 infers it: a frame is the echo of the pending frame with
 the same datagram sequence, indexes and lengths when its WKC sum is not smaller and, if it
 carries auto-increment/broadcast datagrams, their ADPs changed (every slave increments
-them; compared for inequality because they wrap at 16 bits).
+them; compared for inequality because they wrap at 16 bits). A frame whose WKCs are only
+equal to the pending one's is its echo only when it comes within the echo window
+(:data:`ECHO_ROUND_TRIPS` x the running round trip): a master resends a lost frame as it
+was, WKCs 0, and that copy is no echo.
 
 Address key: auto-increment and broadcast commands have their ADP incremented by every
 slave, so only ADO identifies them; configured-address and logical commands keep the
@@ -90,6 +93,7 @@ S_BACK_F0 = 42  # frame numbers of the first BACK_KEEP backward steps
 S_MALF_F0 = 45  # frame numbers of the first BACK_KEEP malformed frames
 S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (DESIGN.md)
 S_BRD_MAX = 49  # the highest WKC a BRD/BWR came back with: the slaves on the line
+S_RT_EST = 50  # running average of round trips (direction inference: the echo window)
 S_SIZE = 64
 
 # --- kernel return codes -----------------------------------------------------------------
@@ -128,6 +132,11 @@ KIND_AL_STATUS = 2
 OBS_PER_RECORD = 2 * MAX_DGRAMS
 MAX_RECORD = 16 * 1024 * 1024
 BURST_GAP_NS = 1_000_000
+#: direction inference: a frame that looks exactly like a pending one (WKCs not higher)
+#: is its echo only within ECHO_ROUND_TRIPS x the running round trip (at least
+#: ECHO_WINDOW_NS); later it is a frame of its own (a master resending a lost frame)
+ECHO_ROUND_TRIPS = 10
+ECHO_WINDOW_NS = 1_000_000
 #: The 64-bit FNV prime, FNV_HI << 32 | FNV_LO (see _mix)
 FNV_HI = 0x100
 FNV_LO = 0x1B3
@@ -444,9 +453,17 @@ def _ecat(
         ret = 0
         i = _slot(pk, hp)
         if pk[i] != 0 and pn[i] > 0:
-            e = pv[(i * DEPTH + pn[i] - 1) * PCOLS + 2]
-            if (ev >> 17) >= (e >> 17) and (inc == 0 or (ev & 0xFFFF) != (e & 0xFFFF)):
-                ret = 1
+            t = (i * DEPTH + pn[i] - 1) * PCOLS
+            e = pv[t + 2]
+            if inc == 0 or (ev & 0xFFFF) != (e & 0xFFFF):
+                if (ev >> 17) > (e >> 17):
+                    ret = 1
+                elif (ev >> 17) == (e >> 17):
+                    window = ECHO_ROUND_TRIPS * st[S_RT_EST]
+                    if window < ECHO_WINDOW_NS:
+                        window = ECHO_WINDOW_NS
+                    if ts - pv[t] <= window:
+                        ret = 1
     if ret == 0:
         st[S_OUT] += 1
         if logical:
@@ -489,6 +506,11 @@ def _ecat(
         o_rtfr[r] = pv[e + 1]
         st[S_N_RT] = r + 1
         st[S_PAIRS] += 1
+        if infer:
+            rt = ts - pv[e]
+            if rt < 0:
+                rt = 0
+            st[S_RT_EST] = rt if st[S_PAIRS] == 1 else (7 * st[S_RT_EST] + rt) >> 3
     else:
         st[S_UNMATCHED_RET] += 1
     for j in range(n):

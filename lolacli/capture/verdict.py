@@ -48,7 +48,7 @@ def timeout_ns(median_round_trip_ns: float | None, given_ns: int | None) -> tupl
         return given_ns, "--timeout"
     scaled = None if median_round_trip_ns is None else median_round_trip_ns * TIMEOUT_ROUND_TRIPS
     if scaled is not None and scaled > MIN_TIMEOUT_NS:
-        return int(scaled), "10 x the median round trip"
+        return round(scaled), "10 x the median round trip"
     return MIN_TIMEOUT_NS, "the 1 ms minimum"
 
 
