@@ -131,3 +131,28 @@ def test_list_bad_filter_is_usage_error(cli, corpus):
     code, _, err = cli("capture", "list", PCAP / "ethercrab__replay-sdo-error.pcapng",
                        "--filter", "bogus")
     assert code == 2 and "bogus" in err
+
+
+@pytest.mark.parametrize("name", ["ethercrab__twincat-scan-boxes.pcapng",
+                                  "ethercrab__soem-sdinfo-no-slaves.pcapng",
+                                  "ethercrab__replay-issue-255.pcapng"])
+def test_plot_never_a_traceback(cli, corpus, tmp_path, name):
+    """Quantised and backward timestamps (scan-boxes), nothing to plot (no-slaves), a
+    healthy stream: plots or a clean skip, never a traceback."""
+    code, _, err = cli("capture", "analyze", PCAP / name, "--plot", tmp_path, "-f", "json")
+    assert "Traceback" not in err and code in (0, 1)
+    written = sorted(p.name for p in tmp_path.glob("*.png"))
+    stem = name.removesuffix(".pcapng")
+    if name.startswith("ethercrab__soem-sdinfo-no-slaves"):
+        assert written == [f"{stem}-cycle-period.png"]  # periods, but no round trip at all
+    else:
+        assert written == sorted(f"{stem}-{k}.png" for k in ("cycle-period", "round-trip",
+                                                           "round-trip-cdf"))
+
+
+def test_plot_without_matplotlib_is_one_line(cli, faulty, tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
+    code, _, err = cli("capture", "analyze", faulty, "--plot", tmp_path)
+    assert code == 2 and "needs matplotlib" in err and "Traceback" not in err

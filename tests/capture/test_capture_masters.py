@@ -166,9 +166,14 @@ def test_master_capture_verdict(name, tmp_path):
     assert (eth["outgoing_frames"], eth["returned_frames"]) == (sent, sum(types.values()) - sent)
     assert _bus(eth) == _bus(cooked)  # the same pairs, losses and verdicts either way
 
-    # pairs and lost frames, against the emulator's own count (veth loses nothing)
-    assert eth["outgoing_frames"] == emu["received"]
-    assert eth["pairs"] == eth["returned_frames"] == emu["answered"]
+    # pairs and lost frames, against the emulator's own count (veth loses nothing). Seen
+    # once, at the start of a run under load: the emulator counted one frame more than
+    # either capture holds, and both hold its answer (an unmatched return), so the
+    # request reached the emulator without passing the master's capture point.
+    assert eth["outgoing_frames"] + eth["unmatched_returned"] == emu["received"]
+    assert eth["returned_frames"] == emu["answered"]
+    assert eth["pairs"] == emu["answered"] - eth["unmatched_returned"]
+    assert eth["unmatched_returned"] <= 1
     dropped = emu["received"] - emu["answered"]
     assert eth["lost_frames"] + eth["in_flight_at_end"] == dropped
     kinds = {f["kind"] for f in eth["findings"] if f["severity"] == "failure"}
@@ -196,11 +201,15 @@ def _check_wkc(master: str, seen: dict, eth: dict, with_eni: dict, eni) -> None:
     if "slaves" not in seen:
         return  # KickCAT never came up (--drop-p): no cyclic frame to judge
     if master == "pysoem":
+        sent = sum(seen["wkcs"].values())  # one LRW per cycle
+        back_in_time = sum(n for w, n in seen["wkcs"].items() if int(w) >= 0)
         for rep, basis in ((eth, "capture-fmmu"), (with_eni, "eni+capture-fmmu")):
             lrw = _datagram(rep, "LRW")
             assert (lrw["expected"], lrw["basis"]) == (seen["expected_wkc"], basis)
-            assert lrw["mismatches"] + lrw["bring_up"] == seen["bad_wkc"]
-            assert lrw["returns"] == sum(n for w, n in seen["wkcs"].items() if int(w) >= 0)
+            # an answer later than pysoem's timeout is -1 to pysoem, a (late) return here
+            late = lrw["returns"] - back_in_time
+            assert 0 <= late <= sent - back_in_time
+            assert seen["bad_wkc"] <= lrw["mismatches"] + lrw["bring_up"] <= seen["bad_wkc"] + late
         return
     inputs = sum(1 for s in eni.slaves if s.inputs_bits)
     outputs = sum(1 for s in eni.slaves if s.outputs_bits)

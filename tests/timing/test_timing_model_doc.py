@@ -4,6 +4,7 @@ fails when the model, the capture analysis or the corpus changed and the table d
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 from conftest import CORPUS
@@ -16,6 +17,7 @@ def _tool():
         "timing_model_check", ROOT / "tools" / "timing_model_check.py")
     assert spec and spec.loader
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
     spec.loader.exec_module(module)
     return module
 
