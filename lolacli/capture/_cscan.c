@@ -241,8 +241,9 @@ static inline void count_stream(Tables *t, i64 key) {
 /* Count one observation (kind, cmd, a, b, c, d); keep its first three and last frame. */
 static inline void observe(Tables *t, i64 kind, i64 cmd, i64 a, i64 b, i64 c, i64 d,
                            i64 frame) {
-    i64 key = key_of(mix(mix(mix(mix(mix(mix(SEED_OBS, kind), cmd), a), b & 0xFFFFFFFFLL), c),
-                         d));
+    /* three words: kind|cmd|b, a, c|d (see scan.py) */
+    i64 key = key_of(mix(mix(mix(SEED_OBS, (kind << 40) | (cmd << 32) | (b & 0xFFFFFFFFLL)), a),
+                         (c << 32) | (d & 0xFFFFFFFFLL)));
     i64 i = slot(t->wk, t->w_len, key);
     i64 base = i * OCOLS;
     i64 n = t->wn[i];

@@ -285,8 +285,9 @@ def _observe(
     frame: Any,
 ) -> Any:
     """Count one observation (kind, cmd, a, b, c, d); keep its first three and last frame."""
-    key = _key(_mix(_mix(_mix(_mix(_mix(_mix(SEED_OBS, kind), cmd), a), b & 0xFFFFFFFF), c),
-                    d))
+    # three words: kind|cmd|b, a, c|d (a and b below 2^32, kind/cmd/c/d below 2^16)
+    key = _key(_mix(_mix(_mix(SEED_OBS, (kind << 40) | (cmd << 32) | (b & 0xFFFFFFFF)), a),
+                    (c << 32) | (d & 0xFFFFFFFF)))
     i = _slot(wk, key)
     base = i * OCOLS
     n = wn[i]

@@ -164,9 +164,10 @@ def group(rows: Iterable[tuple[int, ...]]) -> list[DatagramVerdict]:
     for cmd, akey, length, wkc, count, f1, f2, f3, last in rows:
         frames = tuple(f for f in (f1, f2, f3)[: min(count, 3)])
         by_key.setdefault((cmd, akey, length), []).append(Observed(wkc, count, frames, last))
+    # in the order they first came back (ties: by command, address, length)
+    order = sorted(by_key.items(), key=lambda kv: (min(o.frames[0] for o in kv[1]), kv[0]))
     return [DatagramVerdict(cmd, akey, length, sorted(obs, key=lambda o: o.wkc))
-            for (cmd, akey, length), obs in sorted(by_key.items(),
-                                                   key=lambda kv: min(o.frames[0] for o in kv[1]))]
+            for (cmd, akey, length), obs in order]
 
 
 def verdict(rows: Iterable[tuple[int, ...]], layout: MasterLayout, eni: Eni | None) -> WkcVerdict:
