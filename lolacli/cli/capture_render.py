@@ -62,8 +62,11 @@ def _verdict(console: Any, d: dict[str, Any]) -> None:
     for f in findings:
         text = f"{f['kind']}: {f['message']}"
         if f["frames"]:
-            more = " …" if f["count"] > len(f["frames"]) else ""
-            text += "\nframes " + ", ".join(str(n) for n in f["frames"]) + more
+            listed = ", ".join(str(n) for n in f["frames"])
+            if f["count"] > len(f["frames"]):
+                text += f"\nfirst frames {listed} (of {f['count']})"
+            else:
+                text += f"\nframe{'s' if len(f['frames']) > 1 else ''} {listed}"
         grid.add_row(_SEVERITY.get(f["severity"], f["severity"]), text)
     console.print(grid)
 
@@ -95,7 +98,7 @@ def _timing(console: Any, d: dict[str, Any]) -> None:
                        "round_trip_cyclic_us"), ("cycle period", "cycle_period_us")):
         s = d[key]
         cells = ["—"] * 7 if s is None else [str(s["count"])] + [
-            f"{s[k]:.2f}" for k in _STATS[1:]]
+            _us(s[k]) for k in _STATS[1:]]
         table.add_row(label + (" (unusable)" if key in d["unusable_stats"] else ""), *cells)
     console.print(table)
     if d["unusable_stats"]:
@@ -104,6 +107,13 @@ def _timing(console: Any, d: dict[str, Any]) -> None:
         j = d["cycle_jitter_us"]
         console.print(f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
                       f"{j['max_deviation']:.2f} µs")
+
+
+def _us(value: float) -> str:
+    """Two decimals below 1 ms, one below 10 ms, none above: a row of seven fits 80
+    columns whatever the cycle (numbers are rounded, never cut)."""
+    digits = 2 if abs(value) < 1000 else 1 if abs(value) < 10_000 else 0
+    return f"{value:.{digits}f}"
 
 
 def _wkc(console: Any, d: dict[str, Any]) -> None:

@@ -156,3 +156,32 @@ def test_plot_without_matplotlib_is_one_line(cli, faulty, tmp_path, monkeypatch)
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
     code, _, err = cli("capture", "analyze", faulty, "--plot", tmp_path)
     assert code == 2 and "needs matplotlib" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("path", sorted(PCAP.glob("*")) if PCAP.is_dir() else [],
+                         ids=lambda p: p.name)
+def test_human_output_reads_at_80_columns(cli, path):
+    """Piped output is 80 columns wide (cli/common.py); names wrap, numbers are rounded to
+    fit, never cut (no ellipsis anywhere)."""
+    code, out, _ = cli("capture", "analyze", path)
+    lines = out.splitlines()
+    assert max(len(line.rstrip()) for line in lines) <= 80
+    assert "…" not in "".join(x for x in lines if not x.startswith("… "))
+    assert any(x.startswith("Verdict: ") for x in lines[:4])  # (long paths wrap)
+
+
+def test_sdo_table_says_how_many_more_and_all_shows_them(cli, corpus):
+    path = PCAP / "ethercrab__replay-ek1914-no-complete-access.pcapng"
+    code, out, _ = cli("capture", "analyze", path)
+    assert "… 34 more, --all to show" in out
+    rows = [x for x in out.splitlines() if x.strip().startswith("0x100")]
+    assert len(rows) == 50
+    code, out, _ = cli("capture", "analyze", path, "--all")
+    assert "more, --all" not in out
+    assert len([x for x in out.splitlines() if x.strip().startswith("0x100")]) == 84
+
+
+def test_every_abort_has_its_own_line(cli, corpus):
+    code, out, _ = cli("capture", "analyze", PCAP / "ethercrab__replay-sdo-error.pcapng")
+    assert ("SDO abort: slave 0x1000 0x1001:00 0x06020000 Object does not exist in the object"
+            in out.replace("\n", " "))

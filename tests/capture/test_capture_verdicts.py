@@ -368,5 +368,5 @@ def test_human_output_shows_the_verdict_and_findings(cli, tmp_path):
     lines = out.splitlines()
     assert lines[2].startswith("Verdict: FAIL (1 failure")
     assert any(line.startswith("FAIL lost: 1 outgoing frames never came back") for line in lines)
-    assert any("frames 29" in line for line in lines)
+    assert any("frame 29" in line for line in lines)
     assert max(len(line.rstrip()) for line in lines) <= 80
