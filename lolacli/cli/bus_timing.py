@@ -243,7 +243,7 @@ def _capture_round_trip_ns(path: Path, report: dict[str, Any],
         if key in report["unusable_stats"] or float(stats[statistic.value]) <= 0:
             zero = [f for f in report["findings"] if f["kind"] == "timestamps-quantised"]
             why = zero[0]["message"] if zero else "they are not positive"
-            raise InputError(f"its round trips cannot measure one: {why}", path=str(path))
+            raise InputError(f"round trips of 0 us cannot measure one: {why}", path=str(path))
         value = round(float(stats[statistic.value]) * 1000)
         label = "minimum" if statistic is Statistic.min else "median"
         return value, f"capture: {label} of {stats['count']} {what}"

@@ -9,6 +9,8 @@ from typing import Any
 SDO_ROWS = 50
 _SEVERITY = {"failure": "FAIL", "warning": "WARN", "info": "info"}
 _STATS = ("count", "min", "mean", "median", "std", "p99", "max")
+_RULES = {"mac": "by the source MAC", "packet_type": "by packet type (Linux cooked)",
+          "packet_type+mac": "by packet type and source MAC", "inferred": "inferred"}
 
 
 def _table(**kwargs: Any) -> Any:
@@ -31,7 +33,7 @@ def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
     console.print(d["file"])
     console.print(
         f"{d['format']}, {d['time_span_us'] / 1e6:.3f} s, {d['frames_total']} packets, "
-        f"engine {d['engine']}; direction by {d['direction_rule'].replace('_', ' ')}"
+        f"engine {d['engine']}; direction {_RULES.get(d['direction_rule'], d['direction_rule'])}"
     )
     _verdict(console, d)
     _frames(console, d)

@@ -62,7 +62,8 @@ def stdout_console() -> Any:
     """The console every command group prints data with, and its width rule: the
     terminal's width, ``$COLUMNS``, or 80 columns when piped. Tables fit it by wrapping
     names and headers, never by cutting numbers; a table that cannot fit is printed whole,
-    wider than that, rather than cropped (:func:`fit_table`)."""
+    wider than that, rather than cropped (:func:`fit_table`). Lines of text are not broken
+    (they stay one line for grep; a terminal wraps them)."""
     from rich.console import Console
     from rich.measure import Measurement
     from rich.table import Table
@@ -73,6 +74,8 @@ def stdout_console() -> Any:
 
         def print(self, *objects: Any, **kwargs: Any) -> None:
             tables = [o for o in objects if isinstance(o, Table)]
+            if not tables:
+                kwargs.setdefault("soft_wrap", True)  # a line of text is never broken
             for table in tables:
                 fit_table(table)
             if len(objects) == 1 and tables and "width" not in kwargs:
