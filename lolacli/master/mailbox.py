@@ -108,13 +108,23 @@ class MailboxClient:
             if d.wkc == 1:
                 break
             self._wait(deadline, "write the mailbox")
+        return self._receive(mailbox_type, deadline)
+
+    def receive(self, mailbox_type: int, *, timeout_ns: int | None = None) -> bytes:
+        """The payload of the next message of ``mailbox_type`` the slave posts, without
+        sending anything: the further fragments of an answer that comes in several
+        mailboxes (SDO Information). TransportError on timeout."""
+        deadline = self.port.now_ns() + (self.timeout_ns if timeout_ns is None else timeout_ns)
+        return self._receive(mailbox_type, deadline)
+
+    def _receive(self, mailbox_type: int, deadline: int) -> bytes:
         while True:
             answer = self._read_once()
             if answer is not None:
                 kind, body = answer
                 if kind == MailboxType.ERR:
                     error = decode_mailbox_error(body)
-                    raise WireError(f"station {station}: mailbox error: {error.text}")
+                    raise WireError(f"station {self.layout.station}: mailbox error: {error.text}")
                 if kind == mailbox_type and not self._is_emergency(kind, body):
                     return body
                 continue
