@@ -54,6 +54,7 @@ class LolaBus:
         """``where`` ends the slaves' descriptions ("on eth0"); ``name`` names the bus in
         messages about it as a whole ("eth0")."""
         from lolacli.master.core import MasterOptions
+        from lolacli.master.port import SinglePort
         from lolacli.master.preop import PreopBus, configure_from_sii
 
         self.transport = transport
@@ -73,6 +74,7 @@ class LolaBus:
             transport.close()
             raise
         self.eni = eni
+        self.port = SinglePort(self.bus.master)  # mailbox frames: one datagram each
 
     def slaves(self) -> tuple[SlaveRef, ...]:
         return slave_refs(self.eni)
@@ -109,6 +111,7 @@ class LolaClient:
         self.slave = slave
         self.description = description
         self.mailbox: MailboxClient = bus.bus.master.mailbox(slave)
+        self.mailbox.port = bus.port
         self.mailbox.timeout_ns = bus.timeout_ns
         self.sdo: MasterSdo = MasterSdo(self.mailbox)
 

@@ -140,3 +140,51 @@ def test_a_line_cut_after_slave_3() -> None:
     bus = LolaBus(ChainTransport(chain), None, where="here", name="cut")
     assert [s.name for s in bus.slaves()] == [s.name for s in eni.slaves[:3]]
     assert bus.client(bus.slaves()[2]).upload(0x1000, 0) == bytes.fromhex("92010200")
+
+
+def test_the_single_port_sends_what_the_master_sends() -> None:
+    """Mailbox frames through SinglePort are Master.exchange's, byte for byte (but for the
+    frame index), and so are the answers."""
+    from lolacli.master.core import Master
+    from lolacli.master.port import SinglePort
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram
+
+    eni = _eni()
+    transport = ChainTransport(make_chain(eni, EmulateOptions()))
+    seen: list[tuple[bytes, bool]] = []
+    transport.taps.append(lambda _t, frame, back: seen.append((frame, back)))
+    master = Master(eni, transport)
+    port = SinglePort(master)
+    for d in (
+        Datagram.physical(Command.BRD, 0, 0x0000, 1),
+        Datagram.physical(Command.APRD, 0xFFFC, 0x0130, 2),
+        Datagram.physical(Command.APWR, 0xFFFC, 0x0010, b"\xed\x03"),
+        Datagram.physical(Command.FPRD, 0x03ED, 0x0010, 2),
+        Datagram.physical(Command.FPRD, 0x0999, 0x0010, 2),
+    ):
+        a = master.exchange_one(d)
+        b = port.exchange_one(d)
+        (out_a, _), (back_a, _), (out_b, _), (back_b, _) = seen[-4:]
+        assert out_a[:17] + out_a[18:] == out_b[:17] + out_b[18:]
+        assert back_a[:17] + back_a[18:] == back_b[:17] + back_b[18:]
+        assert (a.cmd, a.address, a.data, a.wkc) == (b.cmd, b.address, b.data, b.wkc)
+    assert master.stats.frames_sent == 10 and master.stats.acyclic_frames == 10
+
+
+def test_the_single_port_sends_lost_frames_again() -> None:
+    from lolacli.master.core import Master, MasterOptions
+    from lolacli.master.port import SinglePort
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram
+
+    eni = _eni()
+    lossy = ChainTransport(make_chain(eni, EmulateOptions(drop_probability=0.5, seed=3)))
+    master = Master(eni, lossy, options=MasterOptions(frame_retries=20))
+    port = SinglePort(master)
+    for _ in range(20):
+        assert port.exchange_one(Datagram.physical(Command.BRD, 0, 0, 1)).wkc == 25
+    assert master.stats.frames_lost > 0
+    dead = ChainTransport(make_chain(eni, EmulateOptions(drop_probability=1.0)))
+    with pytest.raises(TransportError, match="after 4 frames"):
+        SinglePort(Master(eni, dead)).exchange_one(Datagram.physical(Command.BRD, 0, 0, 1))
