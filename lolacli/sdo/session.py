@@ -176,11 +176,13 @@ class LolaSession(Session):
             )
 
     def target(self, spec: str) -> Target:
-        from lolacli.sdo.files import esi_dictionary
-
         ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
         client = self.bus.client(ref)
-        dictionary = esi_dictionary(self.esi, ref.identity) if self.esi else None
+        dictionary = None
+        if self.esi:
+            from lolacli.sdo.files import esi_dictionary
+
+            dictionary = esi_dictionary(self.esi, ref.identity)
         return Target(spec.strip(), client, dictionary)
 
     def close(self) -> None:
