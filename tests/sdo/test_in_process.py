@@ -235,3 +235,19 @@ def test_every_corpus_chain_answers_or_names_the_refusal(path, corpus) -> None:
                 continue
             got = read(target.client, 0x1018, 2)
             assert got.value == slave.identity.product_code, slave.name
+
+
+def test_the_library_example_of_the_docs() -> None:
+    import os
+
+    script = ROOT / "docs" / "examples" / "sdo_access.py"
+    done = subprocess.run(
+        [sys.executable, str(script)],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[:3] == ["198948", "250000 90d00300", "24 Statusword"]
