@@ -145,8 +145,15 @@ def test_slaves_without_mailbox_and_unknown_slaves(cli) -> None:
     assert code == 2 and "position 26" in err
     code, _out, err = cli("sdo", "read", "Joint99", "0x1000")
     assert code == 2 and "Joint99" in err
-    code, _out, err = cli("sdo", "read", "5", "0x1000", "--eni", str(ROOT / "nosuch.xml"))
-    assert code == 3 and "nosuch.xml" in err
+    for bad, why in (
+        (ROOT / "nosuch.xml", "no such file"),
+        (ROOT / "lolacli", "is a directory"),
+        (ROOT / "README.md", "not well-formed XML"),
+    ):
+        code, _out, err = cli("sdo", "read", "5", "0x1000", "--eni", str(bad))
+        assert code == 3 and str(bad) in err and why in err, err
+    code, _out, err = cli("sdo", "read", "5", "0x1000", "--esi", str(ROOT / "README.md"))
+    assert code == 3 and "README.md" in err
     with pytest.raises(UsageError):
         open_session(TransportOptions(backend="soem"))
 
