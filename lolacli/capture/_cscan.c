@@ -29,11 +29,11 @@
 #define S_PAIRS 7
 #define S_UNMATCHED_RET 8
 #define S_CYC_N 9
-#define S_CYC_MATCHED 10
-#define S_LOST 11
+#define S_EVICTED 10
+#define S_N_EVICT 11
 #define S_CYC_LAST_TS 12
-#define S_WKC_MISMATCH 13
-#define S_WKC_CHECKED 14
+#define S_N_CFG 13
+#define S_WKC_OBS 14
 #define S_DC_DGRAMS 15
 #define S_DC_BURST 16
 #define S_DC_LAST_TS 17
@@ -48,7 +48,7 @@
 #define S_LAST_TS 26
 #define S_MODE 27
 #define S_STREAM_SIG 28
-#define S_WKC_FIXED 29
+#define S_DIRMODE 29
 #define S_NON_ETH 30
 #define S_ECAT_OTHER 31
 #define S_FIRST_TS 32
@@ -58,8 +58,15 @@
 #define S_CUT 36
 #define S_LOGICAL_OUT 37
 #define S_SKIPPED 38
-#define S_N_WKCBAD 39
+#define S_DIR_PT 39
 #define S_TS_SEEN 40
+#define S_BACKWARDS 41
+#define S_BACK_F0 42
+#define S_MALF_F0 45
+#define S_CYC_BYTES 48
+#define S_BRD_MAX 49
+#define S_RT_EST 50
+#define S_SIZE 64
 
 /* return codes */
 #define ST_NEED_MORE 0
@@ -70,24 +77,44 @@
 #define ST_DONE 5
 
 #define MODE_LOGICAL 0
+#define DIR_INFER 1
+
+#define LINK_ETHERNET 1
+#define LINK_SLL 113
+#define LINK_SLL2 276
+#define PACKET_OUTGOING 4
 
 #define DEPTH 16
+#define PCOLS 3
 #define MAX_DGRAMS 128
 #define CHECK_EVERY 64
 #define MBX_COLS 8
-#define WKC_COLS 5
+#define CFG_COLS 6
+#define EVICT_COLS 2
+#define OCOLS 10
+#define BACK_KEEP 3
+#define KIND_WKC 1
+#define KIND_AL_STATUS 2
 #define MAX_RECORD (16 * 1024 * 1024)
 #define BURST_GAP_NS 1000000
+#define ECHO_ROUND_TRIPS 10
+#define ECHO_WINDOW_NS 1000000
 #define FNV_HI 0x100
 #define FNV_LO 0x1B3
 #define SEED_PAIR 0x2545F4914F6CDD1DLL
 #define SEED_STREAM 0x1B873593LL
-#define SEED_WKC 0x5BD1E995LL
+#define SEED_OBS 0x5BD1E995LL
 
 #define TS_LIMIT_NS (1LL << 62)
 #define TS_OFFSET_LIMIT_NS (1LL << 60)
 #define TS_BAD (-(1LL << 62))
 
+#define REG_STATION_ADDRESS 0x0010
+#define REG_AL_CONTROL 0x0120
+#define REG_AL_STATUS 0x0130
+#define REG_AL_STATUS_CODE 0x0134
+#define REG_FMMU 0x0600
+#define REG_FMMU_END 0x0700
 #define REG_DC_SYSTIME 0x0910
 #define REG_DC_SYSTIME_DIFF 0x092C
 #define MBX_AREA 0x1000
@@ -97,9 +124,9 @@ typedef int64_t i64;
 /* Every array the scanner reads or writes; lengths in elements. Filled by cengine.py. */
 typedef struct {
     i64 *st, *cmd_counts;
-    i64 *pk, *pn, *pts, *pmeta;
-    i64 *sk, *sc, *wk, *wv;
-    i64 *o_rt, *o_rtts, *o_rtcyc, *o_period, *o_burst, *o_dc, *o_mbx, *o_wkc;
+    i64 *pk, *pn, *pv;
+    i64 *sk, *sc, *wk, *wn, *wv;
+    i64 *o_rt, *o_rtts, *o_rtfr, *o_period, *o_burst, *o_dc, *o_mbx, *o_cfg, *o_evict;
     const i64 *ifs;
     i64 n_if, p_len, s_len, w_len, o_len;
 } Tables;
@@ -131,11 +158,13 @@ static inline i64 slot(const i64 *keys, i64 len, i64 key) {
     return i;
 }
 
+/* APRD APWR APRW ARMW BRD BWR BRW: every slave increments the ADP. */
+static inline int adp_incremented(i64 cmd) {
+    return cmd == 1 || cmd == 2 || cmd == 3 || cmd == 13 || cmd == 7 || cmd == 8 || cmd == 9;
+}
+
 static inline i64 addr_key(i64 cmd, i64 addr) {
-    /* APRD APWR APRW ARMW BRD BWR BRW: ADP is incremented by every slave. */
-    if (cmd == 1 || cmd == 2 || cmd == 3 || cmd == 13 || cmd == 7 || cmd == 8 || cmd == 9)
-        return addr & 0xFFFF0000LL;
-    return addr;
+    return adp_incremented(cmd) ? (addr & 0xFFFF0000LL) : addr;
 }
 
 static inline i64 floordiv(i64 a, i64 b) {
@@ -167,24 +196,37 @@ static i64 ts_ns(i64 units, i64 mode, i64 a, i64 b, i64 off) {
     return sec * 1000000000LL + ((frac * 1000000000LL) >> a) + off;
 }
 
-static inline void push(Tables *t, i64 key, i64 ts, i64 meta) {
+static inline void push(Tables *t, i64 key, i64 ts, i64 meta, i64 ev) {
+    i64 *st = t->st;
     i64 i = slot(t->pk, t->p_len, key);
     if (t->pk[i] == 0) {
         t->pk[i] = key;
-        t->st[S_P_USED] += 1;
+        st[S_P_USED] += 1;
     }
     i64 n = t->pn[i];
-    i64 base = i * DEPTH;
+    i64 base = i * DEPTH * PCOLS;
+    i64 *pv = t->pv;
     if (n == DEPTH) {
-        for (i64 j = 0; j < DEPTH - 1; j++) {
-            t->pts[base + j] = t->pts[base + j + 1];
-            t->pmeta[base + j] = t->pmeta[base + j + 1];
-        }
+        /* the oldest pending frame leaves the stack: it can no longer be paired */
+        i64 r = st[S_N_EVICT] * EVICT_COLS;
+        t->o_evict[r] = pv[base + 1];
+        t->o_evict[r + 1] = pv[base];
+        st[S_N_EVICT] += 1;
+        st[S_EVICTED] += 1;
+        for (i64 j = PCOLS; j < DEPTH * PCOLS; j++) pv[base + j - PCOLS] = pv[base + j];
         n = DEPTH - 1;
     }
-    t->pts[base + n] = ts;
-    t->pmeta[base + n] = meta;
+    i64 e = base + n * PCOLS;
+    pv[e] = ts;
+    pv[e + 1] = meta;
+    pv[e + 2] = ev;
     t->pn[i] = n + 1;
+}
+
+/* Count a malformed frame; keep the numbers of the first BACK_KEEP. */
+static inline void bad(i64 *st) {
+    if (st[S_MALFORMED] < BACK_KEEP) st[S_MALF_F0 + st[S_MALFORMED]] = st[S_FRAMES];
+    st[S_MALFORMED] += 1;
 }
 
 static inline void count_stream(Tables *t, i64 key) {
@@ -196,31 +238,33 @@ static inline void count_stream(Tables *t, i64 key) {
     t->sc[i] += 1;
 }
 
-static inline void check_wkc(const uint8_t *buf, i64 q, i64 cmd, i64 akey, i64 ln, i64 wkc,
-                             Tables *t) {
-    i64 *st = t->st;
-    i64 wkey = key_of(mix(mix(mix(SEED_WKC, cmd), akey), ln));
-    i64 ws = slot(t->wk, t->w_len, wkey);
-    int known = t->wk[ws] != 0;
-    if (!known && st[S_WKC_FIXED] == 0) {
-        t->wk[ws] = wkey;
-        t->wv[ws] = wkc;
-        st[S_W_USED] += 1;
-        known = 1;
+/* Count one observation (kind, cmd, a, b, c, d); keep its first three and last frame. */
+static inline void observe(Tables *t, i64 kind, i64 cmd, i64 a, i64 b, i64 c, i64 d,
+                           i64 frame) {
+    /* three words: kind|cmd|b, a, c|d (see scan.py) */
+    i64 key = key_of(mix(mix(mix(SEED_OBS, (kind << 40) | (cmd << 32) | (b & 0xFFFFFFFFLL)), a),
+                         (c << 32) | (d & 0xFFFFFFFFLL)));
+    i64 i = slot(t->wk, t->w_len, key);
+    i64 base = i * OCOLS;
+    i64 n = t->wn[i];
+    i64 *wv = t->wv;
+    if (t->wk[i] == 0) {
+        t->wk[i] = key;
+        t->st[S_W_USED] += 1;
+        wv[base] = kind;
+        wv[base + 1] = cmd;
+        wv[base + 2] = a;
+        wv[base + 3] = b;
+        wv[base + 4] = c;
+        wv[base + 5] = d;
+        wv[base + 6] = frame;
+    } else if (n == 1) {
+        wv[base + 7] = frame;
+    } else if (n == 2) {
+        wv[base + 8] = frame;
     }
-    if (known) {
-        st[S_WKC_CHECKED] += 1;
-        if (t->wv[ws] != wkc) {
-            st[S_WKC_MISMATCH] += 1;
-            i64 r = st[S_N_WKCBAD] * WKC_COLS;
-            t->o_wkc[r] = st[S_FRAMES];
-            t->o_wkc[r + 1] = cmd;
-            t->o_wkc[r + 2] = u32le(buf, q + 2);
-            t->o_wkc[r + 3] = t->wv[ws];
-            t->o_wkc[r + 4] = wkc;
-            st[S_N_WKCBAD] += 1;
-        }
-    }
+    wv[base + 9] = frame;
+    t->wn[i] = n + 1;
 }
 
 static inline void returned_extras(const uint8_t *buf, i64 q, i64 cmd, i64 ado, i64 ln,
@@ -233,6 +277,18 @@ static inline void returned_extras(const uint8_t *buf, i64 q, i64 cmd, i64 ado, 
             i64 mag = v & 0x7FFFFFFF;
             t->o_dc[st[S_N_DC]] = (v & 0x80000000LL) ? -mag : mag;
             st[S_N_DC] += 1;
+        }
+    }
+    /* AL status reads (FPRD/FPRW of one slave, BRD/BRW of all), with the status code
+     * when the read covers 0x0134 too. */
+    if ((cmd == 4 || cmd == 6 || cmd == 7 || cmd == 9) && wkc >= 1 && ado <= REG_AL_STATUS) {
+        if (ado + ln >= REG_AL_STATUS + 2) {
+            i64 status = u16le(buf, q + 10 + REG_AL_STATUS - ado);
+            i64 code = -1;
+            if (ado + ln >= REG_AL_STATUS_CODE + 2)
+                code = u16le(buf, q + 10 + REG_AL_STATUS_CODE - ado);
+            i64 station = (cmd == 4 || cmd == 6) ? u16le(buf, q + 2) : 0;
+            observe(t, KIND_AL_STATUS, cmd, station, code, wkc, status, st[S_FRAMES]);
         }
     }
     /* Mailbox candidates (ETG.1000.4 Table 29). */
@@ -256,6 +312,26 @@ static inline void returned_extras(const uint8_t *buf, i64 q, i64 cmd, i64 ado, 
     }
 }
 
+/* Flag an outgoing write of a station address, AL control or FMMU (see scan.py). */
+static inline void config_write(const uint8_t *buf, i64 q, i64 cmd, i64 ado, i64 ln,
+                                Tables *t) {
+    if (!(cmd == 2 || cmd == 3 || cmd == 5 || cmd == 6 || cmd == 8 || cmd == 9)) return;
+    i64 end = ado + ln;
+    if (ado >= REG_FMMU_END || end <= REG_STATION_ADDRESS) return;
+    if (ado < REG_STATION_ADDRESS + 2 || (ado < REG_AL_CONTROL + 2 && end > REG_AL_CONTROL) ||
+        end > REG_FMMU) {
+        i64 *st = t->st;
+        i64 r = st[S_N_CFG] * CFG_COLS;
+        t->o_cfg[r] = st[S_FRAMES];
+        t->o_cfg[r + 1] = q;
+        t->o_cfg[r + 2] = cmd;
+        t->o_cfg[r + 3] = u16le(buf, q + 2);
+        t->o_cfg[r + 4] = ado;
+        t->o_cfg[r + 5] = ln;
+        st[S_N_CFG] += 1;
+    }
+}
+
 static inline void drift(i64 ts, Tables *t) {
     i64 *st = t->st;
     st[S_DC_DGRAMS] += 1;
@@ -268,7 +344,8 @@ static inline void drift(i64 ts, Tables *t) {
     st[S_DC_LAST_TS] = ts;
 }
 
-/* One EtherCAT payload at p (captured bytes end at limit); 0 when malformed. */
+/* One EtherCAT payload at p (captured bytes end at limit); ret 0 sent, 1 returned, -1 to
+ * infer. 0 when malformed. */
 static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t) {
     i64 *st = t->st;
     i64 dg[MAX_DGRAMS];
@@ -290,44 +367,82 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         q += 12 + ln;
         if ((lw & 0x8000) == 0) break;
     }
+    i64 qend = q;
     st[S_ECAT] += 1;
     st[S_DGRAMS] += n;
+    int infer = ret < 0;
     i64 hp = SEED_PAIR, hs = SEED_STREAM;
     int logical = 0;
+    i64 wsum = 0, adps = 0, inc = 0;
     for (i64 j = 0; j < n; j++) {
         q = dg[j];
         i64 cmd = buf[q];
-        i64 akey = addr_key(cmd, u32le(buf, q + 2));
+        i64 addr = u32le(buf, q + 2);
+        i64 akey = addr_key(cmd, addr);
         t->cmd_counts[cmd] += 1;
         hp = mix(mix(hp, (cmd << 8) | buf[q + 1]), akey);
         hs = mix(mix(hs, cmd), akey);
         if (cmd == 10 || cmd == 11 || cmd == 12) logical = 1;
+        if (infer) {
+            i64 ln = u16le(buf, q + 6) & 0x7FF;
+            hp = mix(hp, ln);
+            wsum += u16le(buf, q + 10 + ln);
+            if (adp_incremented(cmd)) {
+                adps += addr & 0xFFFF;
+                inc = 1;
+            }
+        }
     }
     i64 kp = key_of(hp), ks = key_of(hs);
     int cyc = st[S_MODE] == MODE_LOGICAL ? logical : (ks == st[S_STREAM_SIG]);
+    i64 frame = st[S_FRAMES];
+    i64 ev = (wsum << 17) | (inc << 16) | (adps & 0xFFFF);
+    if (infer) {
+        /* an echo of the most recent pending frame with this key, or a frame of its own */
+        ret = 0;
+        i64 i = slot(t->pk, t->p_len, kp);
+        if (t->pk[i] != 0 && t->pn[i] > 0) {
+            i64 tp = (i * DEPTH + t->pn[i] - 1) * PCOLS;
+            i64 e = t->pv[tp + 2];
+            if (inc == 0 || (ev & 0xFFFF) != (e & 0xFFFF)) {
+                if ((ev >> 17) > (e >> 17)) {
+                    ret = 1;
+                } else if ((ev >> 17) == (e >> 17)) {
+                    /* as it was: an echo only within the echo window (see scan.py) */
+                    i64 window = ECHO_ROUND_TRIPS * st[S_RT_EST];
+                    if (window < ECHO_WINDOW_NS) window = ECHO_WINDOW_NS;
+                    if (ts - t->pv[tp] <= window) ret = 1;
+                }
+            }
+        }
+    }
     if (ret == 0) {
         st[S_OUT] += 1;
         if (logical)
             st[S_LOGICAL_OUT] += 1;
         else if (st[S_LOGICAL_OUT] == 0)
             count_stream(t, ks);
-        i64 meta = 0;
+        i64 cbit = 0;
         if (cyc) {
             if (st[S_CYC_N] > 0) {
-                if (st[S_CYC_MATCHED] == 0) st[S_LOST] += 1;
                 t->o_period[st[S_N_PERIOD]] = ts - st[S_CYC_LAST_TS];
                 st[S_N_PERIOD] += 1;
             }
             st[S_CYC_N] += 1;
-            st[S_CYC_MATCHED] = 0;
             st[S_CYC_LAST_TS] = ts;
-            meta = st[S_CYC_N];
+            cbit = 1;
+            /* Ethernet header 14 + EtherCAT header and datagrams + FCS 4, at least 64 */
+            i64 fb = 18 + qend - p;
+            if (fb < 64) fb = 64;
+            if (fb > st[S_CYC_BYTES]) st[S_CYC_BYTES] = fb;
         }
-        push(t, kp, ts, meta);
+        push(t, kp, ts, (frame << 1) | cbit, ev);
         for (i64 j = 0; j < n; j++) {
             q = dg[j];
             i64 cmd = buf[q];
-            if ((cmd == 13 || cmd == 14) && u16le(buf, q + 4) == REG_DC_SYSTIME) drift(ts, t);
+            i64 ado = u16le(buf, q + 4);
+            if ((cmd == 13 || cmd == 14) && ado == REG_DC_SYSTIME) drift(ts, t);
+            config_write(buf, q, cmd, ado, u16le(buf, q + 6) & 0x7FF, t);
         }
         return 1;
     }
@@ -336,14 +451,18 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
     if (t->pk[i] != 0 && t->pn[i] > 0) {
         i64 top = t->pn[i] - 1;
         t->pn[i] = top;
-        i64 meta = t->pmeta[i * DEPTH + top];
+        i64 e = (i * DEPTH + top) * PCOLS;
         i64 r = st[S_N_RT];
-        t->o_rt[r] = ts - t->pts[i * DEPTH + top];
+        t->o_rt[r] = ts - t->pv[e];
         t->o_rtts[r] = ts;
-        t->o_rtcyc[r] = meta > 0 ? 1 : 0;
+        t->o_rtfr[r] = t->pv[e + 1];
         st[S_N_RT] = r + 1;
         st[S_PAIRS] += 1;
-        if (meta > 0 && meta == st[S_CYC_N]) st[S_CYC_MATCHED] = 1;
+        if (infer) {
+            i64 rt = ts - t->pv[e];
+            if (rt < 0) rt = 0;
+            st[S_RT_EST] = st[S_PAIRS] == 1 ? rt : (7 * st[S_RT_EST] + rt) >> 3;
+        }
     } else {
         st[S_UNMATCHED_RET] += 1;
     }
@@ -353,37 +472,66 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
         i64 ado = u16le(buf, q + 4);
         i64 ln = u16le(buf, q + 6) & 0x7FF;
         i64 wkc = u16le(buf, q + 10 + ln);
-        if (cyc) check_wkc(buf, q, cmd, addr_key(cmd, u32le(buf, q + 2)), ln, wkc, t);
+        if ((cmd == 7 || cmd == 8) && wkc > st[S_BRD_MAX]) st[S_BRD_MAX] = wkc;
+        if (cyc) {
+            st[S_WKC_OBS] += 1;
+            observe(t, KIND_WKC, cmd, addr_key(cmd, u32le(buf, q + 2)), ln, wkc, 0, frame);
+        }
         returned_extras(buf, q, cmd, ado, ln, wkc, ts, t);
     }
     return 1;
 }
 
-/* One Ethernet frame of cap captured bytes at d. */
-static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, Tables *t) {
+/* One link-layer frame (Ethernet, SLL or SLL2) of cap captured bytes at d. */
+static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, i64 link, Tables *t) {
     i64 *st = t->st;
     st[S_FRAMES] += 1;
     /* not S_FRAMES == 1: packets skipped in pcapng_record are counted without a time */
     if (st[S_TS_SEEN] == 0) {
         st[S_TS_SEEN] = 1;
         st[S_FIRST_TS] = ts;
+    } else if (ts < st[S_END_TS]) {
+        if (st[S_BACKWARDS] < BACK_KEEP) st[S_BACK_F0 + st[S_BACKWARDS]] = st[S_FRAMES];
+        st[S_BACKWARDS] += 1;
     }
     st[S_END_TS] = ts;
     st[S_LAST_TS] = ts;
-    if (cap < 14) {
-        st[S_MALFORMED] += 1;
-        return;
-    }
-    i64 limit = d + cap;
-    i64 etype = u16be(buf, d + 12);
-    i64 p = d + 14;
-    if (etype == 0x8100) {
-        if (cap < 18) {
-            st[S_MALFORMED] += 1;
+    int cooked = 1;
+    i64 ret, etype, p;
+    if (link == LINK_SLL) {
+        if (cap < 16) {
+            bad(st);
             return;
         }
-        etype = u16be(buf, d + 16);
-        p = d + 18;
+        ret = u16be(buf, d) == PACKET_OUTGOING ? 0 : 1;
+        etype = u16be(buf, d + 14);
+        p = d + 16;
+    } else if (link == LINK_SLL2) {
+        if (cap < 20) {
+            bad(st);
+            return;
+        }
+        ret = buf[d + 10] == PACKET_OUTGOING ? 0 : 1;
+        etype = u16be(buf, d);
+        p = d + 20;
+    } else {
+        if (cap < 14) {
+            bad(st);
+            return;
+        }
+        ret = (buf[d + 6] & 0x02) ? 1 : 0;
+        etype = u16be(buf, d + 12);
+        p = d + 14;
+        cooked = 0;
+    }
+    i64 limit = d + cap;
+    if (etype == 0x8100) {
+        if (p + 4 > limit) {
+            bad(st);
+            return;
+        }
+        etype = u16be(buf, p + 2);
+        p = p + 4;
         st[S_VLAN] += 1;
     }
     if (etype == 0x0800) {
@@ -407,34 +555,37 @@ static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, Tables 
         st[S_NONECAT] += 1;
         return;
     }
-    i64 ret = buf[d + 6] & 0x02;
-    if (!ecat(buf, p, limit, ret, ts, t))
-        st[S_MALFORMED] += 1;
-    else if (cap < orig)
-        st[S_CUT] += 1;
+    if (st[S_DIRMODE] == DIR_INFER) ret = -1;
+    if (!ecat(buf, p, limit, ret, ts, t)) {
+        bad(st);
+        return;
+    }
+    if (cooked && ret >= 0) st[S_DIR_PT] += 1;
+    if (cap < orig) st[S_CUT] += 1;
 }
 
 static int full(Tables *t, i64 cap) {
     i64 *st = t->st;
     i64 lim = cap - MAX_DGRAMS - 2;
     if (st[S_N_RT] >= lim || st[S_N_PERIOD] >= lim || st[S_N_BURST] >= lim ||
-        st[S_N_DC] >= lim || st[S_N_MBX] >= lim || st[S_N_WKCBAD] >= lim)
+        st[S_N_DC] >= lim || st[S_N_MBX] >= lim || st[S_N_CFG] >= lim || st[S_N_EVICT] >= lim)
         return ST_FLUSH;
     if (st[S_P_USED] * 2 > t->p_len || st[S_S_USED] * 2 > t->s_len || st[S_W_USED] * 2 > t->w_len)
         return ST_GROW;
     return -1;
 }
 
-/* An EPB/OPB/SPB: data offset (-1 when not analysed), captured and original length, ts. */
+/* An EPB/OPB/SPB: data offset (-1 when not analysed), captured and original length, ts,
+ * link type. */
 static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int big,
-                         Tables *t, i64 *incl_out, i64 *orig_out, i64 *ts_out) {
+                         Tables *t, i64 *incl_out, i64 *orig_out, i64 *ts_out, i64 *link_out) {
     i64 *st = t->st;
     const i64 *ifs = t->ifs;
     i64 iface, incl, orig, ts, start;
     if (btype == 3) {
         if (total < 16 || t->n_if == 0) {
             st[S_FRAMES] += 1;
-            st[S_MALFORMED] += 1;
+            bad(st);
             return -1;
         }
         orig = u32x(buf, pos + 8, big);
@@ -445,7 +596,7 @@ static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int 
     } else {
         if (total < 32) {
             st[S_FRAMES] += 1;
-            st[S_MALFORMED] += 1;
+            bad(st);
             return -1;
         }
         iface = btype == 6 ? u32x(buf, pos + 8, big) : u16x(buf, pos + 8, big);
@@ -455,7 +606,7 @@ static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int 
         start = pos + 28;
         if (28 + incl > total - 4 || iface >= t->n_if) {
             st[S_FRAMES] += 1;
-            st[S_MALFORMED] += 1;
+            bad(st);
             return -1;
         }
         ts = TS_BAD;
@@ -465,7 +616,8 @@ static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int 
             ts = ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3]);
         }
     }
-    if (ifs[iface * 5 + 4] == 0) {
+    i64 link = ifs[iface * 5 + 4];
+    if (link == 0) {
         st[S_FRAMES] += 1;
         st[S_NONECAT] += 1;
         st[S_NON_ETH] += 1;
@@ -473,12 +625,13 @@ static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int 
     }
     if (ts == TS_BAD) {
         st[S_FRAMES] += 1;
-        st[S_MALFORMED] += 1;
+        bad(st);
         return -1;
     }
     *incl_out = incl;
     *orig_out = orig;
     *ts_out = ts;
+    *link_out = link;
     return start;
 }
 
@@ -491,9 +644,10 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
     i64 cap = t->o_len - CHECK_EVERY * (MAX_DGRAMS + 2);
     i64 count = 0;
     i64 *st = t->st;
+    i64 pcap_link = t->n_if > 0 ? t->ifs[4] : LINK_ETHERNET;
     for (;;) {
         count += 1;
-        /* the WKC table before every record: one record may add MAX_DGRAMS keys */
+        /* the observation table before every record: one record may add many keys */
         if (count % CHECK_EVERY == 1 || st[S_W_USED] * 2 > t->w_len) {
             int act = full(t, cap);
             if (act >= 0) {
@@ -501,7 +655,7 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
                 return act;
             }
         }
-        i64 d, incl, orig, ts, size;
+        i64 d, incl, orig, ts, size, link;
         if (fmt == 0) {
             if (pos + 16 > end) break;
             incl = u32x(buf, pos + 8, big);
@@ -515,6 +669,7 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
             ts = u32x(buf, pos, big) * 1000000000LL + (ns_res ? frac : frac * 1000);
             d = pos + 16;
             orig = u32x(buf, pos + 12, big);
+            link = pcap_link;
         } else {
             if (pos + 8 > end) break;
             i64 btype = u32x(buf, pos, big);
@@ -537,13 +692,13 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
                 pos += size;
                 continue;
             }
-            d = pcapng_record(buf, pos, size, btype, big, t, &incl, &orig, &ts);
+            d = pcapng_record(buf, pos, size, btype, big, t, &incl, &orig, &ts, &link);
             if (d < 0) {
                 pos += size;
                 continue;
             }
         }
-        packet(buf, d, incl, orig, ts, t);
+        packet(buf, d, incl, orig, ts, link, t);
         pos += size;
     }
     *pos_io = pos;
@@ -552,33 +707,25 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
 }
 
 /* Move the entries of one open-addressing table into a new (empty) one; see scan.rehash.
- * depth 0 for the stream and WKC tables (on = their values). */
-i64 lolacli_rehash(const i64 *ok, const i64 *on, const i64 *ots, const i64 *ometa, i64 olen,
-                   i64 depth, i64 *nk, i64 *nn, i64 *nts, i64 *nmeta, i64 nlen,
-                   i64 keep_empty) {
+ * width values per slot (0 for the stream table). */
+i64 lolacli_rehash(const i64 *ok, const i64 *on, const i64 *ov, i64 olen, i64 width, i64 *nk,
+                   i64 *nn, i64 *nv, i64 nlen, i64 keep_empty) {
     i64 used = 0;
     for (i64 i = 0; i < olen; i++) {
         i64 k = ok[i];
         if (k == 0) continue;
-        if (depth > 0 && on[i] == 0 && !keep_empty) continue;
+        if (on[i] == 0 && !keep_empty) continue;
         i64 j = slot(nk, nlen, k);
         nk[j] = k;
         nn[j] = on[i];
-        for (i64 d = 0; d < depth; d++) {
-            nts[j * depth + d] = ots[i * depth + d];
-            nmeta[j * depth + d] = ometa[i * depth + d];
-        }
+        for (i64 w = 0; w < width; w++) nv[j * width + w] = ov[i * width + w];
         used += 1;
     }
     return used;
 }
 
-/* End of file: the last cyclic frame without a return is lost; close the DC burst. */
+/* End of file: close the DC burst. */
 void lolacli_finish(i64 *st, i64 *o_burst) {
-    if (st[S_CYC_N] > 0 && st[S_CYC_MATCHED] == 0) {
-        st[S_LOST] += 1;
-        st[S_CYC_MATCHED] = 1;
-    }
     if (st[S_DC_BURST] > 0) {
         o_burst[st[S_N_BURST]] = st[S_DC_BURST];
         st[S_N_BURST] += 1;

@@ -1,15 +1,22 @@
-"""Capture analysis: one streaming pass of the scanner, then numpy statistics.
+"""Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
 
 :func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
 :func:`lolacli.capture.scan.scan` (its C twin, or numba-compiled, when available) walk the
-records. The scanner pairs frames, counts commands, checks working counters and tracks DC drift
-compensation as it goes; the rare mailbox datagrams it flags are decoded here in Python
-(:mod:`lolacli.capture.sdo`). Definitions follow DESIGN.md (Direction, Pairing, Cyclic
-stream, Expected WKC, Lost frame); the JSON shape is ``lolacli.capture/1``.
+records. The scanner pairs frames, counts commands, counts the working counters and AL
+states it sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
+configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
+:mod:`lolacli.capture.layout`). Verdicts are drawn once the whole file is read
+(:mod:`lolacli.capture.wkc`, :mod:`lolacli.capture.verdict`), because their references
+(median round trip, expected WKC) need all of it. Definitions follow DESIGN.md
+(Direction, Pairing, Cyclic stream, Expected WKC, Lost frame, WKC verdict, Timestamp
+quality); the JSON shape is ``lolacli.capture/1``.
 
-Cyclic stream: outgoing frames that carry a logical (LRD/LWR/LRW) datagram; when there
-are none, the outgoing frames with the most frequent (command, address key) sequence,
-found by a second pass.
+Passes: the first takes the direction from the link layer (packet type of Linux cooked
+captures, else the source MAC). When that makes every frame go one way, a second pass
+infers the direction from the frames themselves and is kept when it pairs any. Cyclic
+stream: outgoing frames that carry a logical (LRD/LWR/LRW) datagram; when there are none,
+the outgoing frames with the most frequent (command, address key) sequence, found by one
+more pass.
 """
 
 from __future__ import annotations
@@ -18,25 +25,42 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from lolacli.capture import scan as S
 from lolacli.capture.fast import choose_engine, kernels
+from lolacli.capture.layout import AlStatusRead, MasterLayout, last_al_status
 from lolacli.capture.reader import (
+    ANALYSED_LINK_TYPES,
     FORMAT_PCAP,
     PCAP_HEADER_BYTES,
     CaptureReader,
     Interface,
     parse_idb,
 )
-from lolacli.capture.sdo import SdoTracker
 from lolacli.capture.stats import summary_us
+from lolacli.capture.verdict import (
+    FAILURE,
+    INFO,
+    MIN_TIMEOUT_NS,
+    WARNING,
+    Finding,
+    Findings,
+    FrameFate,
+    fates,
+    first,
+    frame_findings,
+    timeout_ns,
+    timestamp_findings,
+)
+from lolacli.capture.wkc import WkcVerdict, eni_slaves_not_mapped, verdict
 from lolacli.errors import CaptureError
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
+    from lolacli.capture.sdo import SdoTracker
     from lolacli.eni.model import Eni
 
 SCHEMA = "lolacli.capture/1"
@@ -44,8 +68,7 @@ CHUNK_BYTES = 8 * 1024 * 1024
 OUT_ROWS = 1 << 16
 PAIR_SLOTS = 1 << 12
 STREAM_SLOTS = 1 << 10
-WKC_SLOTS = 1 << 8
-WKC_DETAIL_ROWS = 200
+OBS_SLOTS = 1 << 10
 
 Progress = Callable[[int, int], None]
 
@@ -77,7 +100,13 @@ class CaptureReport:
     round_trip_cyclic_stats: dict[str, Any] | None
     cycle_period_stats: dict[str, Any] | None
     cyclic_stream: str
-    wkc: dict[str, Any]
+    direction_rule: str
+    wkc_verdict: WkcVerdict
+    fate: FrameFate
+    findings: list[Finding]
+    unusable_stats: list[str]
+    al_status: list[AlStatusRead]
+    layout: MasterLayout
     dc: dict[str, Any]
     sdo: SdoTracker
     time_span_ns: int
@@ -90,11 +119,16 @@ class CaptureReport:
 
     @property
     def lost_frames(self) -> int:
-        return self.counts["lost_frames"]
+        return int(self.fate.lost.size)
 
     @property
     def wkc_mismatches(self) -> int:
-        return int(self.wkc["mismatches"])
+        return self.wkc_verdict.mismatches
+
+    @property
+    def failed(self) -> bool:
+        """Whether a finding is a failure (``capture analyze`` exits 1)."""
+        return any(f.severity == FAILURE for f in self.findings)
 
     def to_dict(self) -> dict[str, Any]:
         c = self.counts
@@ -104,12 +138,14 @@ class CaptureReport:
             "file": self.path,
             "format": self.format,
             "engine": self.engine,
+            "verdict": "fail" if self.failed else "pass",
             "frames_total": c["frames_total"],
             "ecat_frames": c["ecat_frames"],
             "non_ecat_frames": c["non_ecat_frames"],
             "malformed_frames": c["malformed_frames"],
             "datagrams_total": c["datagrams_total"],
             "datagrams_by_cmd": self.datagrams_by_cmd,
+            "direction_rule": self.direction_rule,
             "outgoing_frames": c["outgoing_frames"],
             "returned_frames": c["returned_frames"],
             "pairs": c["pairs"],
@@ -119,13 +155,41 @@ class CaptureReport:
             "round_trip_cyclic_us": self.round_trip_cyclic_stats,
             "cyclic_stream": self.cyclic_stream,
             "cyclic_frames": c["cyclic_frames"],
-            # cyclic frames never answered at all (lost_frames also counts late answers)
+            # cyclic frames never answered at all (lost or still in flight at the end)
             "cyclic_unmatched": c["cyclic_frames"] - c["cyclic_pairs"],
             "cycle_period_us": self.cycle_period_stats,
             "cycle_jitter_us": _jitter(self.cycle_period_stats),
+            "unusable_stats": list(self.unusable_stats),
+            "lost_frames": self.lost_frames,
+            "late_frames": self.fate.late,
+            "in_flight_at_end": int(self.fate.in_flight.size),
+            "timeout_us": self.fate.timeout_ns / 1000.0,
+            "timeout_source": self.fate.timeout_source,
             "wkc_mismatches": self.wkc_mismatches,
-            "wkc": self.wkc,
-            "lost_frames": c["lost_frames"],
+            "wkc_reference": self.wkc_verdict.reference,
+            "wkc_checked": self.wkc_verdict.checked,
+            "wkc": self.wkc_verdict.to_dict(),
+            "al_status": [
+                {"station": None if r.broadcast else r.station, "cmd": mnemonic(r.cmd),
+                 "state": r.describe(), "status": r.status, "code": r.code,
+                 "answered": r.answered, "last_frame": r.last_frame}
+                for r in self.al_status
+            ],
+            "bus_seen": {
+                # every slave increments a broadcast's WKC once: the slaves on the line
+                "slaves": c["brd_wkc_max"] or None,
+                "slaves_from": "the highest WKC of a BRD/BWR" if c["brd_wkc_max"] else None,
+                "cyclic_frame_bytes": c["cyclic_frame_bytes"] or None,
+            },
+            "master_layout": {
+                "stations_assigned": len(self.layout.stations),
+                "fmmu_writes": len(self.layout.fmmu_writes),
+                "slaves_mapped": len(self.layout.fmmus()),
+                "al_requests": len(self.layout.al_requests),
+            },
+            "timestamp_findings": [f.to_dict() for f in self.findings
+                                   if f.kind.startswith("timestamps-") or f.kind == "cut-short"],
+            "findings": [f.to_dict() for f in self.findings],
             "sdo_transactions": len(self.sdo.transactions),
             "sdo_aborts": [
                 {
@@ -175,6 +239,9 @@ def analyze_file(
     engine: str = "auto",
     keep_series: bool = False,
     chunk_bytes: int = CHUNK_BYTES,
+    timeout_ns: int | None = None,
+    max_lost: int = 0,
+    max_wkc_mismatches: int = 0,
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
@@ -182,37 +249,54 @@ def analyze_file(
     under 2 MB), ``"c"``, ``"numba"`` or ``"python"``; all give identical results.
     ``progress(done_bytes, total_bytes)`` is called once per chunk.
     ``keep_series`` keeps the return timestamp of every pair (for plots).
+    ``timeout_ns`` replaces the in-flight timeout (10 x the median round trip, >= 1 ms);
+    ``max_lost`` and ``max_wkc_mismatches`` are how many lost frames and WKC mismatches
+    are still no failure.
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
     reader = CaptureReader(path)  # validates the file header
     eng = choose_engine(engine, os.path.getsize(reader.path))
-    run = _Pass(reader, eng, eni, S.MODE_LOGICAL, 0, keep_series, chunk_bytes, progress)
-    run.run()
+
+    def scan_pass(dirmode: int, mode: int, sig: int) -> _Pass:
+        p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress)
+        p.run()
+        return p
+
+    run = scan_pass(S.DIR_AUTO, S.MODE_LOGICAL, 0)
+    st = run.st
+    if st[S.S_ECAT] > 0 and (st[S.S_OUT] == 0 or st[S.S_RET] == 0):
+        inferred = scan_pass(S.DIR_INFER, S.MODE_LOGICAL, 0)
+        if inferred.st[S.S_PAIRS] > 0:
+            run = inferred
     if run.st[S.S_LOGICAL_OUT] == 0 and run.st[S.S_OUT] > 0:
-        sig = run.top_stream()
-        run = _Pass(reader, eng, eni, S.MODE_SIGNATURE, sig, keep_series, chunk_bytes, progress)
-        run.run()
-    return run.report()
+        run = scan_pass(int(run.st[S.S_DIRMODE]), S.MODE_SIGNATURE, run.top_stream())
+    return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches)
 
 
 def _zeros(n: int, py: bool) -> Any:
     return [0] * n if py else np.zeros(n, np.int64)
 
 
+def _np(values: Any) -> np.ndarray:
+    return np.asarray(values, dtype=np.int64)
+
+
 class _Pass:
-    """One scan of the file with fixed cyclic-stream rules."""
+    """One scan of the file with fixed direction and cyclic-stream rules."""
 
     def __init__(
         self,
         reader: CaptureReader,
         engine: str,
-        eni: Eni | None,
+        dirmode: int,
         mode: int,
         stream_sig: int,
         keep_series: bool,
         chunk_bytes: int,
         progress: Progress | None,
     ) -> None:
+        from lolacli.capture.sdo import SdoTracker
+
         self.reader = reader
         self.engine = engine
         self.k = kernels(engine)
@@ -224,86 +308,70 @@ class _Pass:
         self.st = _zeros(S.S_SIZE, py)
         self.st[S.S_MODE] = mode
         self.st[S.S_STREAM_SIG] = stream_sig
+        self.st[S.S_DIRMODE] = dirmode
         self.cmd_counts = _zeros(256, py)
         self.dg = _zeros(S.MAX_DGRAMS, py)
         self._new_pair_table(PAIR_SLOTS)
         self.sk, self.sc = _zeros(STREAM_SLOTS, py), _zeros(STREAM_SLOTS, py)
-        self.wk, self.wv = _zeros(WKC_SLOTS, py), _zeros(WKC_SLOTS, py)
+        self.wk, self.wn = _zeros(OBS_SLOTS, py), _zeros(OBS_SLOTS, py)
+        self.wv = _zeros(OBS_SLOTS * S.OCOLS, py)
         self.o_rt = _zeros(OUT_ROWS, py)
         self.o_rtts = _zeros(OUT_ROWS, py)
-        self.o_rtcyc = _zeros(OUT_ROWS, py)
+        self.o_rtfr = _zeros(OUT_ROWS, py)
         self.o_period = _zeros(OUT_ROWS, py)
         self.o_burst = _zeros(OUT_ROWS, py)
         self.o_dc = _zeros(OUT_ROWS, py)
         self.o_mbx = _zeros(OUT_ROWS * S.MBX_COLS, py)
-        self.o_wkc = _zeros(OUT_ROWS * S.WKC_COLS, py)
+        self.o_cfg = _zeros(OUT_ROWS * S.CFG_COLS, py)
+        self.o_evict = _zeros(OUT_ROWS * S.EVICT_COLS, py)
         self.ifs = _zeros(5 * 64, py)
         self.n_if = 0
         self.interfaces: list[Interface] = []
-        self.big = reader.header.big_endian
+        header = reader.header
+        self.big = header.big_endian
+        if header.format == FORMAT_PCAP:
+            link = header.link_type if header.link_type in ANALYSED_LINK_TYPES else 0
+            for j, v in enumerate((0, 1, 1, 0, link)):
+                self.ifs[j] = v
+            self.n_if = 1
         self.rt_cyclic: list[np.ndarray] = []  # round trips of cyclic frames
         self.rt_other: list[np.ndarray] = []  # of all other pairs
         self.rt_series: list[np.ndarray] = []  # all, in order (keep_series)
         self.rt_ts: list[np.ndarray] = []
+        self.odd_rt: list[np.ndarray] = []  # (frame, rt) of round trips <= 0 or >= 1 ms
         self.periods: list[np.ndarray] = []
         self.bursts = np.zeros(0, np.int64)
         self.dc_values: list[np.ndarray] = []
-        self.wkc_rows: list[list[int]] = []
+        self.evicted: list[np.ndarray] = []  # (frame << 1 | cyclic, ts)
+        self.layout = MasterLayout()
         self.sdo = SdoTracker()
         self.stopped_at: int | None = None
-        if eni is not None:
-            self._load_eni(eni)
+        self.cut_short = False
 
     # --- tables ----------------------------------------------------------------------
     def _new_pair_table(self, slots: int) -> None:
         py = self.py
         self.pk, self.pn = _zeros(slots, py), _zeros(slots, py)
-        self.pts, self.pmeta = _zeros(slots * S.DEPTH, py), _zeros(slots * S.DEPTH, py)
+        self.pv = _zeros(slots * S.DEPTH * S.PCOLS, py)
 
     def _grow(self) -> None:
         st, py, k = self.st, self.py, self.k
         if st[S.S_P_USED] * 2 > len(self.pk):
             live = sum(1 for n in self.pn if n) if py else int(np.count_nonzero(self.pn))
             slots = len(self.pk) * (2 if live * 4 > len(self.pk) else 1)
-            old = (self.pk, self.pn, self.pts, self.pmeta)
+            old = (self.pk, self.pn, self.pv)
             self._new_pair_table(slots)
-            st[S.S_P_USED] = k.rehash(*old, self.pk, self.pn, self.pts, self.pmeta, False)
+            st[S.S_P_USED] = k.rehash(*old, self.pk, self.pn, self.pv, False)
         if st[S.S_S_USED] * 2 > len(self.sk):
-            self.sk, self.sc, st[S.S_S_USED] = self._grow_kv(self.sk, self.sc)
+            nk, nn = _zeros(len(self.sk) * 2, self.py), _zeros(len(self.sk) * 2, self.py)
+            empty = _zeros(0, self.py)
+            st[S.S_S_USED] = k.rehash(self.sk, self.sc, empty, nk, nn, empty, True)
+            self.sk, self.sc = nk, nn
         if st[S.S_W_USED] * 2 > len(self.wk):
-            self.wk, self.wv, st[S.S_W_USED] = self._grow_kv(self.wk, self.wv)
-
-    def _grow_kv(self, keys: Any, vals: Any) -> tuple[Any, Any, int]:
-        nk, nv = _zeros(len(keys) * 2, self.py), _zeros(len(keys) * 2, self.py)
-        empty = _zeros(0, self.py)
-        used = self.k.rehash(keys, vals, empty, empty, nk, nv, empty, empty, True)
-        return nk, nv, used
-
-    def _load_eni(self, eni: Eni) -> None:
-        """Expected WKC per cyclic command from the ENI's ``<Cnt>`` (lookup only)."""
-        entries: dict[int, int] = {}
-        for cyclic in eni.cyclic:
-            for frame in cyclic.frames:
-                for c in frame.commands:
-                    if c.expected_wkc is None:
-                        continue
-                    if c.logical_address is not None:
-                        address = c.logical_address
-                    else:
-                        address = ((c.ado or 0) << 16) | (c.adp or 0)
-                    akey = S._addr_key(c.cmd, address & 0xFFFFFFFF)
-                    key = S._key(S._mix(S._mix(S._mix(S.SEED_WKC, c.cmd), akey),
-                                        c.data_length_bytes))
-                    entries[key] = c.expected_wkc
-        while len(entries) * 2 > len(self.wk):
-            self.wk, self.wv = _zeros(len(self.wk) * 2, self.py), _zeros(len(self.wk) * 2, self.py)
-        for key, value in entries.items():
-            i = S._slot(self.wk, key)
-            self.wk[i] = key
-            self.wv[i] = value
-        self.st[S.S_W_USED] = len(entries)
-        self.st[S.S_WKC_FIXED] = 1
-        self.eni_commands = len(entries)
+            size = len(self.wk) * 2
+            nk, nn, nv = _zeros(size, py), _zeros(size, py), _zeros(size * S.OCOLS, py)
+            st[S.S_W_USED] = k.rehash(self.wk, self.wn, self.wv, nk, nn, nv, True)
+            self.wk, self.wn, self.wv = nk, nn, nv
 
     def top_stream(self) -> int:
         if self.py:
@@ -320,7 +388,6 @@ class _Pass:
         with open(path, "rb") as f:
             base = 0  # file offset of buf[0]
             pos = PCAP_HEADER_BYTES if fmt == FORMAT_PCAP else 0
-            end, eof = 0, False
             f.seek(0)
             end, eof = _fill(f, buf, 0)
             while True:
@@ -328,28 +395,26 @@ class _Pass:
                 pos, status = self.k.scan(
                     view, pos, end, eof, fmt, self.big, self.reader.header.nanoseconds,
                     self.ifs, self.n_if, self.st, self.cmd_counts, self.dg,
-                    self.pk, self.pn, self.pts, self.pmeta, self.sk, self.sc, self.wk, self.wv,
-                    self.o_rt, self.o_rtts, self.o_rtcyc, self.o_period, self.o_burst,
-                    self.o_dc, self.o_mbx, self.o_wkc,
+                    self.pk, self.pn, self.pv, self.sk, self.sc, self.wk, self.wn, self.wv,
+                    self.o_rt, self.o_rtts, self.o_rtfr, self.o_period, self.o_burst,
+                    self.o_dc, self.o_mbx, self.o_cfg, self.o_evict,
                 )
                 self._drain(view)
                 if status == S.ST_DONE:
                     break
                 if status == S.ST_CORRUPT:
-                    self.st[S.S_MALFORMED] += 1
-                    self.stopped_at = base + pos
+                    self._stop(buf, pos, end, eof, base)
                     break
                 if status == S.ST_GROW:
                     self._grow()
                     continue
                 if status == S.ST_BLOCK:
-                    need = self._block(buf, pos, end, eof, base)
+                    need = self._block(buf, pos, end, eof)
                     if need == 0:
                         pos = self._block_done
                         continue
                     if need < 0:
-                        self.st[S.S_MALFORMED] += 1
-                        self.stopped_at = base + pos
+                        self._stop(buf, pos, end, eof, base)
                         break
                 elif status == S.ST_FLUSH:
                     continue
@@ -365,13 +430,22 @@ class _Pass:
         self._drain(b"")
         if self.progress is not None:
             self.progress(total, total)
-        if self.interfaces and not any(i.is_ethernet for i in self.interfaces):
+        if self.interfaces and not any(i.analysed for i in self.interfaces):
             types = sorted({i.link_type for i in self.interfaces})
             raise CaptureError(
-                f"no Ethernet interface in the capture (link types {types})", path=str(path)
+                f"no Ethernet or Linux cooked (SLL/SLL2) interface in the capture (link types "
+                f"{types})", path=str(path)
             )
 
-    def _block(self, buf: np.ndarray, pos: int, end: int, eof: bool, base: int) -> int:
+    def _stop(self, buf: np.ndarray, pos: int, end: int, eof: bool, base: int) -> None:
+        """A record the scanner cannot read: the file was cut short (the record runs past
+        its end) or is damaged there."""
+        self.st[S.S_MALFORMED] += 1
+        self.stopped_at = base + pos
+        self.cut_short = eof and _runs_past_end(buf, pos, end, self.reader.header.format,
+                                                self.big)
+
+    def _block(self, buf: np.ndarray, pos: int, end: int, eof: bool) -> int:
         """A pcapng SHB or IDB at ``pos``: 0 handled, 1 need more bytes, -1 corrupt."""
         if pos + 12 > end:
             return -1 if eof else 1
@@ -411,7 +485,7 @@ class _Pass:
             self.ifs = grown
         mode, a, b, off = iface.ts_params()
         base = self.n_if * 5
-        for j, v in enumerate((mode, a, b, off, 1 if iface.is_ethernet else 0)):
+        for j, v in enumerate((mode, a, b, off, iface.link_type if iface.analysed else 0)):
             self.ifs[base + j] = v
         self.n_if += 1
 
@@ -419,19 +493,23 @@ class _Pass:
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
-            rt = np.array(self.o_rt[:n], np.int64)
-            cyc = np.array(self.o_rtcyc[:n], np.int64) != 0
+            rt = _np(self.o_rt[:n])
+            meta = _np(self.o_rtfr[:n])
+            cyc = (meta & 1) != 0
             self.rt_cyclic.append(_compact(rt[cyc]))
             self.rt_other.append(_compact(rt[~cyc]))
+            odd = (rt <= 0) | (rt >= MIN_TIMEOUT_NS)
+            if odd.any():
+                self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
             if self.keep_series:
                 self.rt_series.append(rt)
-                self.rt_ts.append(np.array(self.o_rtts[:n], np.int64))
+                self.rt_ts.append(_np(self.o_rtts[:n]))
         n = int(st[S.S_N_PERIOD])
         if n:
-            self.periods.append(_compact(np.array(self.o_period[:n], np.int64)))
+            self.periods.append(_compact(_np(self.o_period[:n])))
         n = int(st[S.S_N_BURST])
         if n:
-            counts = np.bincount(np.array(self.o_burst[:n], np.int64))
+            counts = np.bincount(_np(self.o_burst[:n]))
             if counts.size > self.bursts.size:
                 counts[: self.bursts.size] += self.bursts
                 self.bursts = counts
@@ -439,21 +517,56 @@ class _Pass:
                 self.bursts[: counts.size] += counts
         n = int(st[S.S_N_DC])
         if n:
-            self.dc_values.append(np.array(self.o_dc[:n], np.int64))
-        n = int(st[S.S_N_WKCBAD])
-        for r in range(min(n, WKC_DETAIL_ROWS - len(self.wkc_rows))):
-            self.wkc_rows.append([int(v) for v in self.o_wkc[r * S.WKC_COLS:(r + 1) * S.WKC_COLS]])
+            self.dc_values.append(_np(self.o_dc[:n]))
+        n = int(st[S.S_N_EVICT])
+        if n:
+            self.evicted.append(_np(self.o_evict[: n * S.EVICT_COLS]).reshape(n, S.EVICT_COLS))
+        n = int(st[S.S_N_CFG])
+        for r in range(n):
+            frame, q, cmd, adp, ado, ln = (int(v) for v in
+                                           self.o_cfg[r * S.CFG_COLS:(r + 1) * S.CFG_COLS])
+            self.layout.feed(frame, cmd, adp, ado, bytes(view[q + 10 : q + 10 + ln]))
         n = int(st[S.S_N_MBX])
         for r in range(n):
             row = [int(v) for v in self.o_mbx[r * S.MBX_COLS:(r + 1) * S.MBX_COLS]]
             frame, ts, q, cmd, address, ln = row[:6]
             data = bytes(view[q + 10 : q + 10 + ln])
             self.sdo.feed(frame, ts, cmd, address, data)
-        for i in (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_WKCBAD, S.S_N_MBX):
+        for i in (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
+                  S.S_N_EVICT):
             st[i] = 0
 
+    # --- what the pass saw -------------------------------------------------------------
+    def _pending(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(frame, ts, cyclic) of every outgoing frame left unanswered."""
+        pn = _np(self.pn)
+        pv = _np(self.pv).reshape(pn.size, S.DEPTH, S.PCOLS)
+        live = np.arange(S.DEPTH)[None, :] < pn[:, None]
+        meta, ts = pv[..., 1][live], pv[..., 0][live]
+        if self.evicted:
+            rows = np.concatenate(self.evicted)
+            meta, ts = np.concatenate([meta, rows[:, 0]]), np.concatenate([ts, rows[:, 1]])
+        return meta >> 1, ts, (meta & 1) != 0
+
+    def _observations(self, kind: int) -> list[tuple[int, ...]]:
+        """Observation rows of one kind: the six fields after ``kind``... see scan.py."""
+        wk = _np(self.wk)
+        used = np.flatnonzero(wk)
+        wv = _np(self.wv).reshape(wk.size, S.OCOLS)[used]
+        wn = _np(self.wn)[used]
+        rows: list[tuple[int, ...]] = []
+        for v, n in zip(wv.tolist(), wn.tolist(), strict=True):
+            if v[0] != kind:
+                continue
+            if kind == S.KIND_WKC:
+                rows.append((v[1], v[2], v[3], v[4], n, v[6], v[7], v[8], v[9]))
+            else:
+                rows.append((v[1], v[2], v[3], v[4], v[5], n, v[6], v[9]))
+        return rows
+
     # --- result ----------------------------------------------------------------------
-    def report(self) -> CaptureReport:
+    def report(self, eni: Eni | None, given_timeout_ns: int | None, max_lost: int,
+               max_wkc: int) -> CaptureReport:
         st = [int(v) for v in self.st]
         by_cmd = {mnemonic(c): int(n) for c, n in enumerate(self.cmd_counts) if n}
         counts = {
@@ -467,21 +580,34 @@ class _Pass:
             "pairs": st[S.S_PAIRS],
             "unmatched_returned": st[S.S_UNMATCHED_RET],
             "cyclic_frames": st[S.S_CYC_N],
-            "lost_frames": st[S.S_LOST],
             "vlan_frames": st[S.S_VLAN],
             "udp_frames": st[S.S_UDP],
             "non_command_ecat_frames": st[S.S_ECAT_OTHER],
             "snaplen_cut_frames": st[S.S_CUT],
             "non_ethernet_packets": st[S.S_NON_ETH],
             "skipped_blocks": st[S.S_SKIPPED],
+            "cyclic_pairs": sum(int(c.size) for c in self.rt_cyclic),
+            "brd_wkc_max": st[S.S_BRD_MAX],
+            "cyclic_frame_bytes": st[S.S_CYC_BYTES],
         }
         keep = self.keep_series
-        keep = self.keep_series
-        counts["cyclic_pairs"] = sum(int(c.size) for c in self.rt_cyclic)
-        rt_cyclic_stats = summary_us(self.rt_cyclic)
-        rt_stats = summary_us(self.rt_cyclic + self.rt_other)
-        period_stats = summary_us(self.periods)
-        mode = "logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature"
+        all_rt = self.rt_cyclic + self.rt_other
+        rt_stats = summary_us(all_rt)
+        findings = Findings()
+        fate = self._fate(all_rt, rt_stats, given_timeout_ns, st[S.S_END_TS])
+        rule = self._direction_rule(st)
+        frame_findings(findings, counts, fate, max_lost, rule)
+        unusable = self._timestamps(findings, all_rt, st)
+        self._file_findings(findings, st)
+        wkc = verdict(self._observations(S.KIND_WKC), self.layout, eni)
+        _wkc_findings(findings, wkc, max_wkc, eni, self.layout)
+        al = last_al_status(self._observations(S.KIND_AL_STATUS))
+        _al_findings(findings, al, self.layout)
+        for t in self.sdo.aborts():
+            findings.add("sdo-abort", WARNING,
+                         f"SDO abort 0x{t.abort_code or 0:08X} ({t.to_dict()['abort_text']}) "
+                         f"on 0x{t.index:04X}:{t.subindex:02X} of slave 0x{t.slave:04X}",
+                         [t.end_frame], 1)
         return CaptureReport(
             path=str(self.reader.path),
             format="pcap" if self.reader.header.format == FORMAT_PCAP else "pcapng",
@@ -489,10 +615,16 @@ class _Pass:
             counts=counts,
             datagrams_by_cmd=by_cmd,
             round_trip_stats=rt_stats,
-            round_trip_cyclic_stats=rt_cyclic_stats,
-            cycle_period_stats=period_stats,
-            cyclic_stream=mode,
-            wkc=self._wkc_dict(st),
+            round_trip_cyclic_stats=summary_us(self.rt_cyclic),
+            cycle_period_stats=summary_us(self.periods),
+            cyclic_stream="logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature",
+            direction_rule=rule,
+            wkc_verdict=wkc,
+            fate=fate,
+            findings=_ordered(findings.items),
+            unusable_stats=unusable,
+            al_status=al,
+            layout=self.layout,
             dc=self._dc_dict(st),
             sdo=self.sdo,
             time_span_ns=st[S.S_END_TS] - st[S.S_FIRST_TS],
@@ -502,17 +634,55 @@ class _Pass:
             cycle_period_ns=_take(self.periods) if keep else None,
         )
 
-    def _wkc_dict(self, st: list[int]) -> dict[str, Any]:
-        return {
-            "reference": "eni" if st[S.S_WKC_FIXED] else "first-seen",
-            "checked_datagrams": st[S.S_WKC_CHECKED],
-            "mismatches": st[S.S_WKC_MISMATCH],
-            "first_mismatches": [
-                {"frame": r[0], "cmd": mnemonic(r[1]), "address": f"0x{r[2]:08X}",
-                 "expected": r[3], "received": r[4]}
-                for r in self.wkc_rows[:20]
-            ],
-        }
+    def _direction_rule(self, st: list[int]) -> str:
+        if st[S.S_DIRMODE] == S.DIR_INFER:
+            return "inferred"
+        if st[S.S_DIR_PT] == 0:
+            return "mac"
+        # (frames of other EtherCAT types count here too, not in S_ECAT)
+        return "packet_type" if st[S.S_DIR_PT] >= st[S.S_ECAT] else "packet_type+mac"
+
+    def _fate(self, all_rt: list[np.ndarray], rt_stats: dict[str, Any] | None,
+              given: int | None, end_ts: int) -> FrameFate:
+        median = None if rt_stats is None else float(rt_stats["median"]) * 1000
+        limit = timeout_ns(median, given)
+        odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
+        late_count = sum(int(np.count_nonzero(c > limit[0])) for c in all_rt)
+        late_frames = first(odd[odd[:, 1] > limit[0], 0])
+        frames, ts, cyc = self._pending()
+        return fates(frames, ts, cyc, end_ts, limit, late_count, late_frames)
+
+    def _timestamps(self, out: Findings, all_rt: list[np.ndarray], st: list[int]) -> list[str]:
+        zero = sum(int(np.count_nonzero(c == 0)) for c in all_rt)
+        negative = sum(int(np.count_nonzero(c < 0)) for c in all_rt)
+        odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
+        bad_frames = first(odd[odd[:, 1] <= 0, 0])
+        back = st[S.S_BACKWARDS]
+        back_frames = tuple(st[S.S_BACK_F0:S.S_BACK_F0 + min(back, S.BACK_KEEP)])
+        periods_bad = sum(int(np.count_nonzero(c <= 0)) for c in self.periods)
+        pairs = sum(int(c.size) for c in all_rt)
+        return timestamp_findings(out, zero, negative, bad_frames, pairs, back, back_frames,
+                                  periods_bad)
+
+    def _file_findings(self, out: Findings, st: list[int]) -> None:
+        total = os.path.getsize(self.reader.path)
+        if self.stopped_at is not None:
+            unread = total - self.stopped_at
+            if self.cut_short:
+                out.add("cut-short", WARNING,
+                        f"the file ends inside a record at offset {self.stopped_at} (the "
+                        f"capture was cut short); its last {unread} bytes are not analysed",
+                        count=1)
+            else:
+                out.add("unreadable", FAILURE,
+                        f"the file is damaged at offset {self.stopped_at}: the {unread} bytes "
+                        f"after it (of {total}) could not be read", count=1)
+        malformed = st[S.S_MALFORMED] - (1 if self.stopped_at is not None else 0)
+        if malformed > 0:
+            frames = st[S.S_MALF_F0:S.S_MALF_F0 + min(malformed, S.BACK_KEEP)]
+            out.add("malformed", WARNING,
+                    f"{malformed} frames could not be decoded (truncated or damaged)",
+                    frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
         sizes = np.repeat(np.arange(self.bursts.size), self.bursts)
@@ -529,6 +699,80 @@ class _Pass:
             "system_time_difference_max_abs_ns": int(np.abs(values).max()) if values.size else None,
             "system_time_difference_last_ns": int(values[-1]) if values.size else None,
         }
+
+
+_SEVERITY_ORDER = {FAILURE: 0, WARNING: 1, INFO: 2}
+
+
+def _ordered(items: list[Finding]) -> list[Finding]:
+    return sorted(items, key=lambda f: _SEVERITY_ORDER.get(f.severity, 3))
+
+
+def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
+                  layout: MasterLayout) -> None:
+    total = wkc.mismatches
+    for d in wkc.datagrams:
+        counted = wkc._counts(d)
+        if counted and d.mismatches:
+            values = ", ".join(f"{o.wkc} ×{o.count}" for o in d.observed if o.wkc != d.expected)
+            out.add("wkc-mismatch", FAILURE if total > max_wkc else WARNING,
+                    f"{d.name()}: WKC differs from the expected {d.expected} in "
+                    f"{d.mismatches} of {d.returns} returns (seen: {values}; expected: "
+                    f"{d.note})", d.mismatch_frames, d.mismatches)
+        if counted and d.bring_up:
+            out.add("wkc-bring-up", INFO,
+                    f"{d.name()}: {d.bring_up} returns below {d.expected} before it first "
+                    "reached it (the bus coming up)", (), d.bring_up)
+        if d.expected is None:
+            out.add("wkc-unknown", WARNING, f"{d.name()}: {d.note}",
+                    [o.frames[0] for o in d.observed], d.returns)
+    if eni is None:
+        return
+    if wkc.checked == 0:
+        if wkc.datagrams:
+            reason = "; ".join(f"{d.name()}: {d.note}" for d in wkc.datagrams
+                               if d.expected is None) or "no expected value from the ENI"
+        else:
+            reason = "no cyclic datagram came back"
+        out.add("wkc-unverified", FAILURE,
+                f"0 returns of cyclic datagrams could be checked against the ENI: {reason}")
+    missing = eni_slaves_not_mapped(eni, layout)
+    if missing:
+        names = ", ".join(f"{s.position} {s.name}" for s in missing[:5])
+        out.add("eni-slave-unmapped", FAILURE,
+                f"{len(missing)} ENI slaves with process data have no FMMU in the master's "
+                f"layout (not in the bus, or not configured): {names}", (), len(missing))
+
+
+def _al_findings(out: Findings, reads: list[AlStatusRead], layout: MasterLayout) -> None:
+    """Slaves not in OP after the master asked for OP, where the capture reads AL status."""
+    for r in reads:
+        request = layout.requested(None if r.broadcast else r.station)
+        asked_op = request is not None and request.state == 8 and request.frame < r.last_frame
+        who = "the bus (BRD)" if r.broadcast else f"slave 0x{r.station:04X}"
+        pos = None if r.broadcast else layout.position_of(r.station)
+        if pos is not None:
+            who += f" (position {pos + 1})"
+        if asked_op and not r.in_op:
+            out.add("not-op", FAILURE,
+                    f"{who} is in {r.describe()} after the master requested OP "
+                    f"(frame {request.frame if request else '?'})", [r.last_frame], 1)
+        elif r.status & 0x10:
+            out.add("al-error", WARNING, f"{who} reports {r.describe()}", [r.last_frame], 1)
+
+
+def _runs_past_end(buf: np.ndarray, pos: int, end: int, fmt: int, big: bool) -> bool:
+    """Whether the record at ``pos`` is sane but longer than the bytes left (cut short)."""
+    order: Literal["big", "little"] = "big" if big else "little"
+    if fmt == FORMAT_PCAP:
+        if end - pos < 16:
+            return True
+        incl = int.from_bytes(buf[pos + 8 : pos + 12].tobytes(), order)
+        return incl <= S.MAX_RECORD and pos + 16 + incl > end
+    if end - pos < 8:
+        return True
+    size = int.from_bytes(buf[pos + 4 : pos + 8].tobytes(), order)
+    return 12 <= size <= S.MAX_RECORD and size % 4 == 0 and pos + size > end
 
 
 def _cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:

@@ -27,9 +27,9 @@ class _Tables(ctypes.Structure):
     _fields_ = [
         (name, ctypes.c_void_p)
         for name in (
-            "st", "cmd_counts", "pk", "pn", "pts", "pmeta", "sk", "sc", "wk", "wv",
-            "o_rt", "o_rtts", "o_rtcyc", "o_period", "o_burst", "o_dc", "o_mbx", "o_wkc",
-            "ifs",
+            "st", "cmd_counts", "pk", "pn", "pv", "sk", "sc", "wk", "wn", "wv",
+            "o_rt", "o_rtts", "o_rtfr", "o_period", "o_burst", "o_dc", "o_mbx", "o_cfg",
+            "o_evict", "ifs",
         )
     ] + [(name, ctypes.c_int64) for name in ("n_if", "p_len", "s_len", "w_len", "o_len")]
 
@@ -43,7 +43,7 @@ def _library() -> ctypes.CDLL | None:
     i64, vp = ctypes.c_int64, ctypes.c_void_p
     lib.lolacli_scan.argtypes = [vp, _I64P, i64, i64, i64, i64, i64, ctypes.POINTER(_Tables)]
     lib.lolacli_scan.restype = i64
-    lib.lolacli_rehash.argtypes = [vp, vp, vp, vp, i64, i64, vp, vp, vp, vp, i64, i64]
+    lib.lolacli_rehash.argtypes = [vp, vp, vp, i64, i64, vp, vp, vp, i64, i64]
     lib.lolacli_rehash.restype = i64
     lib.lolacli_finish.argtypes = [vp, vp]
     lib.lolacli_finish.restype = None
@@ -69,10 +69,10 @@ def _ptr(a: np.ndarray, n: int | None = None) -> int:
 
 #: Open-addressing lookups end only when a table has a free slot. The pairing and stream
 #: tables gain at most one key per record and are checked every CHECK_EVERY records; the
-#: WKC table gains up to MAX_DGRAMS keys per record and is checked before each one. A
-#: table grows once half full, so these sizes keep a free slot at all times.
+#: observation table gains up to OBS_PER_RECORD keys per record and is checked before
+#: each one. A table grows once half full, so these sizes keep a free slot at all times.
 MIN_KEY_SLOTS = 2 * S.CHECK_EVERY
-MIN_WKC_SLOTS = 2 * S.MAX_DGRAMS
+MIN_OBS_SLOTS = 2 * S.OBS_PER_RECORD
 
 
 def _pow2(n: int) -> bool:
@@ -80,14 +80,16 @@ def _pow2(n: int) -> bool:
 
 
 #: st counters the kernel uses as row indices into the outputs (it bounds them above)
-_ROW_COUNTERS = (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_WKCBAD)
+_ROW_COUNTERS = (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
+                 S.S_N_EVICT)
 
 
 def _check_state(st: np.ndarray, pn: np.ndarray, ifs: np.ndarray, n_if: int) -> None:
     """The values the kernel indexes with or divides by, besides the array sizes: row
-    counters not negative, stack depths within DEPTH, interface rows as ts_params makes
-    them (mode 0: a >= 0, b >= 1; mode 1: a >= 0; offsets bounded)."""
-    if n_if < 0 or min(int(st[i]) for i in _ROW_COUNTERS) < 0:
+    counters, backward-step and malformed counts not negative, stack depths within
+    DEPTH, interface rows as ts_params makes them (mode 0: a >= 0, b >= 1; mode 1:
+    a >= 0; offsets bounded)."""
+    if n_if < 0 or min(int(st[i]) for i in (*_ROW_COUNTERS, S.S_BACKWARDS, S.S_MALFORMED)) < 0:
         raise ValueError("scanner state: negative interface count or output row")
     if pn.size and (int(pn.min()) < 0 or int(pn.max()) > S.DEPTH):
         raise ValueError("scanner state: pairing stack depth out of range")
@@ -110,9 +112,9 @@ class CKernels:
 
     def scan(
         self, buf: Any, pos: int, end: int, eof: Any, fmt: int, big: Any, ns_res: Any,
-        ifs: Any, n_if: int, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pts: Any,
-        pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtcyc: Any,
-        o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+        ifs: Any, n_if: int, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pv: Any,
+        sk: Any, sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any,
+        o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any,
     ) -> tuple[int, int]:
         if buf.dtype != np.uint8 or not buf.flags.c_contiguous or not 0 <= pos <= end <= buf.size:
             raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
@@ -122,15 +124,16 @@ class CKernels:
             S.MAX_DGRAMS + 2
         ) + S.MAX_DGRAMS + 2:
             raise ValueError("scanner tables must be powers of two, outputs large enough")
-        if p_len < MIN_KEY_SLOTS or s_len < MIN_KEY_SLOTS or w_len < MIN_WKC_SLOTS:
+        if p_len < MIN_KEY_SLOTS or s_len < MIN_KEY_SLOTS or w_len < MIN_OBS_SLOTS:
             raise ValueError("scanner tables too small to stay below half full between checks")
         t = _Tables(
             _ptr(st, S.S_SIZE), _ptr(cmd_counts, 256),
-            _ptr(pk), _ptr(pn, p_len), _ptr(pts, p_len * S.DEPTH), _ptr(pmeta, p_len * S.DEPTH),
-            _ptr(sk), _ptr(sc, s_len), _ptr(wk), _ptr(wv, w_len),
-            _ptr(o_rt), _ptr(o_rtts, rows), _ptr(o_rtcyc, rows), _ptr(o_period, rows),
+            _ptr(pk), _ptr(pn, p_len), _ptr(pv, p_len * S.DEPTH * S.PCOLS),
+            _ptr(sk), _ptr(sc, s_len), _ptr(wk), _ptr(wn, w_len), _ptr(wv, w_len * S.OCOLS),
+            _ptr(o_rt), _ptr(o_rtts, rows), _ptr(o_rtfr, rows), _ptr(o_period, rows),
             _ptr(o_burst, rows), _ptr(o_dc, rows), _ptr(o_mbx, rows * S.MBX_COLS),
-            _ptr(o_wkc, rows * S.WKC_COLS), _ptr(ifs, 5 * int(n_if)),
+            _ptr(o_cfg, rows * S.CFG_COLS), _ptr(o_evict, rows * S.EVICT_COLS),
+            _ptr(ifs, 5 * int(n_if)),
             int(n_if), p_len, s_len, w_len, rows,
         )
         _check_state(st, pn, ifs, int(n_if))
@@ -142,17 +145,15 @@ class CKernels:
         return int(self._pos.value), int(status)
 
     def rehash(
-        self, ok: Any, on: Any, ots: Any, ometa: Any, nk: Any, nn: Any, nts: Any, nmeta: Any,
-        keep_empty: Any,
+        self, ok: Any, on: Any, ov: Any, nk: Any, nn: Any, nv: Any, keep_empty: Any,
     ) -> int:
         olen, nlen = ok.size, nk.size
-        depth = ots.size // olen if olen else 0
+        width = ov.size // olen if olen else 0
         if not _pow2(nlen) or nk.size < olen:
             raise ValueError("the new table must be a power of two, not smaller")
         return int(self._lib.lolacli_rehash(
-            _ptr(ok), _ptr(on, olen), _ptr(ots, olen * depth), _ptr(ometa, olen * depth),
-            olen, depth, _ptr(nk), _ptr(nn, nlen), _ptr(nts, nlen * depth),
-            _ptr(nmeta, nlen * depth), nlen, int(bool(keep_empty)),
+            _ptr(ok), _ptr(on, olen), _ptr(ov, olen * width), olen, width, _ptr(nk),
+            _ptr(nn, nlen), _ptr(nv, nlen * width), nlen, int(bool(keep_empty)),
         ))
 
     def finish(self, st: Any, o_burst: Any) -> None:

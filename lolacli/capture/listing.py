@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lolacli.capture.reader import CaptureReader
+from lolacli.capture.reader import CaptureReader, link_header
 from lolacli.errors import UsageError, WireError
 from lolacli.wire.coe import CoeService, decode_coe_header
 from lolacli.wire.commands import LOGICAL, Command, mnemonic
@@ -28,7 +28,6 @@ from lolacli.wire.frame import (
     ETHERTYPE_ECAT,
     Datagram,
     decode_ecat_payload,
-    decode_ethernet_header,
 )
 from lolacli.wire.mailbox import MailboxType, decode_mailbox
 from lolacli.wire.sdo import (
@@ -223,17 +222,17 @@ def list_frames(
         if count is not None and shown >= count:
             return
         try:
-            eth, etype, pos = decode_ethernet_header(frame.data)
-            if etype != ETHERTYPE_ECAT:
+            link = link_header(frame)
+            if link.ethertype != ETHERTYPE_ECAT:
                 continue
-            _, _, datagrams, _ = decode_ecat_payload(frame.data, pos)
-        except WireError:
+            _, _, datagrams, _ = decode_ecat_payload(frame.data, link.payload)
+        except (WireError, ValueError):
             continue
-        direction = "ret" if eth.returned else "out"
+        direction = "ret" if link.returned else "out"
         if not datagrams or not flt.frame_ok(direction):
             continue
         listed = tuple(
-            x for x in (_listed(d, eth.returned) for d in datagrams) if flt.datagram_ok(x)
+            x for x in (_listed(d, link.returned) for d in datagrams) if flt.datagram_ok(x)
         )
         if listed:
             shown += 1

@@ -12,11 +12,15 @@ from lolacli.errors import UsageError
 
 def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
     """Cycle-period histogram, round trip over time and round-trip CDF; returns the paths
-    written (a plot with nothing to show is skipped)."""
-    import matplotlib
+    written (a plot with nothing to show is skipped). Statistics the report marks unusable
+    (quantised or backward timestamps) say so in their titles."""
+    try:
+        import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # a core dependency; a broken install still gets one line
+        raise UsageError(f"--plot needs matplotlib ({exc}): pip install matplotlib") from None
 
     out = plot_folder(folder)
     stem = Path(report.path).stem
@@ -24,12 +28,17 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
     empty = np.zeros(0, np.int64)
     periods = (report.cycle_period_ns if report.cycle_period_ns is not None else empty) / 1000.0
     rt = (report.round_trip_ns if report.round_trip_ns is not None else empty) / 1000.0
+    unusable = set(report.unusable_stats)
+    rt_note = "\nunusable: quantised or backward timestamps" if (
+        "round_trip_us" in unusable) else ""
     if periods.size:
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.hist(periods, bins=min(200, max(10, periods.size // 20)))
         ax.set_xlabel("cycle period (µs)")
         ax.set_ylabel("cycles")
-        ax.set_title(f"{stem}: cycle period ({report.to_dict()['cyclic_stream']} stream)")
+        note = ("\nunusable: quantised or backward timestamps"
+                if "cycle_period_us" in unusable else "")
+        ax.set_title(f"{stem}: cycle period ({report.cyclic_stream} stream){note}", fontsize=10)
         written.append(_save(fig, out / f"{stem}-cycle-period.png"))
     if rt.size:
         fig, ax = plt.subplots(figsize=(7, 4))
@@ -38,14 +47,14 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
         ax.plot(x, rt, ".", markersize=2)
         ax.set_xlabel("time (s)" if at is not None else "pair")
         ax.set_ylabel("round trip (µs)")
-        ax.set_title(f"{stem}: round trip over time")
+        ax.set_title(f"{stem}: round trip over time{rt_note}", fontsize=10)
         written.append(_save(fig, out / f"{stem}-round-trip.png"))
         fig, ax = plt.subplots(figsize=(7, 4))
         s = np.sort(rt)
         ax.plot(s, np.arange(1, s.size + 1) / s.size)
         ax.set_xlabel("round trip (µs)")
         ax.set_ylabel("fraction of pairs")
-        ax.set_title(f"{stem}: round-trip CDF")
+        ax.set_title(f"{stem}: round-trip CDF{rt_note}", fontsize=10)
         ax.grid(True, alpha=0.3)
         written.append(_save(fig, out / f"{stem}-round-trip-cdf.png"))
     return written

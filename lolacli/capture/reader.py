@@ -10,7 +10,9 @@ and resets its interfaces; an Interface Description Block (type 1) declares one 
 (link type, snaplen, options such as ``if_tsresol`` (9) and ``if_tsoffset`` (14)); packets
 come in Enhanced (6), Simple (3) or obsolete Packet (2) blocks. Unknown blocks are skipped.
 
-Only link type 1 (Ethernet) is analysed. Files are read in bounded chunks: nothing here
+Link types analysed: 1 (Ethernet), 113 (Linux cooked, SLL) and 276 (Linux cooked v2, SLL2),
+which ``tcpdump -i any`` and ``dumpcap -i any`` write; their packet type tells a frame
+this host sent from one it received. Files are read in bounded chunks: nothing here
 holds the whole file in memory. Damaged records are counted, not fatal; a file that is
 not a capture at all raises :class:`~lolacli.errors.CaptureError`.
 """
@@ -26,6 +28,9 @@ from typing import BinaryIO
 from lolacli.errors import CaptureError
 
 LINKTYPE_ETHERNET = 1
+LINKTYPE_LINUX_SLL = 113
+LINKTYPE_LINUX_SLL2 = 276
+ANALYSED_LINK_TYPES = (LINKTYPE_ETHERNET, LINKTYPE_LINUX_SLL, LINKTYPE_LINUX_SLL2)
 
 PCAP_MAGIC_US = 0xA1B2C3D4
 PCAP_MAGIC_NS = 0xA1B23C4D
@@ -36,7 +41,10 @@ BLOCK_OPB = 2
 BLOCK_SPB = 3
 BLOCK_EPB = 6
 OPT_END = 0
+OPT_IF_NAME = 2
+OPT_IF_DESCRIPTION = 3
 OPT_IF_TSRESOL = 9
+OPT_IF_OS = 12
 OPT_IF_TSOFFSET = 14
 
 PCAP_HEADER_BYTES = 24
@@ -61,10 +69,18 @@ class Interface:
     snaplen: int = 0
     tsresol: int = 6
     tsoffset_s: int = 0
+    name: str = ""  # if_name, if_description, if_os (the capturing host)
+    description: str = ""
+    os: str = ""
 
     @property
     def is_ethernet(self) -> bool:
         return self.link_type == LINKTYPE_ETHERNET
+
+    @property
+    def analysed(self) -> bool:
+        """Ethernet or Linux cooked (SLL/SLL2)."""
+        return self.link_type in ANALYSED_LINK_TYPES
 
     def ts_params(self) -> tuple[int, int, int, int]:
         """``(mode, a, b, offset_ns)`` for :func:`ts_to_ns`."""
@@ -156,9 +172,10 @@ def _pcap_header(name: str, head: bytes, big: bool, ns: bool) -> FileHeader:
         order + "IHHiIII", head
     )
     link_type = network & 0x0FFFFFFF
-    if link_type != LINKTYPE_ETHERNET:
+    if link_type not in ANALYSED_LINK_TYPES:
         raise CaptureError(
-            f"link type {link_type} is not Ethernet (1); only Ethernet captures are analysed",
+            f"link type {link_type} is neither Ethernet (1) nor Linux cooked (113, 276); "
+            "only those captures are analysed",
             path=name,
             offset=20,
         )
@@ -197,6 +214,7 @@ def parse_idb(block: bytes | memoryview, big: bool) -> Interface:
     link_type, _reserved, snaplen = struct.unpack_from(order + "HHI", block, 8)
     tsresol = 6
     tsoffset = 0
+    texts = {OPT_IF_NAME: "", OPT_IF_DESCRIPTION: "", OPT_IF_OS: ""}
     pos, end = 16, total - 4
     while pos + 4 <= end:
         code, length = struct.unpack_from(order + "HH", block, pos)
@@ -207,8 +225,11 @@ def parse_idb(block: bytes | memoryview, big: bool) -> Interface:
             tsresol = value[0]
         elif code == OPT_IF_TSOFFSET and length >= 8:
             tsoffset = struct.unpack_from(order + "q", value)[0]
+        elif code in texts:
+            texts[code] = value.decode("utf-8", "replace")
         pos += 4 + length + (-length % 4)
-    return Interface(link_type, snaplen, tsresol, tsoffset)
+    return Interface(link_type, snaplen, tsresol, tsoffset, texts[OPT_IF_NAME],
+                     texts[OPT_IF_DESCRIPTION], texts[OPT_IF_OS])
 
 
 @dataclass(slots=True)
@@ -284,7 +305,8 @@ class CaptureReader:
         order = ">" if self.header.big_endian else "<"
         rec = struct.Struct(order + "IIII")
         frac_ns = 1 if self.header.nanoseconds else 1000
-        self.stats.interfaces = [Interface(LINKTYPE_ETHERNET, self.header.snaplen)]
+        link = self.header.link_type
+        self.stats.interfaces = [Interface(link, self.header.snaplen)]
         pos = PCAP_HEADER_BYTES
         while True:
             head = src.window(pos, PCAP_RECORD_BYTES)
@@ -302,7 +324,8 @@ class CaptureReader:
                 return
             self.stats.packets += 1
             yield CapturedFrame(
-                self.stats.packets, sec * 1_000_000_000 + frac * frac_ns, data, orig
+                self.stats.packets, sec * 1_000_000_000 + frac * frac_ns, data, orig,
+                link_type=link,
             )
             pos += PCAP_RECORD_BYTES + incl
 
@@ -395,13 +418,63 @@ class CaptureReader:
             self.stats.malformed_records += 1
             return None
         iface = ifaces[iface_id]
-        if not iface.is_ethernet:
+        if not iface.analysed:
             self.stats.non_ethernet_packets += 1
             return None
         ts_ns = last_ts if ts is None else ts_to_ns(ts, *params[iface_id])
-        return CapturedFrame(number, ts_ns, block[start : start + incl], orig, iface_id)
+        return CapturedFrame(number, ts_ns, block[start : start + incl], orig, iface_id,
+                             iface.link_type)
 
 
 def iter_frames(path: str | Path) -> Iterator[CapturedFrame]:
-    """The Ethernet frames of a capture, in file order."""
+    """The Ethernet and Linux cooked frames of a capture, in file order."""
     return iter(CaptureReader(path))
+
+
+#: Linux packet type (SLL/SLL2) of a frame this host sent
+PACKET_OUTGOING = 4
+ETHERTYPE_VLAN = 0x8100
+
+
+@dataclass(frozen=True, slots=True)
+class LinkHeader:
+    """The link layer of one captured frame: what it carries, where, and which way.
+
+    ``returned``: for Ethernet, the locally administered bit of the source MAC (DESIGN.md
+    "Direction"); for Linux cooked frames, a packet type other than "sent by this host".
+    """
+
+    ethertype: int
+    payload: int
+    returned: bool
+    source: bytes
+
+
+def link_header(frame: CapturedFrame) -> LinkHeader:
+    """Decode the link-layer header (Ethernet, SLL or SLL2, one optional 802.1Q tag).
+
+    Raises :class:`ValueError` when the frame is too short for it."""
+    data = frame.data
+    if frame.link_type == LINKTYPE_LINUX_SLL:
+        if len(data) < 16:
+            raise ValueError("SLL header truncated")
+        ptype, _, alen = struct.unpack_from(">HHH", data)
+        source = bytes(data[6 : 6 + min(alen, 8)])
+        etype, pos, returned = struct.unpack_from(">H", data, 14)[0], 16, ptype != PACKET_OUTGOING
+    elif frame.link_type == LINKTYPE_LINUX_SLL2:
+        if len(data) < 20:
+            raise ValueError("SLL2 header truncated")
+        etype = struct.unpack_from(">H", data)[0]
+        ptype, alen = data[10], data[11]
+        source = bytes(data[12 : 12 + min(alen, 8)])
+        pos, returned = 20, ptype != PACKET_OUTGOING
+    else:
+        if len(data) < 14:
+            raise ValueError("Ethernet header truncated")
+        source = bytes(data[6:12])
+        etype, pos, returned = struct.unpack_from(">H", data, 12)[0], 14, bool(data[6] & 0x02)
+    if etype == ETHERTYPE_VLAN:
+        if len(data) < pos + 4:
+            raise ValueError("802.1Q tag truncated")
+        etype, pos = struct.unpack_from(">H", data, pos + 2)[0], pos + 4
+    return LinkHeader(etype, pos, returned, source)

@@ -3,20 +3,39 @@ EtherCAT frame in one pass (pure; no IO).
 
 This module is written in the small subset of Python that numba compiles: integers,
 indexing, loops, no objects. :mod:`lolacli.capture.fast` compiles it with ``numba.njit``;
-without numba the very same functions run as plain Python (slower, same results).
+without numba the very same functions run as plain Python (slower, same results), and
+``_cscan.c`` repeats it statement for statement in C.
 
 Everything lives in flat integer arrays (lists in plain-Python mode):
 
 * ``st`` — counters and running state, indexed by the ``S_*`` constants below;
 * ``cmd_counts[256]`` — datagrams per command byte;
-* the pairing table ``pk/pn/pts/pmeta`` (open addressing, key = 63-bit hash of the
-  frame's (command, index, address key) sequence, a stack of ``DEPTH`` pending outgoing
-  timestamps per key: a return pops the most recent one, DESIGN.md "Pairing");
+* the pairing table ``pk/pn/pv`` (open addressing, key = 63-bit hash of the frame's
+  (command, index, address key) sequence; per key a stack of ``DEPTH`` pending outgoing
+  frames, ``PCOLS`` values each: timestamp, ``frame << 1 | cyclic``, echo evidence).
+  A return pops the most recent one (DESIGN.md "Pairing"); a frame pushed out of a full
+  stack is written to ``o_evict`` (it can no longer be answered: lost or in flight);
 * the stream table ``sk/sc`` (outgoing frames per (command, address key) signature), used
   to pick the cyclic stream when there is no logical traffic;
-* the WKC table ``wk/wv`` (expected WKC per cyclic datagram key: the ENI's ``<Cnt>``, or
-  the first WKC seen);
-* output rows ``o_*`` that the driver drains whenever :data:`ST_FLUSH` is returned.
+* the observation table ``wk/wn/wv``: per distinct observation a count and ``OCOLS``
+  values (kind, command, three fields, the first three and the last frame number).
+  :data:`KIND_WKC`: a WKC returned by one cyclic datagram (command, address key, length,
+  WKC); :data:`KIND_AL_STATUS`: an AL status register read (command, station, status
+  code, WKC, status). The verdicts are drawn from it after the scan
+  (:mod:`lolacli.capture.verdict`), when references are known;
+* output rows ``o_*`` that the driver drains whenever :data:`ST_FLUSH` is returned;
+  ``o_cfg`` flags the master's writes of station addresses, AL control and FMMUs, which
+  the driver decodes from the buffer (:mod:`lolacli.capture.layout`).
+
+Direction (DESIGN.md "Direction"): ``st[S_DIRMODE]`` 0 takes the packet type of Linux
+cooked captures (SLL/SLL2: 4 = sent by this host) and the locally administered bit of the
+source MAC of Ethernet frames; 1 infers it: a frame is the echo of the pending frame with
+the same datagram sequence, indexes and lengths when its WKC sum is not smaller and, if it
+carries auto-increment/broadcast datagrams, their ADPs changed (every slave increments
+them; compared for inequality because they wrap at 16 bits). A frame whose WKCs are only
+equal to the pending one's is its echo only when it comes within the echo window
+(:data:`ECHO_ROUND_TRIPS` x the running round trip): a master resends a lost frame as it
+was, WKCs 0, and that copy is no echo.
 
 Address key: auto-increment and broadcast commands have their ADP incremented by every
 slave, so only ADO identifies them; configured-address and logical commands keep the
@@ -38,11 +57,11 @@ S_RET = 6
 S_PAIRS = 7
 S_UNMATCHED_RET = 8
 S_CYC_N = 9
-S_CYC_MATCHED = 10
-S_LOST = 11
+S_EVICTED = 10
+S_N_EVICT = 11
 S_CYC_LAST_TS = 12
-S_WKC_MISMATCH = 13
-S_WKC_CHECKED = 14
+S_N_CFG = 13
+S_WKC_OBS = 14
 S_DC_DGRAMS = 15
 S_DC_BURST = 16
 S_DC_LAST_TS = 17
@@ -57,7 +76,7 @@ S_W_USED = 25
 S_LAST_TS = 26
 S_MODE = 27
 S_STREAM_SIG = 28
-S_WKC_FIXED = 29
+S_DIRMODE = 29
 S_NON_ETH = 30
 S_ECAT_OTHER = 31
 S_FIRST_TS = 32
@@ -67,9 +86,15 @@ S_VLAN = 35
 S_CUT = 36
 S_LOGICAL_OUT = 37
 S_SKIPPED = 38
-S_N_WKCBAD = 39
+S_DIR_PT = 39
 S_TS_SEEN = 40
-S_SIZE = 48
+S_BACKWARDS = 41
+S_BACK_F0 = 42  # frame numbers of the first BACK_KEEP backward steps
+S_MALF_F0 = 45  # frame numbers of the first BACK_KEEP malformed frames
+S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (DESIGN.md)
+S_BRD_MAX = 49  # the highest WKC a BRD/BWR came back with: the slaves on the line
+S_RT_EST = 50  # running average of round trips (direction inference: the echo window)
+S_SIZE = 64
 
 # --- kernel return codes -----------------------------------------------------------------
 ST_NEED_MORE = 0
@@ -82,19 +107,42 @@ ST_DONE = 5
 MODE_LOGICAL = 0
 MODE_SIGNATURE = 1
 
+DIR_AUTO = 0
+DIR_INFER = 1
+
+#: link types analysed (pcap LINKTYPE_*): Ethernet, Linux cooked v1 and v2
+LINK_ETHERNET = 1
+LINK_SLL = 113
+LINK_SLL2 = 276
+#: Linux packet type of a frame this host sent (PACKET_OUTGOING)
+PACKET_OUTGOING = 4
+
 DEPTH = 16
+PCOLS = 3
 MAX_DGRAMS = 128
 CHECK_EVERY = 64
 MBX_COLS = 8
-WKC_COLS = 5
+CFG_COLS = 6
+EVICT_COLS = 2
+OCOLS = 10
+BACK_KEEP = 3
+KIND_WKC = 1
+KIND_AL_STATUS = 2
+#: observations one record may add at most (two per datagram: a WKC and an AL status)
+OBS_PER_RECORD = 2 * MAX_DGRAMS
 MAX_RECORD = 16 * 1024 * 1024
 BURST_GAP_NS = 1_000_000
+#: direction inference: a frame that looks exactly like a pending one (WKCs not higher)
+#: is its echo only within ECHO_ROUND_TRIPS x the running round trip (at least
+#: ECHO_WINDOW_NS); later it is a frame of its own (a master resending a lost frame)
+ECHO_ROUND_TRIPS = 10
+ECHO_WINDOW_NS = 1_000_000
 #: The 64-bit FNV prime, FNV_HI << 32 | FNV_LO (see _mix)
 FNV_HI = 0x100
 FNV_LO = 0x1B3
 SEED_PAIR = 0x2545F4914F6CDD1D
 SEED_STREAM = 0x1B873593
-SEED_WKC = 0x5BD1E995
+SEED_OBS = 0x5BD1E995
 
 #: Timestamps are int64 nanoseconds: a pcapng packet whose raw timestamp has the top bit
 #: set, or converts beyond TS_LIMIT_NS (year 2116), is malformed; interface offsets
@@ -104,6 +152,12 @@ TS_LIMIT_NS = 1 << 62
 TS_OFFSET_LIMIT_NS = 1 << 60
 TS_BAD = -(1 << 62)
 
+REG_STATION_ADDRESS = 0x0010
+REG_AL_CONTROL = 0x0120
+REG_AL_STATUS = 0x0130
+REG_AL_STATUS_CODE = 0x0134
+REG_FMMU = 0x0600
+REG_FMMU_END = 0x0700
 REG_DC_SYSTIME = 0x0910
 REG_DC_SYSTIME_DIFF = 0x092C
 MBX_AREA = 0x1000
@@ -151,9 +205,13 @@ def _slot(keys: Any, key: Any) -> Any:
     return i
 
 
+def _adp_incremented(cmd: Any) -> Any:
+    """APRD APWR APRW ARMW BRD BWR BRW: every slave increments the ADP."""
+    return cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9
+
+
 def _addr_key(cmd: Any, addr: Any) -> Any:
-    # APRD APWR APRW ARMW BRD BWR BRW: ADP is incremented by every slave.
-    if cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9:
+    if _adp_incremented(cmd):
         return addr & 0xFFFF0000
     return addr
 
@@ -181,21 +239,37 @@ def _ts_ns(units: Any, mode: Any, a: Any, b: Any, off: Any) -> Any:
     return sec * 1000000000 + ((frac * 1000000000) >> a) + off
 
 
-def _push(pk: Any, pn: Any, pts: Any, pmeta: Any, st: Any, key: Any, ts: Any, meta: Any) -> Any:
+def _push(
+    pk: Any, pn: Any, pv: Any, st: Any, key: Any, ts: Any, meta: Any, ev: Any, o_evict: Any,
+) -> Any:
     i = _slot(pk, key)
     if pk[i] == 0:
         pk[i] = key
         st[S_P_USED] += 1
     n = pn[i]
-    base = i * DEPTH
+    base = i * DEPTH * PCOLS
     if n == DEPTH:
-        for j in range(DEPTH - 1):
-            pts[base + j] = pts[base + j + 1]
-            pmeta[base + j] = pmeta[base + j + 1]
+        # the oldest pending frame leaves the stack: it can no longer be paired
+        r = st[S_N_EVICT] * EVICT_COLS
+        o_evict[r] = pv[base + 1]
+        o_evict[r + 1] = pv[base]
+        st[S_N_EVICT] += 1
+        st[S_EVICTED] += 1
+        for j in range(PCOLS, DEPTH * PCOLS):
+            pv[base + j - PCOLS] = pv[base + j]
         n = DEPTH - 1
-    pts[base + n] = ts
-    pmeta[base + n] = meta
+    e = base + n * PCOLS
+    pv[e] = ts
+    pv[e + 1] = meta
+    pv[e + 2] = ev
     pn[i] = n + 1
+
+
+def _bad(st: Any) -> Any:
+    """Count a malformed frame; keep the numbers of the first BACK_KEEP."""
+    if st[S_MALFORMED] < BACK_KEEP:
+        st[S_MALF_F0 + st[S_MALFORMED]] = st[S_FRAMES]
+    st[S_MALFORMED] += 1
 
 
 def _count_stream(sk: Any, sc: Any, st: Any, key: Any) -> Any:
@@ -206,34 +280,38 @@ def _count_stream(sk: Any, sc: Any, st: Any, key: Any) -> Any:
     sc[i] += 1
 
 
-def _check_wkc(
-    buf: Any, q: Any, cmd: Any, akey: Any, ln: Any, wkc: Any, wk: Any, wv: Any, st: Any,
-    o_wkc: Any,
+def _observe(
+    wk: Any, wn: Any, wv: Any, st: Any, kind: Any, cmd: Any, a: Any, b: Any, c: Any, d: Any,
+    frame: Any,
 ) -> Any:
-    wkey = _key(_mix(_mix(_mix(SEED_WKC, cmd), akey), ln))
-    wslot = _slot(wk, wkey)
-    wknown = wk[wslot] != 0
-    if not wknown and st[S_WKC_FIXED] == 0:
-        wk[wslot] = wkey
-        wv[wslot] = wkc
+    """Count one observation (kind, cmd, a, b, c, d); keep its first three and last frame."""
+    # three words: kind|cmd|b, a, c|d (a and b below 2^32, kind/cmd/c/d below 2^16)
+    key = _key(_mix(_mix(_mix(SEED_OBS, (kind << 40) | (cmd << 32) | (b & 0xFFFFFFFF)), a),
+                    (c << 32) | (d & 0xFFFFFFFF)))
+    i = _slot(wk, key)
+    base = i * OCOLS
+    n = wn[i]
+    if wk[i] == 0:
+        wk[i] = key
         st[S_W_USED] += 1
-        wknown = True
-    if wknown:
-        st[S_WKC_CHECKED] += 1
-        if wv[wslot] != wkc:
-            st[S_WKC_MISMATCH] += 1
-            wrow = st[S_N_WKCBAD] * WKC_COLS
-            o_wkc[wrow] = st[S_FRAMES]
-            o_wkc[wrow + 1] = cmd
-            o_wkc[wrow + 2] = _u32(buf, q + 2, False)
-            o_wkc[wrow + 3] = wv[wslot]
-            o_wkc[wrow + 4] = wkc
-            st[S_N_WKCBAD] += 1
+        wv[base] = kind
+        wv[base + 1] = cmd
+        wv[base + 2] = a
+        wv[base + 3] = b
+        wv[base + 4] = c
+        wv[base + 5] = d
+        wv[base + 6] = frame
+    elif n == 1:
+        wv[base + 7] = frame
+    elif n == 2:
+        wv[base + 8] = frame
+    wv[base + 9] = frame
+    wn[i] = n + 1
 
 
 def _returned_extras(
-    buf: Any, q: Any, cmd: Any, ado: Any, ln: Any, wkc: Any, ts: Any, st: Any, o_dc: Any,
-    o_mbx: Any,
+    buf: Any, q: Any, cmd: Any, ado: Any, ln: Any, wkc: Any, ts: Any, st: Any, wk: Any,
+    wn: Any, wv: Any, o_dc: Any, o_mbx: Any,
 ) -> Any:
     # Reads of the DC system-time difference (0x092C): sign-and-magnitude nanoseconds.
     if (cmd == 1 or cmd == 4) and wkc >= 1 and ado <= REG_DC_SYSTIME_DIFF:
@@ -242,6 +320,17 @@ def _returned_extras(
             mag = v & 0x7FFFFFFF
             o_dc[st[S_N_DC]] = -mag if v & 0x80000000 else mag
             st[S_N_DC] += 1
+    # AL status reads (FPRD/FPRW of one slave, BRD/BRW of all): state, and the status
+    # code when the read covers 0x0134 too.
+    if (cmd == 4 or cmd == 6 or cmd == 7 or cmd == 9) and wkc >= 1 and ado <= REG_AL_STATUS:
+        if ado + ln >= REG_AL_STATUS + 2:
+            status = _u16(buf, q + 10 + REG_AL_STATUS - ado, False)
+            code = -1
+            if ado + ln >= REG_AL_STATUS_CODE + 2:
+                code = _u16(buf, q + 10 + REG_AL_STATUS_CODE - ado, False)
+            station = _u16(buf, q + 2, False) if cmd == 4 or cmd == 6 else 0
+            _observe(wk, wn, wv, st, KIND_AL_STATUS, cmd, station, code, wkc, status,
+                     st[S_FRAMES])
     # Mailbox candidates: a physical read/write in the process-memory area whose data
     # starts with a plausible mailbox header (ETG.1000.4 Table 29).
     if (cmd == 1 or cmd == 2 or cmd == 4 or cmd == 5) and wkc >= 1 and ado >= MBX_AREA:
@@ -261,6 +350,26 @@ def _returned_extras(
                 st[S_N_MBX] += 1
 
 
+def _config_write(buf: Any, q: Any, cmd: Any, ado: Any, ln: Any, st: Any, o_cfg: Any) -> Any:
+    """Flag an outgoing write of a station address (0x0010), AL control (0x0120) or FMMU
+    (0x0600-0x06FF): the master's configuration, decoded by the driver."""
+    if not (cmd == 2 or cmd == 3 or cmd == 5 or cmd == 6 or cmd == 8 or cmd == 9):
+        return
+    end = ado + ln
+    if ado >= REG_FMMU_END or end <= REG_STATION_ADDRESS:
+        return
+    if ado < REG_STATION_ADDRESS + 2 or (ado < REG_AL_CONTROL + 2 and end > REG_AL_CONTROL) \
+            or end > REG_FMMU:
+        r = st[S_N_CFG] * CFG_COLS
+        o_cfg[r] = st[S_FRAMES]
+        o_cfg[r + 1] = q
+        o_cfg[r + 2] = cmd
+        o_cfg[r + 3] = _u16(buf, q + 2, False)
+        o_cfg[r + 4] = ado
+        o_cfg[r + 5] = ln
+        st[S_N_CFG] += 1
+
+
 def _drift(ts: Any, st: Any, o_burst: Any) -> Any:
     st[S_DC_DGRAMS] += 1
     if st[S_DC_BURST] > 0 and ts - st[S_DC_LAST_TS] > BURST_GAP_NS:
@@ -273,10 +382,12 @@ def _drift(ts: Any, st: Any, o_burst: Any) -> Any:
 
 def _ecat(
     buf: Any, p: Any, limit: Any, ret: Any, ts: Any, st: Any, cmd_counts: Any, dg: Any,
-    pk: Any, pn: Any, pts: Any, pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any,
-    o_rtts: Any, o_rtcyc: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+    pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any,
+    o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any,
+    o_cfg: Any, o_evict: Any,
 ) -> Any:
-    """One EtherCAT payload at ``p`` (captured bytes end at ``limit``).
+    """One EtherCAT payload at ``p`` (captured bytes end at ``limit``); ``ret`` 0 sent by
+    the master, 1 returned, -1 to infer.
 
     Returns False when the datagrams do not fit (a malformed frame).
     """
@@ -303,26 +414,57 @@ def _ecat(
         q += 12 + ln
         if (lw & 0x8000) == 0:
             break
+    qend = q
     st[S_ECAT] += 1
     st[S_DGRAMS] += n
+    infer = ret < 0
     hp = SEED_PAIR
     hs = SEED_STREAM
     logical = False
+    wsum = 0
+    adps = 0
+    inc = 0
     for j in range(n):
         q = dg[j]
         cmd = _byte(buf, q)
-        akey = _addr_key(cmd, _u32(buf, q + 2, False))
+        addr = _u32(buf, q + 2, False)
+        akey = _addr_key(cmd, addr)
         cmd_counts[cmd] += 1
         hp = _mix(_mix(hp, (cmd << 8) | _byte(buf, q + 1)), akey)
         hs = _mix(_mix(hs, cmd), akey)
         if cmd == 10 or cmd == 11 or cmd == 12:
             logical = True
+        if infer:
+            ln = _u16(buf, q + 6, False) & 0x7FF
+            hp = _mix(hp, ln)
+            wsum += _u16(buf, q + 10 + ln, False)
+            if _adp_incremented(cmd):
+                adps += addr & 0xFFFF
+                inc = 1
     hp = _key(hp)
     hs = _key(hs)
     if st[S_MODE] == MODE_LOGICAL:
         cyc = logical
     else:
         cyc = hs == st[S_STREAM_SIG]
+    frame = st[S_FRAMES]
+    ev = (wsum << 17) | (inc << 16) | (adps & 0xFFFF)
+    if infer:
+        # an echo of the most recent pending frame with this key, or a frame of its own
+        ret = 0
+        i = _slot(pk, hp)
+        if pk[i] != 0 and pn[i] > 0:
+            t = (i * DEPTH + pn[i] - 1) * PCOLS
+            e = pv[t + 2]
+            if inc == 0 or (ev & 0xFFFF) != (e & 0xFFFF):
+                if (ev >> 17) > (e >> 17):
+                    ret = 1
+                elif (ev >> 17) == (e >> 17):
+                    window = ECHO_ROUND_TRIPS * st[S_RT_EST]
+                    if window < ECHO_WINDOW_NS:
+                        window = ECHO_WINDOW_NS
+                    if ts - pv[t] <= window:
+                        ret = 1
     if ret == 0:
         st[S_OUT] += 1
         if logical:
@@ -330,38 +472,46 @@ def _ecat(
         elif st[S_LOGICAL_OUT] == 0:
             # only needed to pick the cyclic stream of a capture without logical traffic
             _count_stream(sk, sc, st, hs)
-        meta = 0
+        cbit = 0
         if cyc:
             if st[S_CYC_N] > 0:
-                if st[S_CYC_MATCHED] == 0:
-                    st[S_LOST] += 1
                 o_period[st[S_N_PERIOD]] = ts - st[S_CYC_LAST_TS]
                 st[S_N_PERIOD] += 1
             st[S_CYC_N] += 1
-            st[S_CYC_MATCHED] = 0
             st[S_CYC_LAST_TS] = ts
-            meta = st[S_CYC_N]
-        _push(pk, pn, pts, pmeta, st, hp, ts, meta)
+            cbit = 1
+            # Ethernet header 14 + EtherCAT header and datagrams + FCS 4, at least 64
+            fb = 18 + qend - p
+            if fb < 64:
+                fb = 64
+            if fb > st[S_CYC_BYTES]:
+                st[S_CYC_BYTES] = fb
+        _push(pk, pn, pv, st, hp, ts, (frame << 1) | cbit, ev, o_evict)
         for j in range(n):
             q = dg[j]
             cmd = _byte(buf, q)
-            if (cmd == 13 or cmd == 14) and _u16(buf, q + 4, False) == REG_DC_SYSTIME:
+            ado = _u16(buf, q + 4, False)
+            if (cmd == 13 or cmd == 14) and ado == REG_DC_SYSTIME:
                 _drift(ts, st, o_burst)
+            _config_write(buf, q, cmd, ado, _u16(buf, q + 6, False) & 0x7FF, st, o_cfg)
         return True
     st[S_RET] += 1
     i = _slot(pk, hp)
     if pk[i] != 0 and pn[i] > 0:
         top = pn[i] - 1
         pn[i] = top
-        meta = pmeta[i * DEPTH + top]
+        e = (i * DEPTH + top) * PCOLS
         r = st[S_N_RT]
-        o_rt[r] = ts - pts[i * DEPTH + top]
+        o_rt[r] = ts - pv[e]
         o_rtts[r] = ts
-        o_rtcyc[r] = 1 if meta > 0 else 0
+        o_rtfr[r] = pv[e + 1]
         st[S_N_RT] = r + 1
         st[S_PAIRS] += 1
-        if meta > 0 and meta == st[S_CYC_N]:
-            st[S_CYC_MATCHED] = 1
+        if infer:
+            rt = ts - pv[e]
+            if rt < 0:
+                rt = 0
+            st[S_RT_EST] = rt if st[S_PAIRS] == 1 else (7 * st[S_RT_EST] + rt) >> 3
     else:
         st[S_UNMATCHED_RET] += 1
     for j in range(n):
@@ -370,38 +520,67 @@ def _ecat(
         ado = _u16(buf, q + 4, False)
         ln = _u16(buf, q + 6, False) & 0x7FF
         wkc = _u16(buf, q + 10 + ln, False)
+        if (cmd == 7 or cmd == 8) and wkc > st[S_BRD_MAX]:
+            st[S_BRD_MAX] = wkc
         if cyc:
-            akey = _addr_key(cmd, _u32(buf, q + 2, False))
-            _check_wkc(buf, q, cmd, akey, ln, wkc, wk, wv, st, o_wkc)
-        _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, o_dc, o_mbx)
+            st[S_WKC_OBS] += 1
+            _observe(wk, wn, wv, st, KIND_WKC, cmd, _addr_key(cmd, _u32(buf, q + 2, False)),
+                     ln, wkc, 0, frame)
+        _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, wk, wn, wv, o_dc, o_mbx)
     return True
 
 
 def _packet(
-    buf: Any, d: Any, cap: Any, orig: Any, ts: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any,
-    pn: Any, pts: Any, pmeta: Any, sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any,
-    o_rtcyc: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+    buf: Any, d: Any, cap: Any, orig: Any, ts: Any, link: Any, st: Any, cmd_counts: Any,
+    dg: Any, pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any, wn: Any, wv: Any,
+    o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any,
+    o_cfg: Any, o_evict: Any,
 ) -> Any:
-    """One Ethernet frame of ``cap`` captured bytes at ``d``."""
+    """One link-layer frame (Ethernet, SLL or SLL2) of ``cap`` captured bytes at ``d``."""
     st[S_FRAMES] += 1
     # not S_FRAMES == 1: packets skipped in _pcapng_record are counted without a time
     if st[S_TS_SEEN] == 0:
         st[S_TS_SEEN] = 1
         st[S_FIRST_TS] = ts
+    elif ts < st[S_END_TS]:
+        if st[S_BACKWARDS] < BACK_KEEP:
+            st[S_BACK_F0 + st[S_BACKWARDS]] = st[S_FRAMES]
+        st[S_BACKWARDS] += 1
     st[S_END_TS] = ts
     st[S_LAST_TS] = ts
-    if cap < 14:
-        st[S_MALFORMED] += 1
-        return
-    limit = d + cap
-    etype = _u16(buf, d + 12, True)
-    p = d + 14
-    if etype == 0x8100:
-        if cap < 18:
-            st[S_MALFORMED] += 1
+    cooked = True
+    if link == LINK_SLL:
+        # packet type u16, ARPHRD u16, address length u16, address 8, protocol u16
+        if cap < 16:
+            _bad(st)
             return
-        etype = _u16(buf, d + 16, True)
-        p = d + 18
+        ret = 0 if _u16(buf, d, True) == PACKET_OUTGOING else 1
+        etype = _u16(buf, d + 14, True)
+        p = d + 16
+    elif link == LINK_SLL2:
+        # protocol u16, reserved u16, ifindex u32, ARPHRD u16, packet type u8, address
+        # length u8, address 8
+        if cap < 20:
+            _bad(st)
+            return
+        ret = 0 if _byte(buf, d + 10) == PACKET_OUTGOING else 1
+        etype = _u16(buf, d, True)
+        p = d + 20
+    else:
+        if cap < 14:
+            _bad(st)
+            return
+        ret = 1 if _byte(buf, d + 6) & 0x02 else 0
+        etype = _u16(buf, d + 12, True)
+        p = d + 14
+        cooked = False
+    limit = d + cap
+    if etype == 0x8100:
+        if p + 4 > limit:
+            _bad(st)
+            return
+        etype = _u16(buf, p + 2, True)
+        p = p + 4
         st[S_VLAN] += 1
     if etype == 0x0800:
         # EtherCAT over UDP (ETG.1000.4 §5.3.2): IPv4, protocol 17, port 0x88A4.
@@ -420,12 +599,16 @@ def _packet(
     elif etype != 0x88A4:
         st[S_NONECAT] += 1
         return
-    ret = _byte(buf, d + 6) & 0x02
-    ok = _ecat(buf, p, limit, ret, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
-               o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+    if st[S_DIRMODE] == DIR_INFER:
+        ret = -1
+    ok = _ecat(buf, p, limit, ret, ts, st, cmd_counts, dg, pk, pn, pv, sk, sc, wk, wn, wv,
+               o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict)
     if not ok:
-        st[S_MALFORMED] += 1
-    elif cap < orig:
+        _bad(st)
+        return
+    if cooked and ret >= 0:
+        st[S_DIR_PT] += 1
+    if cap < orig:
         st[S_CUT] += 1
 
 
@@ -433,7 +616,8 @@ def _full(st: Any, cap: Any, pk: Any, sk: Any, wk: Any) -> Any:
     """ST_FLUSH / ST_GROW / -1: whether the driver must act before the next record."""
     lim = cap - MAX_DGRAMS - 2
     if (st[S_N_RT] >= lim or st[S_N_PERIOD] >= lim or st[S_N_BURST] >= lim
-            or st[S_N_DC] >= lim or st[S_N_MBX] >= lim or st[S_N_WKCBAD] >= lim):
+            or st[S_N_DC] >= lim or st[S_N_MBX] >= lim or st[S_N_CFG] >= lim
+            or st[S_N_EVICT] >= lim):
         return ST_FLUSH
     if st[S_P_USED] * 2 > len(pk) or st[S_S_USED] * 2 > len(sk) or st[S_W_USED] * 2 > len(wk):
         return ST_GROW
@@ -442,21 +626,23 @@ def _full(st: Any, cap: Any, pk: Any, sk: Any, wk: Any) -> Any:
 
 def scan(
     buf: Any, pos: Any, end: Any, eof: Any, fmt: Any, big: Any, ns_res: Any, ifs: Any,
-    n_if: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pts: Any, pmeta: Any,
-    sk: Any, sc: Any, wk: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtcyc: Any, o_period: Any,
-    o_burst: Any, o_dc: Any, o_mbx: Any, o_wkc: Any,
+    n_if: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pv: Any, sk: Any,
+    sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any,
+    o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any,
 ) -> Any:
     """Walk records from ``pos`` until the buffer ends or the driver must act.
 
     ``fmt`` 0 = classic pcap (``ns_res`` 1 for nanosecond files), 1 = pcapng. ``ifs`` holds
-    5 integers per pcapng interface: ts mode, a, b, offset_ns, is_ethernet.
+    5 integers per pcapng interface: ts mode, a, b, offset_ns, link type (0 when not
+    analysed); classic pcap uses the link type of row 0.
     Returns ``(pos, status)``.
     """
     # outputs and tables are checked every CHECK_EVERY records: leave room for that many.
-    # The WKC table is checked before every record: one record may add MAX_DGRAMS keys,
-    # and a full open-addressing table would make _slot loop forever.
+    # The observation table is checked before every record: one record may add
+    # OBS_PER_RECORD keys, and a full open-addressing table would make _slot loop forever.
     cap = len(o_rt) - CHECK_EVERY * (MAX_DGRAMS + 2)
     count = 0
+    pcap_link = ifs[4] if n_if > 0 else LINK_ETHERNET
     while True:
         count += 1
         if count % CHECK_EVERY == 1 or st[S_W_USED] * 2 > len(wk):
@@ -476,6 +662,7 @@ def scan(
             ts = _u32(buf, pos, big) * 1000000000 + (frac if ns_res else frac * 1000)
             d = pos + 16
             orig = _u32(buf, pos + 12, big)
+            link = pcap_link
         else:
             if pos + 8 > end:
                 break
@@ -493,12 +680,12 @@ def scan(
                 st[S_SKIPPED] += 1
                 pos += size
                 continue
-            d, incl, orig, ts = _pcapng_record(buf, pos, size, btype, big, ifs, n_if, st)
+            d, incl, orig, ts, link = _pcapng_record(buf, pos, size, btype, big, ifs, n_if, st)
             if d < 0:
                 pos += size
                 continue
-        _packet(buf, d, incl, orig, ts, st, cmd_counts, dg, pk, pn, pts, pmeta, sk, sc, wk, wv,
-                o_rt, o_rtts, o_rtcyc, o_period, o_burst, o_dc, o_mbx, o_wkc)
+        _packet(buf, d, incl, orig, ts, link, st, cmd_counts, dg, pk, pn, pv, sk, sc, wk, wn,
+                wv, o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict)
         pos += size
     if eof:
         if pos == end:
@@ -510,13 +697,13 @@ def scan(
 def _pcapng_record(
     buf: Any, pos: Any, total: Any, btype: Any, big: Any, ifs: Any, n_if: Any, st: Any,
 ) -> Any:
-    """``(data offset, captured, original, ts_ns)`` of an EPB/OPB/SPB; data offset -1 when
-    the packet is not analysed (counted here as malformed or non-Ethernet)."""
+    """``(data offset, captured, original, ts_ns, link type)`` of an EPB/OPB/SPB; data
+    offset -1 when the packet is not analysed (counted here as malformed or non-Ethernet)."""
     if btype == 3:
         if total < 16 or n_if == 0:
             st[S_FRAMES] += 1
-            st[S_MALFORMED] += 1
-            return -1, 0, 0, 0
+            _bad(st)
+            return -1, 0, 0, 0, 0
         orig = _u32(buf, pos + 8, big)
         incl = min(orig, total - 16)
         iface = 0
@@ -525,8 +712,8 @@ def _pcapng_record(
     else:
         if total < 32:
             st[S_FRAMES] += 1
-            st[S_MALFORMED] += 1
-            return -1, 0, 0, 0
+            _bad(st)
+            return -1, 0, 0, 0, 0
         if btype == 6:
             iface = _u32(buf, pos + 8, big)
         else:
@@ -537,58 +724,52 @@ def _pcapng_record(
         start = pos + 28
         if 28 + incl > total - 4 or iface >= n_if:
             st[S_FRAMES] += 1
-            st[S_MALFORMED] += 1
-            return -1, 0, 0, 0
+            _bad(st)
+            return -1, 0, 0, 0, 0
         ts = TS_BAD
         if hi < 0x80000000:
             b = iface * 5
             units = (hi << 32) | _u32(buf, pos + 16, big)
             ts = _ts_ns(units, ifs[b], ifs[b + 1], ifs[b + 2], ifs[b + 3])
-    if ifs[iface * 5 + 4] == 0:
+    link = ifs[iface * 5 + 4]
+    if link == 0:
         st[S_FRAMES] += 1
         st[S_NONECAT] += 1
         st[S_NON_ETH] += 1
-        return -1, 0, 0, 0
+        return -1, 0, 0, 0, 0
     if ts == TS_BAD:
         st[S_FRAMES] += 1
-        st[S_MALFORMED] += 1
-        return -1, 0, 0, 0
-    return start, incl, orig, ts
+        _bad(st)
+        return -1, 0, 0, 0, 0
+    return start, incl, orig, ts, link
 
 
-def rehash(
-    ok: Any, on: Any, ots: Any, ometa: Any, nk: Any, nn: Any, nts: Any, nmeta: Any,
-    keep_empty: Any,
-) -> Any:
+def rehash(ok: Any, on: Any, ov: Any, nk: Any, nn: Any, nv: Any, keep_empty: Any) -> Any:
     """Move the entries of one open-addressing table into a new (empty) one.
 
-    With ``on`` given (a pairing table), slots whose stack is empty are dropped unless
-    ``keep_empty``. Returns the number of keys moved. For the stream and WKC tables the
-    value array is passed as ``on`` and ``ots``/``ometa`` are empty.
+    ``on`` holds one count per slot, ``ov`` ``len(ov) // len(ok)`` values per slot (none
+    for the stream table). Slots whose count is 0 are dropped unless ``keep_empty`` (the
+    pairing table drops keys without pending frames). Returns the number of keys moved.
     """
     used = 0
-    depth = len(ots) // len(ok) if len(ok) > 0 else 0
+    width = len(ov) // len(ok) if len(ok) > 0 else 0
     for i in range(len(ok)):
         k = ok[i]
         if k == 0:
             continue
-        if depth > 0 and on[i] == 0 and not keep_empty:
+        if on[i] == 0 and not keep_empty:
             continue
         j = _slot(nk, k)
         nk[j] = k
         nn[j] = on[i]
-        for t in range(depth):
-            nts[j * depth + t] = ots[i * depth + t]
-            nmeta[j * depth + t] = ometa[i * depth + t]
+        for t in range(width):
+            nv[j * width + t] = ov[i * width + t]
         used += 1
     return used
 
 
 def finish(st: Any, o_burst: Any) -> Any:
-    """End of file: the last cyclic frame without a return is lost; close the DC burst."""
-    if st[S_CYC_N] > 0 and st[S_CYC_MATCHED] == 0:
-        st[S_LOST] += 1
-        st[S_CYC_MATCHED] = 1
+    """End of file: close the DC burst."""
     if st[S_DC_BURST] > 0:
         o_burst[st[S_N_BURST]] = st[S_DC_BURST]
         st[S_N_BURST] += 1
@@ -597,17 +778,16 @@ def finish(st: Any, o_burst: Any) -> Any:
 
 #: Everything called per frame is inlined: a call that passes arrays costs reference
 #: counting of each array in numba, which would dominate the per-frame time. Not
-#: ``_slot`` and ``_check_wkc``: inlined (numba 0.60-0.61), the WKC table lookups gave
-#: wrong results (the engine-equivalence tests caught it).
+#: ``_slot`` and ``_observe``: inlined (numba 0.60-0.61), the table lookups gave wrong
+#: results (the engine-equivalence tests caught it).
 INLINE = frozenset({
-    "_byte", "_u16", "_u32", "_mix", "_key", "_addr_key", "_ts_ns", "_push",
-    "_count_stream", "_returned_extras", "_drift", "_ecat", "_packet", "_full",
-    "_pcapng_record",
+    "_byte", "_u16", "_u32", "_mix", "_key", "_adp_incremented", "_addr_key", "_ts_ns",
+    "_push", "_bad", "_count_stream", "_returned_extras", "_config_write", "_drift", "_ecat",
+    "_packet", "_full", "_pcapng_record",
 })
 
 KERNELS = (
-    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_addr_key", "_ts_ns", "_push",
-    "_count_stream",
-    "_check_wkc", "_returned_extras", "_drift", "_ecat", "_packet", "_full", "scan",
-    "_pcapng_record", "rehash", "finish",
+    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_adp_incremented", "_addr_key",
+    "_ts_ns", "_push", "_bad", "_count_stream", "_observe", "_returned_extras", "_config_write",
+    "_drift", "_ecat", "_packet", "_full", "scan", "_pcapng_record", "rehash", "finish",
 )

@@ -99,7 +99,16 @@ def summary_us(chunks: Sequence[np.ndarray]) -> dict[str, float | int] | None:
     s1, s2 = _moments(chunks, lo)
     mean = (lo * n + s1) / n
     std = math.sqrt((s2 * n - s1 * s1) / (n * n))
+    pos = (n - 1) * 0.99
+    p_lo = int(math.floor(pos))
+    p_hi = min(p_lo + 1, n - 1)
+    wanted = sorted({(n - 1) // 2, n // 2, p_lo, p_hi})
     memo: dict[int, int] = {}
+    if n <= GATHER_MAX:
+        # small enough to gather: one partition finds every wanted rank at once
+        v = np.concatenate([c.astype(np.int64) for c in chunks])
+        v.partition(wanted)
+        memo = {k: int(v[k]) for k in wanted}
     histograms: dict[tuple[int, int], np.ndarray] = {}
 
     def rank(k: int) -> float:
@@ -107,9 +116,6 @@ def summary_us(chunks: Sequence[np.ndarray]) -> dict[str, float | int] | None:
             memo[k] = order_statistic(chunks, k, lo, hi, histograms)
         return float(memo[k])
 
-    pos = (n - 1) * 0.99
-    p_lo = int(math.floor(pos))
-    p_hi = min(p_lo + 1, n - 1)
     p99 = rank(p_lo) + (rank(p_hi) - rank(p_lo)) * (pos - p_lo)
     return {
         "count": n,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -10,6 +12,11 @@ import typer
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json, warn
 from lolacli.errors import InputError, UsageError
+
+
+class Statistic(StrEnum):
+    min = "min"
+    median = "median"
 
 
 @app.command("timing")
@@ -36,10 +43,20 @@ def timing_cmd(
         typer.Option(
             "--per-slave-ns",
             min=0,
-            help="Per-slave delay (out and back) in ns. Default: calibrated from the "
-            "measured total when there is one, else an assumed 1000 ns.",
+            help="Per-slave delay (out and back) in ns for the prediction. Default: an "
+            "assumed 1000 ns (a measured total is calibrated separately).",
         ),
     ] = None,
+    host_latency_us: Annotated[
+        float,
+        typer.Option(
+            "--host-latency-us",
+            min=0.0,
+            help="What the master's host adds to a round trip measured at its NIC (stack, "
+            "driver, NIC queues, switch): part of the prediction, taken off a measured total "
+            "before calibrating.",
+        ),
+    ] = 0.0,
     measured: Annotated[
         str | None,
         typer.Option(
@@ -49,8 +66,20 @@ def timing_cmd(
     ] = None,
     capture: Annotated[
         Path | None,
-        typer.Option("--capture", help="pcap/pcapng: the measured total is its mean round trip."),
+        typer.Option(
+            "--capture",
+            help="pcap/pcapng: the measured total is its cyclic round trip (--statistic); "
+            "slaves and frame bytes come from it too (BRD working counter, the cyclic "
+            "frame) unless --eni, --slaves or --frame-bytes say otherwise.",
+        ),
     ] = None,
+    statistic: Annotated[
+        Statistic,
+        typer.Option(
+            "--statistic",
+            help="Round-trip statistic of --capture: min (closest to the bus alone) or median.",
+        ),
+    ] = Statistic.min,
     budget_us: Annotated[
         float | None,
         typer.Option(
@@ -65,32 +94,55 @@ def timing_cmd(
     """Theoretical frame time against measured totals, and the maximum update rate.
 
     Round trip = wire time (8 x frame bytes / link rate) + slaves x per-slave delay +
-    cable (5 ns/m, out and back). With --measured or --capture, the per-slave delay is
-    calibrated as (measured - wire - cable) / slaves. The maximum update rate is
-    1 / round trip (measured if given, else predicted): the fastest cycle whose frame is
-    back before the next one leaves, without master computing time or acyclic traffic.
-    Without --eni and --frame-bytes the embedded LOLA chain is used.
+    cable (5 ns/m, out and back) + host latency. The prediction uses the assumed (or given)
+    per-slave delay; with --measured or --capture the per-slave delay is calibrated apart,
+    as (measured - wire - cable - host latency) / slaves, and a warning says when it lies
+    outside what ESCs do (0.3-3 us). The maximum update rate is 1 / round trip (measured if
+    given, else predicted): the fastest cycle whose frame is back before the next one
+    leaves, without master computing time or acyclic traffic. Without --eni, --frame-bytes
+    and --capture the embedded LOLA chain is used.
     """
     from lolacli.timing.model import estimate, parse_duration_ns
 
     _check_options(eni, frame_bytes, slaves, measured, capture)
-    n_bytes, n_slaves, cycle_ns, source = _frame_and_slaves(eni, frame_bytes, slaves)
+    report = None
     measured_ns, measured_from = None, None
     if measured is not None:
-        measured_ns, measured_from = parse_duration_ns(measured), "option"
+        measured_ns, measured_from = parse_duration_ns(measured), "--measured"
     elif capture is not None:
-        measured_ns, measured_from = _capture_round_trip_ns(capture)
-    budget_ns = _scaled("--budget-us", budget_us, 1000) if budget_us is not None else cycle_ns
-    result = estimate(
-        n_bytes,
-        n_slaves,
-        link_bit_s=_scaled("--link-mbit", link_mbit, 1_000_000),
-        cable_m_per_segment=cable_m,
-        per_slave_delay_ns=per_slave_ns,
-        measured_total_ns=measured_ns,
-        budget_ns=budget_ns,
-    )
-    doc = result.to_dict() | {"source": source, "measured_from": measured_from}
+        from lolacli.capture import analyze_file
+
+        report = analyze_file(capture).to_dict()
+        measured_ns, measured_from = _capture_round_trip_ns(capture, report, statistic)
+    line = _line(eni, frame_bytes, slaves, capture, report)
+    budget_ns = (_scaled("--budget-us", budget_us, 1000) if budget_us is not None
+                 else line.cycle_ns)
+    try:
+        result = estimate(
+            line.frame_bytes,
+            line.slaves,
+            link_bit_s=_scaled("--link-mbit", link_mbit, 1_000_000),
+            cable_m_per_segment=cable_m,
+            per_slave_delay_ns=per_slave_ns,
+            measured_total_ns=measured_ns,
+            budget_ns=budget_ns,
+            host_latency_ns=_scaled("--host-latency-us", host_latency_us, 1000),
+        )
+    except UsageError as e:
+        if capture is None or measured_ns is None:
+            raise
+        # the capture's own numbers do not fit a round trip (a veth has no wire time)
+        raise InputError(f"{e}; from {measured_from}", path=str(capture)) from None
+    caution = _calibration_warning(result)
+    doc = result.to_dict() | {
+        "source": line.source,
+        "measured_from": measured_from,
+        "sources": {"frame_bytes": line.frame_bytes_from, "slaves": line.slaves_from,
+                    "measured": measured_from},
+        "calibration_warning": caution,
+    }
+    if caution:
+        warn(caution)
     if fmt is OutputFormat.json:
         emit_json(doc)
     else:
@@ -108,8 +160,8 @@ def _check_options(
 ) -> None:
     if eni is not None and (frame_bytes is not None or slaves is not None):
         raise UsageError("--eni and --frame-bytes/--slaves contradict each other; give one")
-    if (frame_bytes is None) != (slaves is None):
-        raise UsageError("--frame-bytes and --slaves go together")
+    if capture is None and (frame_bytes is None) != (slaves is None):
+        raise UsageError("--frame-bytes and --slaves go together (or come from --capture)")
     if measured is not None and capture is not None:
         raise UsageError("--measured and --capture contradict each other; give one")
 
@@ -124,12 +176,49 @@ def _scaled(option: str, value: float, scale: int) -> int:
     return round(value * scale)
 
 
-def _frame_and_slaves(
-    eni: Path | None, frame_bytes: int | None, slaves: int | None
-) -> tuple[int, int, int | None, str]:
+@dataclass(frozen=True, slots=True)
+class _Line:
+    """The frame and the line of slaves to time, and where each number came from."""
+
+    frame_bytes: int
+    frame_bytes_from: str
+    slaves: int
+    slaves_from: str
+    cycle_ns: int | None
+    source: str
+    report: dict[str, Any] | None = None
+
+
+def _line(eni: Path | None, frame_bytes: int | None, slaves: int | None,
+          capture: Path | None, report: dict[str, Any] | None) -> _Line:
+    if eni is not None or (capture is None and frame_bytes is None):
+        n_bytes, n_slaves, cycle_ns, source = _from_eni(eni)
+        return _Line(n_bytes, f"{source}: first cyclic frame", n_slaves, f"{source}: slaves",
+                     cycle_ns, source, report)
+    if capture is None:
+        assert frame_bytes is not None and slaves is not None
+        return _Line(frame_bytes, "--frame-bytes", slaves, "--slaves", None, "options")
+    assert report is not None
+    seen = report["bus_seen"]
+    if frame_bytes is None:
+        if seen["cyclic_frame_bytes"] is None:
+            raise UsageError(f"{capture}: no cyclic frame to time; give --frame-bytes or --eni")
+        frame_bytes = seen["cyclic_frame_bytes"]
+        bytes_from = f"capture: its longest cyclic frame ({report['cyclic_stream']} stream)"
+    else:
+        bytes_from = "--frame-bytes"
+    if slaves is None:
+        if seen["slaves"] is None:
+            raise UsageError(f"{capture}: no BRD/BWR came back to count the slaves; give "
+                             "--slaves or --eni")
+        slaves, slaves_from = seen["slaves"], f"capture: {seen['slaves_from']}"
+    else:
+        slaves_from = "--slaves"
+    return _Line(frame_bytes, bytes_from, slaves, slaves_from, None, "capture", report)
+
+
+def _from_eni(eni: Path | None) -> tuple[int, int, int | None, str]:
     """(frame bytes, slaves, cycle time ns or None, where they came from)."""
-    if frame_bytes is not None and slaves is not None:
-        return frame_bytes, slaves, None, "options"
     from lolacli.files import load_eni
 
     path = eni if eni is not None else default_eni()
@@ -143,21 +232,32 @@ def _frame_and_slaves(
     return frames[0].frame_bytes, len(model.slaves), model.cycle_time_ns, source
 
 
-def _capture_round_trip_ns(path: Path) -> tuple[int, str]:
-    """Mean round trip of the capture's cyclic stream (or of all pairs), in ns."""
-    from lolacli.capture import analyze_file
-
-    report = analyze_file(path).to_dict()
-    for key in ("round_trip_cyclic_us", "round_trip_us"):
+def _capture_round_trip_ns(path: Path, report: dict[str, Any],
+                           statistic: Statistic) -> tuple[int, str]:
+    """The chosen statistic of the capture's cyclic round trips (else of all pairs), ns."""
+    for key, what in (("round_trip_cyclic_us", "cyclic round trips"),
+                      ("round_trip_us", "round trips of all pairs")):
         stats = report.get(key)
-        if stats and float(stats["max"]) > 0:
-            return round(float(stats["mean"]) * 1000), f"capture:{key}.mean"
-    if report.get("round_trip_us"):
-        raise InputError(
-            "every round trip in the capture is 0 us: its timestamps cannot measure one",
-            path=str(path),
-        )
+        if not stats:
+            continue
+        if key in report["unusable_stats"] or float(stats[statistic.value]) <= 0:
+            zero = [f for f in report["findings"] if f["kind"] == "timestamps-quantised"]
+            why = zero[0]["message"] if zero else "they are not positive"
+            raise InputError(f"round trips of 0 us cannot measure one: {why}", path=str(path))
+        value = round(float(stats[statistic.value]) * 1000)
+        label = "minimum" if statistic is Statistic.min else "median"
+        return value, f"capture: {label} of {stats['count']} {what}"
     raise InputError("no outgoing/returned frame pairs to measure a round trip", path=str(path))
+
+
+def _calibration_warning(result: Any) -> str | None:
+    if result.calibration_plausible is not False:
+        return None
+    lo, hi = (v / 1000 for v in result.to_dict()["esc_delay_range_ns"])
+    return (f"the calibrated per-slave delay ({result.calibrated_per_slave_delay_ns} ns) is "
+            f"outside what ESCs do ({lo:g}-{hi:g} us): the measured round trip holds more than "
+            "the slaves (the master's stack and NIC, a switch; see --host-latency-us), or the "
+            "slave count is off")
 
 
 def _render(doc: dict[str, Any]) -> None:
@@ -165,28 +265,39 @@ def _render(doc: dict[str, Any]) -> None:
 
     from lolacli.cli.common import stdout_console
 
-    table = Table(title=f"Frame timing ({doc['source']})", show_header=False, title_justify="left")
+    console = stdout_console()
+    src = doc["sources"]
+    table = Table(title=f"Frame timing ({doc['source']})", show_header=False,
+                  title_justify="left")
     table.add_column("quantity")
     table.add_column("value", justify="right")
+    table.add_column("from")
+    pred = doc["prediction"]
     rows = [
-        ("frame", f"{doc['frame_bytes']} B at {doc['link_mbit_s']:g} Mbit/s"),
-        ("wire time", f"{doc['wire_time_us']:g} µs"),
-        ("wire time incl. preamble + IFG", f"{doc['wire_time_with_overhead_us']:g} µs"),
-        ("slaves", str(doc["slaves"])),
-        (
-            "per-slave delay",
-            f"{doc['per_slave_delay_ns']} ns ({doc['per_slave_delay_source']})",
-        ),
-        ("cable (out and back)", f"{doc['cable_delay_ns']} ns"),
-        ("predicted round trip", f"{doc['predicted_total_us']:g} µs"),
+        ("frame", f"{doc['frame_bytes']} B at {doc['link_mbit_s']:g} Mbit/s",
+         src["frame_bytes"]),
+        ("wire time", f"{doc['wire_time_us']:g} µs", "8 x bytes / rate"),
+        ("wire time incl. preamble + IFG", f"{doc['wire_time_with_overhead_us']:g} µs",
+         "+ 20 B"),
+        ("slaves", str(doc["slaves"]), src["slaves"]),
+        ("cable (out and back)", f"{doc['cable_delay_ns']} ns",
+         f"{doc['cable_m_per_segment']:g} m per slave"),
+        ("host latency", f"{doc['host_latency_us']:g} µs", "--host-latency-us"),
+        ("per-slave delay (a priori)", f"{pred['per_slave_delay_ns']} ns",
+         pred["per_slave_delay_source"]),
+        ("predicted round trip", f"{doc['predicted_total_us']:g} µs", "model, a priori"),
     ]
     if doc["measured_total_us"] is not None:
-        rows.append(("measured round trip", f"{doc['measured_total_us']:g} µs"))
-        rows.append(("calibrated per-slave delay", f"{doc['calibrated_per_slave_delay_ns']} ns"))
-    rows.append((f"max update rate ({doc['total_source']})", f"{doc['max_rate_hz']:,.0f} Hz"))
+        rows.append(("measured round trip", f"{doc['measured_total_us']:g} µs",
+                     doc["measured_from"]))
+        plausible = "" if doc["calibration_plausible"] else ", outside 0.3-3 µs: see warning"
+        rows.append(("calibrated per-slave delay", f"{doc['calibrated_per_slave_delay_ns']} ns",
+                     f"(measured - wire - cable - host) / slaves{plausible}"))
+    rows.append((f"max update rate ({doc['total_source']})", f"{doc['max_rate_hz']:,.0f} Hz",
+                 "1 / round trip"))
     if doc["budget_us"] is not None:
         verdict = "ok" if doc["within_budget"] else "EXCEEDED"
-        rows.append(("cycle budget", f"{doc['budget_us']:g} µs: {verdict}"))
-    for name, value in rows:
-        table.add_row(name, value)
-    stdout_console().print(table)
+        rows.append(("cycle budget", f"{doc['budget_us']:g} µs", verdict))
+    for name, value, where in rows:
+        table.add_row(name, value, where)
+    console.print(table)

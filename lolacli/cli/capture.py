@@ -14,6 +14,7 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json, silence_stdout
+from lolacli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captures.")
 
@@ -27,7 +28,8 @@ def analyze_cmd(
     file: CaptureArgument,
     eni: Annotated[
         Path | None,
-        typer.Option("--eni", help="ENI whose <Cnt> values are the expected WKCs."),
+        typer.Option("--eni", help="ENI: expected WKCs from its <Cnt> values, slaves and "
+                     "FMMU layout."),
     ] = None,
     fmt: FormatOption = OutputFormat.human,
     plot: Annotated[
@@ -39,17 +41,40 @@ def analyze_cmd(
     ] = 0,
     max_wkc: Annotated[
         int,
-        typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
+        typer.Option(
+            "--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."
+        ),
     ] = 0,
+    timeout: Annotated[
+        str | None,
+        typer.Option(
+            "--timeout",
+            help="A frame unanswered for this long is lost, or late when its answer comes "
+            "later (5ms, 800us). Default: 10 x the median round trip, at least 1 ms.",
+        ),
+    ] = None,
+    show_all: Annotated[
+        bool, typer.Option("--all", help="Show every SDO transaction, not the first 50.")
+    ] = False,
     engine: Annotated[
         str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
     ] = "auto",
 ) -> None:
-    """Out/return pairing, round trip, cycle period and jitter, lost frames, WKC errors,
-    SDO transactions and DC diagnostics of a capture. Exit 1 when lost frames or WKC
-    mismatches exceed the thresholds."""
+    """Out/return pairing, round trip, cycle period and jitter, lost and late frames, WKC
+    verdict, AL states, SDO transactions and DC diagnostics of a capture, with findings.
+    Exit 1 when a finding is a failure (lost frames or WKC mismatches over the thresholds,
+    a bus that never answered, no EtherCAT traffic, slaves not in OP after the master asked
+    for OP, nothing checked against the --eni); frames still in flight when the capture
+    ends are not lost."""
     from lolacli.capture.analyze import analyze_file
 
+    timeout_ns = None
+    if timeout is not None:
+        from lolacli.timing.model import parse_duration_ns
+
+        timeout_ns = parse_duration_ns(timeout)
+        if timeout_ns <= 0:
+            raise UsageError(f"--timeout {timeout}: must be longer than 0")
     if plot is not None:
         from lolacli.capture.plots import plot_folder
 
@@ -61,20 +86,22 @@ def analyze_cmd(
         model = load_eni(eni)
     with _Progress(file, quiet=False) as progress:
         report = analyze_file(
-            file, eni=model, progress=progress, engine=engine, keep_series=plot is not None
+            file, eni=model, progress=progress, engine=engine, keep_series=plot is not None,
+            timeout_ns=timeout_ns, max_lost=max_lost, max_wkc_mismatches=max_wkc,
         )
     data = report.to_dict()
     if fmt is OutputFormat.json:
         emit_json(data)
     else:
-        _render_analysis(data)
+        from lolacli.cli.capture_render import render_analysis
+
+        render_analysis(data, show_all=show_all)
     if plot is not None:
         from lolacli.capture.plots import write_plots
 
         for written in write_plots(report, plot):
             sys.stderr.write(f"lolacli: wrote {written}\n")
-    failed = data["lost_frames"] > max_lost or data["wkc_mismatches"] > max_wkc
-    if failed:
+    if report.failed:
         raise typer.Exit(1)
 
 
@@ -109,115 +136,6 @@ class _Progress:
             self.bar.stop()
 
 
-def _fmt_stats(s: dict[str, Any] | None) -> list[str]:
-    if s is None:
-        return ["—"] * 7
-    return [str(s["count"])] + [
-        f"{s[k]:.2f}" for k in ("min", "mean", "median", "std", "p99", "max")
-    ]
-
-
-def _render_analysis(d: dict[str, Any]) -> None:
-    from rich.table import Table
-
-    from lolacli.cli.common import stdout_console
-
-    console = stdout_console()
-    console.print(
-        f"{d['file']}  ({d['format']}, {d['time_span_us'] / 1e6:.3f} s, engine {d['engine']})"
-    )
-    frames = Table(title="Frames", title_justify="left")
-    for col in (
-        "total",
-        "EtherCAT",
-        "other",
-        "malformed",
-        "out",
-        "returned",
-        "pairs",
-        "unmatched out",
-        "lost",
-        "WKC mismatches",
-    ):
-        frames.add_column(col, justify="right")
-    frames.add_row(
-        *(
-            str(d[k])
-            for k in (
-                "frames_total",
-                "ecat_frames",
-                "non_ecat_frames",
-                "malformed_frames",
-                "outgoing_frames",
-                "returned_frames",
-                "pairs",
-                "unmatched_outgoing",
-                "lost_frames",
-                "wkc_mismatches",
-            )
-        )
-    )
-    console.print(frames)
-    times = Table(title=f"Timing (µs) — cyclic stream: {d['cyclic_stream']}", title_justify="left")
-    times.add_column("")
-    for col in ("count", "min", "mean", "median", "std", "p99", "max"):
-        times.add_column(col, justify="right")
-    times.add_row("round trip", *_fmt_stats(d["round_trip_us"]))
-    times.add_row("round trip (cyclic)", *_fmt_stats(d["round_trip_cyclic_us"]))
-    times.add_row("cycle period", *_fmt_stats(d["cycle_period_us"]))
-    console.print(times)
-    if d["cycle_jitter_us"]:
-        j = d["cycle_jitter_us"]
-        console.print(
-            f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
-            f"{j['max_deviation']:.2f} µs"
-        )
-    cmds = Table(title="Datagrams by command", title_justify="left")
-    for name in d["datagrams_by_cmd"]:
-        cmds.add_column(name, justify="right")
-    cmds.add_row(*(str(v) for v in d["datagrams_by_cmd"].values()))
-    console.print(cmds)
-    _render_sdo_dc(console, d)
-
-
-def _render_sdo_dc(console: Any, d: dict[str, Any]) -> None:
-    from rich.table import Table
-
-    dc = d["dc"]
-    console.print(
-        f"DC: {dc['drift_compensation_datagrams']} drift-compensation datagrams in "
-        f"{dc['drift_compensation_bursts']} bursts; {dc['system_time_difference_reads']} "
-        f"reads of 0x092C, max |diff| {dc['system_time_difference_max_abs_ns']} ns"
-    )
-    console.print(
-        f"WKC reference: {d['wkc']['reference']}, {d['wkc']['checked_datagrams']} datagrams checked"
-    )
-    if not d["sdo_transaction_list"]:
-        console.print(f"SDO: none (mailbox messages: {d['mailbox']['messages']})")
-        return
-    sdo = Table(title=f"SDO transactions ({d['sdo_transactions']})", title_justify="left")
-    for col in ("slave", "object", "kind", "transfer", "bytes", "status", "frames", "µs"):
-        sdo.add_column(col)
-    for t in d["sdo_transaction_list"][:50]:
-        status = (
-            t["status"]
-            if t["abort_code"] is None
-            else (f"abort {t['abort_code']} {t['abort_text']}")
-        )
-        dur = "" if t["duration_us"] is None else f"{t['duration_us']:.0f}"
-        sdo.add_row(
-            f"0x{t['slave']:04X}",
-            t["object"],
-            t["kind"],
-            t["transfer"],
-            str(t["size_bytes"]),
-            status,
-            f"{t['start_frame']}–{t['end_frame']}",
-            dur,
-        )
-    console.print(sdo)
-
-
 @app.command("list")
 def list_cmd(
     file: CaptureArgument,
@@ -240,13 +158,8 @@ def list_cmd(
 
     frames = list_frames(file, count=count, expr=expr)
     if fmt is OutputFormat.json:
-        emit_json(
-            {
-                "schema": "lolacli.capture-list/1",
-                "file": str(file),
-                "frames": [f.to_dict() for f in frames],
-            }
-        )
+        emit_json({"schema": "lolacli.capture-list/1", "file": str(file),
+                   "frames": [f.to_dict() for f in frames]})
         return
     out = sys.stdout
     try:

@@ -59,13 +59,49 @@ def emit_json(data: Any) -> None:
 
 
 def stdout_console() -> Any:
+    """The console every command group prints data with, and its width rule: the
+    terminal's width, ``$COLUMNS``, or 80 columns when piped. Tables fit it by wrapping
+    names and headers, never by cutting numbers; a table that cannot fit is printed whole,
+    wider than that, rather than cropped (:func:`fit_table`). Lines of text are not broken
+    (they stay one line for grep; a terminal wraps them)."""
     from rich.console import Console
+    from rich.measure import Measurement
+    from rich.table import Table
 
     class _Console(Console):
         def on_broken_pipe(self) -> None:
             silence_stdout()
 
+        def print(self, *objects: Any, **kwargs: Any) -> None:
+            tables = [o for o in objects if isinstance(o, Table)]
+            if not tables:
+                kwargs.setdefault("soft_wrap", True)  # a line of text is never broken
+            for table in tables:
+                fit_table(table)
+            if len(objects) == 1 and tables and "width" not in kwargs:
+                wide = self.options.update(width=1 << 16)
+                need = Measurement.get(self, wide, tables[0]).minimum
+                if need > self.width:
+                    kwargs.update(width=need, crop=False)
+            super().print(*objects, **kwargs)
+
     return _Console(highlight=False, soft_wrap=False)
+
+
+def fit_table(table: Any) -> None:
+    """The width rule for a rich table: names and headers wrap between words (a word is
+    never split, nor cut with an ellipsis), and right-aligned (number) columns are never
+    narrower than their widest cell."""
+    from rich.cells import cell_len
+
+    for column in table.columns:
+        column.overflow = "fold"
+        texts = [c for c in column.cells if isinstance(c, str)]
+        words = [w for t in [*texts, str(column.header)] for w in t.split()]
+        widest = max((cell_len(w) for w in words), default=0)
+        if column.justify == "right":
+            widest = max([widest, *(cell_len(t) for t in texts)])
+        column.min_width = max(column.min_width or 0, widest)
 
 
 def stderr_console() -> Any:

@@ -121,10 +121,7 @@ def _frame_table(number: int, frame: dict[str, Any]) -> Any:
 def _console() -> Any:
     from lolacli.cli.common import stdout_console
 
-    console = stdout_console()
-    if not console.is_terminal:  # pipes and CI logs: do not squeeze tables into 80 columns
-        console.width = max(console.width, 200)
-    return console
+    return stdout_console()  # one width rule for every command group (cli/common.py)
 
 
 @app.command("vars")

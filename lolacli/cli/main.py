@@ -10,6 +10,7 @@ from typer.core import TyperGroup
 
 from lolacli import __version__
 from lolacli.cli import bus, bus_emulate, bus_simulate, bus_timing, capture, eni, sdo  # noqa: F401
+from lolacli.cli.coerce import install as _light_parameters
 from lolacli.cli.common import debug_enabled
 
 
@@ -31,6 +32,7 @@ class _LolaGroup(TyperGroup):
             raise typer.Exit(130) from None
 
 
+_light_parameters()  # simple parameters without pydantic: a third of a short command's start-up
 app = typer.Typer(
     cls=_LolaGroup,
     name="lolacli",

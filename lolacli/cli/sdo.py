@@ -17,8 +17,9 @@ from lolacli.cli.common import FormatOption, OutputFormat, emit_json, warn
 
 app = typer.Typer(
     no_args_is_help=True,
-    help="SDO upload/download, object dictionaries and value checks: CANopen (--can) "
-    "or EtherCAT (--iface … --backend soem).",
+    help="SDO upload/download, object dictionaries and value checks: EtherCAT through "
+    "lolacli's master (the emulated chain in process by default, --iface IF for a live "
+    "bus) or pysoem (--iface IF --backend soem), or CANopen (--can).",
 )
 
 SlaveArgument = Annotated[
@@ -78,18 +79,28 @@ IfaceOption = Annotated[
 ]
 BackendOption = Annotated[
     str,
-    typer.Option("--backend", help="EtherCAT master for --iface: soem (pysoem) or lolacli (ours)."),
+    typer.Option(
+        "--backend",
+        help="EtherCAT master: lolacli (ours, in process or --iface) or soem (pysoem, --iface).",
+    ),
 ]
 EniOption = Annotated[
     Path | None,
-    typer.Option("--eni", help="ENI: resolves SLAVE names and station addresses."),
+    typer.Option(
+        "--eni",
+        help="ENI: the chain emulated in process (default: the embedded LOLA chain), or the "
+        "configuration of the --iface bus; resolves SLAVE names and station addresses.",
+    ),
 ]
 EdsOption = Annotated[
     Path | None, typer.Option("--eds", help="EDS/DCF of the CANopen node (value types, list).")
 ]
 EsiOption = Annotated[
     list[Path] | None,
-    typer.Option("--esi", help="ESI file(s) of the EtherCAT slaves (value types, list)."),
+    typer.Option(
+        "--esi",
+        help="ESI file(s) of the EtherCAT slaves (value types, list; the emulated slaves' SII).",
+    ),
 ]
 TimeoutOption = Annotated[
     float,

@@ -22,7 +22,6 @@ from lolacli.wire.coe import (
     COE_HEADER_BYTES,
     CoeService,
     Emergency,
-    decode_coe_header,
     decode_emergency,
 )
 from lolacli.wire.commands import Command
@@ -30,10 +29,9 @@ from lolacli.wire.frame import Datagram
 from lolacli.wire.mailbox import (
     MAILBOX_HEADER_BYTES,
     MailboxType,
-    decode_mailbox,
     decode_mailbox_error,
-    encode_mailbox,
-    make_mailbox,
+    encode_mailbox_message,
+    mailbox_type_and_payload,
     next_counter,
 )
 from lolacli.wire.sdo import (
@@ -44,13 +42,14 @@ from lolacli.wire.sdo import (
     SdoDownloadResponse,
     SdoDownloadSegmentRequest,
     SdoDownloadSegmentResponse,
-    SdoUploadRequest,
     SdoUploadResponse,
     SdoUploadSegmentRequest,
     SdoUploadSegmentResponse,
     abort_text,
     decode_sdo,
     encode_sdo,
+    expedited_upload_data,
+    upload_request,
 )
 
 #: SDO bytes in front of the data of a normal initiate (command, index, subindex, size)
@@ -95,10 +94,7 @@ class MailboxClient:
         """Send ``payload`` as a mailbox of ``mailbox_type``; the payload of the answer of
         the same type. TransportError on timeout, WireError for a mailbox error reply."""
         self.counter = next_counter(self.counter)
-        box = encode_mailbox(
-            make_mailbox(mailbox_type, payload, counter=self.counter),
-            buffer_bytes=self.layout.out_bytes,
-        )
+        box = encode_mailbox_message(mailbox_type, payload, self.counter, self.layout.out_bytes)
         deadline = self.port.now_ns() + (self.timeout_ns if timeout_ns is None else timeout_ns)
         station = self.layout.station
         while True:  # the out buffer may still be full with an earlier message
@@ -108,13 +104,23 @@ class MailboxClient:
             if d.wkc == 1:
                 break
             self._wait(deadline, "write the mailbox")
+        return self._receive(mailbox_type, deadline)
+
+    def receive(self, mailbox_type: int, *, timeout_ns: int | None = None) -> bytes:
+        """The payload of the next message of ``mailbox_type`` the slave posts, without
+        sending anything: the further fragments of an answer that comes in several
+        mailboxes (SDO Information). TransportError on timeout."""
+        deadline = self.port.now_ns() + (self.timeout_ns if timeout_ns is None else timeout_ns)
+        return self._receive(mailbox_type, deadline)
+
+    def _receive(self, mailbox_type: int, deadline: int) -> bytes:
         while True:
             answer = self._read_once()
             if answer is not None:
                 kind, body = answer
                 if kind == MailboxType.ERR:
                     error = decode_mailbox_error(body)
-                    raise WireError(f"station {station}: mailbox error: {error.text}")
+                    raise WireError(f"station {self.layout.station}: mailbox error: {error.text}")
                 if kind == mailbox_type and not self._is_emergency(kind, body):
                     return body
                 continue
@@ -128,13 +134,12 @@ class MailboxClient:
         )
         if d.wkc != 1:
             return None
-        box = decode_mailbox(d.data)
-        return int(box.mailbox_type), box.payload
+        return mailbox_type_and_payload(d.data)
 
     def _is_emergency(self, kind: int, body: bytes) -> bool:
         if kind != MailboxType.CoE or len(body) < COE_HEADER_BYTES:
             return False
-        if decode_coe_header(body).service != CoeService.EMERGENCY:
+        if body[1] >> 4 != CoeService.EMERGENCY:  # the service: bits 12-15 of the CoE header
             return False
         self.emergencies.append(decode_emergency(body))
         return True
@@ -167,7 +172,15 @@ class SdoClient:
 
     def upload(self, index: int, subindex: int, *, complete_access: bool = False) -> bytes:
         """Read an object (SDO upload): its bytes."""
-        first = self._ask(SdoUploadRequest(index, subindex, complete_access), index, subindex)
+        answer = self.mailbox.request(
+            MailboxType.CoE, upload_request(index, subindex, complete_access=complete_access)
+        )
+        quick = expedited_upload_data(answer)  # the usual answer, read in place
+        if quick is not None:
+            return quick
+        first = decode_sdo(answer)
+        if isinstance(first, SdoAbort):
+            raise SdoAbortError(index, subindex, first.code, abort_text(first.code))
         if not isinstance(first, SdoUploadResponse):
             raise WireError(f"SDO 0x{index:04X}:{subindex:02X}: unexpected answer {first!r}")
         if first.expedited:

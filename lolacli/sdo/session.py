@@ -5,11 +5,18 @@ options                   transport
 ========================  =================================================================
 ``--can CH [--interface`` CANopen through canopen + python-can; SLAVE is the node ID
 ``NAME] [--node N]``
-``--iface IF --backend``  EtherCAT through pysoem (SOEM) on a live bus: a ``bus emulate`` at
-``soem``                  the other end of a veth pair, or hardware
-(none) / ``--iface IF``   lolacli's own master (in-process emulated chain / live bus): not
-                          available in this build; a usage error says what to use instead
+(none)                    lolacli's own master against the emulated chain of ``--eni`` (default:
+                          the embedded LOLA chain) in this process, in virtual time; ``--esi``
+                          devices give the emulated slaves their SII as in ``bus emulate``
+``--iface IF``            lolacli's own master on a live bus (a ``bus emulate`` at the other
+                          end of a veth pair, or hardware) through a raw socket; configured by
+                          ``--eni``, else from the slaves' SII (as SOEM does)
+``--iface IF --backend``  EtherCAT through pysoem (SOEM) on a live bus
+``soem``
 ========================  =================================================================
+
+Our master brings only the slaves asked for to PREOP, each when first asked for
+(:class:`lolacli.master.preop.PreopBus`).
 
 Object dictionaries for value types: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device
 whose identity the slave reports), and for ``sdo list`` the slave's SDO Information.
@@ -135,6 +142,60 @@ class SoemSession(Session):
         self.bus.close()
 
 
+class LolaSession(Session):
+    """lolacli's own master: the emulated chain in process (no ``--iface``) or a live bus."""
+
+    def __init__(self, options: TransportOptions) -> None:
+        from lolacli.eni_cache import load_eni_cached
+        from lolacli.files import load_esi
+        from lolacli.sdo.lola_client import LolaBus
+
+        self.esi = [load_esi(p) for p in options.esi]
+        if options.iface is None:
+            from lolacli.emulator.run import EmulateOptions, make_chain
+            from lolacli.master.transport import ChainTransport
+
+            eni = load_eni_cached(options.eni if options.eni is not None else default_eni())
+            chain = make_chain(eni, EmulateOptions(), esi=self.esi)
+            name = Path(eni.source).name if eni.source else "ENI"
+            where = f"of the emulated chain ({name})"
+            self.source = f"the emulated chain ({name})"
+            self.bus = LolaBus(ChainTransport(chain), eni, where=where, timeout_s=options.timeout_s)
+        else:
+            from lolacli.master.transport import RawSocketTransport
+
+            config = load_eni_cached(options.eni) if options.eni is not None else None
+            transport = RawSocketTransport(options.iface)  # TransportError: exit 4
+            self.source = config.source if config is not None else options.iface
+            self.bus = LolaBus(
+                transport,
+                config,
+                where=f"on {options.iface}",
+                name=options.iface,
+                timeout_s=options.timeout_s,
+            )
+
+    def target(self, spec: str) -> Target:
+        ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
+        client = self.bus.client(ref)
+        dictionary = None
+        if self.esi:
+            from lolacli.sdo.files import esi_dictionary
+
+            dictionary = esi_dictionary(self.esi, ref.identity)
+        return Target(spec.strip(), client, dictionary)
+
+    def close(self) -> None:
+        self.bus.close()
+
+
+def default_eni() -> Path:
+    """The embedded LOLA chain (``lolacli/eni_examples/lola.xml``)."""
+    import lolacli.eni_examples
+
+    return Path(lolacli.eni_examples.__file__).resolve().parent / "lola.xml"
+
+
 def open_session(options: TransportOptions) -> Session:
     """The transport the options ask for; UsageError when they ask for none that exists."""
     if options.backend not in BACKENDS:
@@ -149,25 +210,21 @@ def open_session(options: TransportOptions) -> Session:
         raise UsageError("--eds describes a CANopen node: give --can CHANNEL too")
     if options.interface is not None or options.node is not None:
         raise UsageError("--interface and --node are CANopen options: give --can CHANNEL too")
-    if options.iface is not None and options.backend == "soem":
+    if options.backend == "soem":
+        if options.iface is None:
+            raise UsageError("--backend soem drives a live bus: give --iface IF too")
         return SoemSession(options)
-    if options.iface is not None:
-        raise UsageError(
-            "--iface through lolacli's own master is not available in this build: "
-            "add --backend soem (pysoem), or use --can for CANopen"
-        )
-    raise UsageError(
-        "no transport: give --can CHANNEL (CANopen) or --iface IF --backend soem (EtherCAT); "
-        "the in-process emulated chain is not available in this build"
-    )
+    return LolaSession(options)
 
 
 __all__ = [
     "BACKENDS",
     "CanSession",
+    "LolaSession",
     "Session",
     "SoemSession",
     "Target",
     "TransportOptions",
+    "default_eni",
     "open_session",
 ]

@@ -10,7 +10,7 @@ Definitions (DESIGN.md "Definitions"):
 
 Round trip (the seed's "minimum bus cycle time (total delay)") is modelled as
 
-    predicted_total = wire time + slaves × per-slave delay + cable delay
+    predicted_total = wire time + slaves × per-slave delay + cable delay + host latency
 
 The frame is forwarded cut-through, so its serialisation time counts once; every slave adds
 its delay (processing on the way out, forwarding on the way back, PHYs on both), and the
@@ -27,6 +27,20 @@ shows 600 ns between port 0 and port 1 of the EK1100 with two terminals behind i
 The LOLA measurement (124.1 µs for 25 slaves and 846 B) calibrates to about 2.25 µs per
 slave, which also holds the switch and capture latency the seed calls "conservative". Use
 :func:`calibrate_per_slave_delay_ns` with a measured total to replace the assumption.
+
+**Host latency** (default 0): what the master's side adds to a round trip measured where
+the frame leaves and re-enters the host — network stack, driver, NIC queues and interrupt
+moderation, switch, capture path. The bus alone does not need it; a round trip taken from a
+host capture does: for the corpus captures (1-3 slaves, where the bus takes 6-10 µs) the
+minimum round trip is 40-1100 µs, almost all of it host (``docs/timing-model.md``,
+``tools/timing_model_check.py``). Calibrating a per-slave delay from such a round trip
+without this term blames the host on the slaves; give the host latency when it is known.
+
+**Prediction and calibration are kept apart.** ``predicted_total`` always uses the a-priori
+per-slave delay (the caller's, else the assumed default), never the one calibrated from the
+measurement, so a measured total is never shown as a prediction that agrees with itself.
+A calibrated per-slave delay outside what ESCs do (:data:`ESC_DELAY_RANGE_NS`) says the
+measurement holds something else (host latency, a switch, more slaves than assumed).
 
 **Maximum update rate** = 1 / total round trip (measured when given, else predicted): the
 highest cycle rate at which each cycle's frame is back before the next one leaves, with
@@ -53,6 +67,9 @@ LINK_100_MBIT_S = 100_000_000
 PREAMBLE_SFD_BYTES = 8
 INTER_FRAME_GAP_BYTES = 12
 DEFAULT_PER_SLAVE_DELAY_NS = 1000
+#: per-slave delays (out and back) that ESCs show: ~0.3 µs for E-bus terminals, ~1 µs with
+#: two PHYs (see the module docstring), up to a few µs for slow or daisy-chained ports
+ESC_DELAY_RANGE_NS = (300, 3000)
 CABLE_NS_PER_M = 5.0
 DEFAULT_CABLE_M = 1.0  # per segment (master→slave 1, slave 1→slave 2, …)
 NS_PER_S = 1_000_000_000
@@ -96,29 +113,39 @@ def cable_delay_ns(segment_lengths_m: Sequence[float], ns_per_m: float = CABLE_N
     return round(2 * sum(segment_lengths_m) * ns_per_m)
 
 
-def predict_total_ns(wire_ns: int, slaves: int, per_slave_delay_ns: int, cable_ns: int) -> int:
-    """Predicted round trip: wire time + slaves × per-slave delay + cable."""
-    return wire_ns + slaves * per_slave_delay_ns + cable_ns
+def predict_total_ns(
+    wire_ns: int, slaves: int, per_slave_delay_ns: int, cable_ns: int, host_latency_ns: int = 0
+) -> int:
+    """Predicted round trip: wire time + slaves × per-slave delay + cable + host latency."""
+    return wire_ns + slaves * per_slave_delay_ns + cable_ns + host_latency_ns
 
 
 def calibrate_per_slave_delay_ns(
-    measured_total_ns: int, wire_ns: int, cable_ns: int, slaves: int
+    measured_total_ns: int, wire_ns: int, cable_ns: int, slaves: int, host_latency_ns: int = 0
 ) -> int:
-    """(measured − wire − cable) / slaves, rounded to whole ns.
+    """(measured − wire − cable − host latency) / slaves, rounded to whole ns.
 
     Raises :class:`UsageError` when there are no slaves to share the delay, or when the
-    measurement is shorter than the frame's own wire time plus cable (it cannot be a round
-    trip of this frame).
+    measurement is shorter than the frame's own wire time plus cable and host latency (it
+    cannot be a round trip of this frame).
     """
     if slaves <= 0:
         raise UsageError("cannot calibrate a per-slave delay without slaves")
-    rest = measured_total_ns - wire_ns - cable_ns
+    fixed = wire_ns + cable_ns + host_latency_ns
+    rest = measured_total_ns - fixed
     if rest < 0:
         raise UsageError(
             f"measured total {measured_total_ns / 1000:g} us is shorter than the wire time "
-            f"plus cable ({(wire_ns + cable_ns) / 1000:g} us): not a round trip of this frame"
+            f"plus cable{' and host latency' if host_latency_ns else ''} "
+            f"({fixed / 1000:g} us): not a round trip of this frame"
         )
     return _div_round(rest, slaves)
+
+
+def plausible_per_slave_delay(delay_ns: int) -> bool:
+    """Whether a (calibrated) per-slave delay is one that ESCs show."""
+    lo, hi = ESC_DELAY_RANGE_NS
+    return lo <= delay_ns <= hi
 
 
 def max_rate_hz(total_ns: int) -> float:
@@ -145,6 +172,18 @@ class TimingEstimate:
     measured_total_ns: int | None = None
     calibrated_per_slave_delay_ns: int | None = None
     budget_ns: int | None = None
+    #: the delay the prediction uses: the caller's, else the assumed default (never the
+    #: calibrated one)
+    a_priori_per_slave_delay_ns: int = DEFAULT_PER_SLAVE_DELAY_NS
+    a_priori_source: DelaySource = DelaySource.ASSUMED
+    host_latency_ns: int = 0
+
+    @property
+    def calibration_plausible(self) -> bool | None:
+        """None without a calibration; else whether ESCs show such a per-slave delay."""
+        if self.calibrated_per_slave_delay_ns is None:
+            return None
+        return plausible_per_slave_delay(self.calibrated_per_slave_delay_ns)
 
     @property
     def total_ns(self) -> int:
@@ -179,7 +218,19 @@ class TimingEstimate:
             "per_slave_delay_ns": self.per_slave_delay_ns,
             "per_slave_delay_source": self.per_slave_delay_source.value,
             "calibrated_per_slave_delay_ns": self.calibrated_per_slave_delay_ns,
+            "calibration_plausible": self.calibration_plausible,
+            "esc_delay_range_ns": list(ESC_DELAY_RANGE_NS),
+            "host_latency_us": us(self.host_latency_ns),
+            # a priori: model defaults or the caller's numbers, never the calibration
             "predicted_total_us": us(self.predicted_total_ns),
+            "prediction": {
+                "per_slave_delay_ns": self.a_priori_per_slave_delay_ns,
+                "per_slave_delay_source": self.a_priori_source.value,
+                "host_latency_us": us(self.host_latency_ns),
+                "total_us": us(self.predicted_total_ns),
+                "max_rate_hz": round(max_rate_hz(self.predicted_total_ns), 3)
+                if self.predicted_total_ns > 0 else None,
+            },
             "measured_total_us": None
             if self.measured_total_ns is None
             else us(self.measured_total_ns),
@@ -203,29 +254,35 @@ def estimate(
     per_slave_delay_ns: int | None = None,
     measured_total_ns: int | None = None,
     budget_ns: int | None = None,
+    host_latency_ns: int = 0,
 ) -> TimingEstimate:
     """Predict (and, with a measured total, calibrate) the round trip of one frame.
 
-    The per-slave delay is the caller's when given, else calibrated from the measured total
-    when there is one, else :data:`DEFAULT_PER_SLAVE_DELAY_NS`. One cable segment per slave.
+    The prediction uses the caller's per-slave delay, else
+    :data:`DEFAULT_PER_SLAVE_DELAY_NS`, plus ``host_latency_ns``; a measured total is
+    never fed back into it. ``per_slave_delay_ns`` of the result is the caller's, else the
+    one calibrated from the measured total, else the default. One cable segment per slave.
     Frames shorter than the Ethernet minimum are padded to 64 bytes, as on the wire.
     """
     if frame_bytes <= 0 or slaves < 0 or link_bit_s <= 0 or not cable_m_per_segment >= 0:
         raise UsageError("frame bytes and link rate must be positive, slaves and cable >= 0")
     _check_bounds(frame_bytes, slaves, link_bit_s, cable_m_per_segment,
-                  per_slave_delay_ns, measured_total_ns, budget_ns)
+                  per_slave_delay_ns, measured_total_ns, budget_ns, host_latency_ns)
     frame_bytes = max(frame_bytes, MIN_FRAME_BYTES)
     wire = wire_time_ns(frame_bytes, link_bit_s)
     cable = cable_delay_ns([cable_m_per_segment] * slaves)
     calibrated = None
     if measured_total_ns is not None:
-        calibrated = calibrate_per_slave_delay_ns(measured_total_ns, wire, cable, slaves)
+        calibrated = calibrate_per_slave_delay_ns(measured_total_ns, wire, cable, slaves,
+                                                  host_latency_ns)
     if per_slave_delay_ns is not None:
-        delay, source = per_slave_delay_ns, DelaySource.GIVEN
-    elif calibrated is not None:
+        prior, prior_source = per_slave_delay_ns, DelaySource.GIVEN
+    else:
+        prior, prior_source = DEFAULT_PER_SLAVE_DELAY_NS, DelaySource.ASSUMED
+    if per_slave_delay_ns is None and calibrated is not None:
         delay, source = calibrated, DelaySource.CALIBRATED
     else:
-        delay, source = DEFAULT_PER_SLAVE_DELAY_NS, DelaySource.ASSUMED
+        delay, source = prior, prior_source
     return TimingEstimate(
         frame_bytes=frame_bytes,
         slaves=slaves,
@@ -236,10 +293,13 @@ def estimate(
         cable_delay_ns=cable,
         per_slave_delay_ns=delay,
         per_slave_delay_source=source,
-        predicted_total_ns=predict_total_ns(wire, slaves, delay, cable),
+        predicted_total_ns=predict_total_ns(wire, slaves, prior, cable, host_latency_ns),
         measured_total_ns=measured_total_ns,
         calibrated_per_slave_delay_ns=calibrated,
         budget_ns=budget_ns,
+        a_priori_per_slave_delay_ns=prior,
+        a_priori_source=prior_source,
+        host_latency_ns=host_latency_ns,
     )
 
 
@@ -297,6 +357,7 @@ __all__ = [
     "CABLE_NS_PER_M",
     "DEFAULT_CABLE_M",
     "DEFAULT_PER_SLAVE_DELAY_NS",
+    "ESC_DELAY_RANGE_NS",
     "INTER_FRAME_GAP_BYTES",
     "LINK_100_MBIT_S",
     "MAX_INT64",
@@ -311,6 +372,7 @@ __all__ = [
     "frame_bytes",
     "max_rate_hz",
     "parse_duration_ns",
+    "plausible_per_slave_delay",
     "predict_total_ns",
     "wire_time_ns",
     "wire_time_with_overhead_ns",

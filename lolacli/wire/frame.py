@@ -175,9 +175,9 @@ def make_frame(datagrams: list[Datagram] | tuple[Datagram, ...], **eth: object) 
     return Frame(header, fixed)
 
 
-def decode_datagrams(buf: bytes | memoryview, offset: int = 0, end: int | None = None) -> tuple[
-    tuple[Datagram, ...], int
-]:
+def decode_datagrams(
+    buf: bytes | memoryview, offset: int = 0, end: int | None = None
+) -> tuple[tuple[Datagram, ...], int]:
     """Decode datagrams from ``buf[offset:end]`` until one without the M flag.
 
     Returns the datagrams and the offset just after the last one. Raises
@@ -333,3 +333,48 @@ def encode_frame(frame: Frame, *, pad: bool = False) -> bytes:
     if pad:
         return out + bytes(max(0, MIN_FRAME_BYTES - FCS_BYTES - len(out)))
     return out + frame.padding
+
+
+# --- one datagram per frame: the mailbox traffic of a master --------------------------------
+
+_SINGLE = struct.Struct("<HBBIHH")  # EtherCAT header word, cmd, index, address, length, IRQ
+_SINGLE_AT = ETH_HEADER_BYTES
+_SINGLE_DATA_AT = ETH_HEADER_BYTES + ECAT_HEADER_BYTES + DATAGRAM_HEADER_BYTES
+_SINGLE_MIN = MIN_FRAME_BYTES - FCS_BYTES
+
+
+def ethernet_head(dst: bytes, src: bytes) -> bytes:
+    """The 14 bytes in front of an untagged EtherCAT frame."""
+    return bytes(dst) + bytes(src) + _U16BE.pack(ETHERTYPE_ECAT)
+
+
+def encode_single(head: bytes, cmd: int, index: int, address: int, data: bytes) -> bytes:
+    """The frame of one datagram (WKC 0, no flags), padded to 60 bytes: the bytes of
+    ``encode_frame(make_frame([d], …), pad=True)`` with a fraction of the work. ``head``
+    is :func:`ethernet_head`."""
+    n = len(data)
+    if n > MAX_DATAGRAM_DATA - DATAGRAM_HEADER_BYTES - WKC_BYTES:
+        raise WireError(f"datagram data of {n} bytes exceeds one frame")
+    word = (n + DATAGRAM_HEADER_BYTES + WKC_BYTES) | (ECAT_TYPE_COMMANDS << 12)
+    out = head + _SINGLE.pack(word, cmd & 0xFF, index & 0xFF, address, n, 0) + data + b"\0\0"
+    short = _SINGLE_MIN - len(out)
+    return out + bytes(short) if short > 0 else out
+
+
+def decode_single(frame: bytes) -> tuple[int, int, int, bytes, int] | None:
+    """``(cmd, index, address, data, wkc)`` of an untagged EtherCAT frame that holds
+    exactly one datagram; ``None`` for any other frame (the general decoder then says
+    what it is)."""
+    if len(frame) < _SINGLE_DATA_AT + WKC_BYTES or frame[12] != 0x88 or frame[13] != 0xA4:
+        return None
+    word, cmd, index, address, lenw, _irq = _SINGLE.unpack_from(frame, _SINGLE_AT)
+    n = lenw & 0x7FF
+    end = _SINGLE_DATA_AT + n
+    if (
+        word >> 12 != ECAT_TYPE_COMMANDS
+        or lenw & 0x8000
+        or (word & 0x7FF) < n + DATAGRAM_HEADER_BYTES + WKC_BYTES
+        or end + WKC_BYTES > len(frame)
+    ):
+        return None
+    return cmd, index, address, frame[_SINGLE_DATA_AT:end], frame[end] | frame[end + 1] << 8

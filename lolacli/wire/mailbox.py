@@ -174,7 +174,12 @@ def encode_mailbox(mailbox: Mailbox, *, buffer_bytes: int | None = None) -> byte
 
 
 def make_mailbox(
-    mailbox_type: int, payload: bytes, *, counter: int = 0, address: int = 0, channel: int = 0,
+    mailbox_type: int,
+    payload: bytes,
+    *,
+    counter: int = 0,
+    address: int = 0,
+    channel: int = 0,
     priority: int = 0,
 ) -> Mailbox:
     """A mailbox message with a consistent ``length``."""
@@ -198,3 +203,32 @@ def decode_mailbox_error(payload: bytes | memoryview) -> MailboxError:
 
 def encode_mailbox_error(error: MailboxError) -> bytes:
     return _ERROR.pack(error.error_type & 0xFFFF, error.detail & 0xFFFF)
+
+
+# --- the lean path of a master's mailbox traffic --------------------------------------------
+
+
+def encode_mailbox_message(
+    mailbox_type: int, payload: bytes, counter: int, buffer_bytes: int
+) -> bytes:
+    """``encode_mailbox(make_mailbox(mailbox_type, payload, counter=counter),
+    buffer_bytes=buffer_bytes)`` without the intermediate objects."""
+    n = len(payload)
+    if n + MAILBOX_HEADER_BYTES > buffer_bytes:
+        raise WireError(
+            f"mailbox of {n + MAILBOX_HEADER_BYTES} bytes exceeds the {buffer_bytes}-byte buffer"
+        )
+    head = _HEADER.pack(n, 0, 0, (mailbox_type & 0x0F) | ((counter & 0x7) << 4))
+    return head + payload + bytes(buffer_bytes - n - MAILBOX_HEADER_BYTES)
+
+
+def mailbox_type_and_payload(buf: bytes | memoryview) -> tuple[int, bytes]:
+    """The type (low nibble) and the payload of a mailbox message in a sync-manager
+    buffer: what :func:`decode_mailbox` gives, without the objects."""
+    if len(buf) < MAILBOX_HEADER_BYTES:
+        raise WireError("mailbox header truncated", offset=0)
+    length = buf[0] | buf[1] << 8
+    end = MAILBOX_HEADER_BYTES + length
+    if end > len(buf):
+        raise WireError(f"mailbox length {length} runs past the {len(buf)}-byte buffer", offset=0)
+    return buf[5] & 0x0F, bytes(buf[MAILBOX_HEADER_BYTES:end])

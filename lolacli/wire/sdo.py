@@ -703,9 +703,32 @@ def _info_data(m: SdoInfoMessage) -> bytes:
 # --- convenience builders for clients and servers ----------------------------------------
 
 
+_UPLOAD_REQUEST = struct.Struct("<HBHBI")  # CoE header, command, index, subindex, reserved
+
+
 def upload_request(index: int, subindex: int, *, complete_access: bool = False) -> bytes:
-    """The CoE payload of an initiate upload (read) request."""
-    return encode_sdo(SdoUploadRequest(index, subindex, complete_access))
+    """The CoE payload of an initiate upload (read) request: the bytes of
+    ``encode_sdo(SdoUploadRequest(index, subindex, complete_access))``, packed at once
+    (a master's most frequent message)."""
+    command = (ClientCommand.INITIATE_UPLOAD << 5) | (0x10 if complete_access else 0)
+    return _UPLOAD_REQUEST.pack(
+        CoeService.SDO_REQUEST << 12, command, index & 0xFFFF, subindex & 0xFF, 0
+    )
+
+
+def expedited_upload_data(coe_payload: bytes) -> bytes | None:
+    """The data of an expedited initiate upload response (CoE service SDO response,
+    server command 2, the e bit set), ``None`` for any other message: the common answer
+    to a read, taken without decoding it into objects (:func:`decode_sdo` gives the same
+    data in an :class:`SdoUploadResponse`)."""
+    if len(coe_payload) < COE_HEADER_BYTES + _ADDR.size + 4:
+        return None
+    command = coe_payload[2]
+    if coe_payload[1] >> 4 != CoeService.SDO_RESPONSE or command >> 5 != 2 or not command & 2:
+        return None
+    size = EXPEDITED_MAX_BYTES - ((command >> 2) & 3) if command & 1 else EXPEDITED_MAX_BYTES
+    start = COE_HEADER_BYTES + _ADDR.size
+    return bytes(coe_payload[start : start + size])
 
 
 def download_request(

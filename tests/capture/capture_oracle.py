@@ -111,3 +111,46 @@ def percentile(values: list[float], q: float) -> float:
     lo = int(pos)
     hi = min(lo + 1, len(s) - 1)
     return s[lo] + (s[hi] - s[lo]) * (pos - lo)
+
+
+@functools.cache
+def last_packet_ns(path: Path) -> int:
+    """Timestamp of the capture's last packet (any protocol), per tshark."""
+    out = subprocess.run(["tshark", "-r", str(path), "-T", "fields", "-e", "frame.time_epoch"],
+                         capture_output=True, text=True, check=True).stdout.split()
+    return _ns(out[-1])
+
+
+@dataclass(frozen=True)
+class Fates:
+    timeout_ns: int
+    lost: tuple[int, ...]  # outgoing frame numbers
+    in_flight: tuple[int, ...]
+    late: tuple[int, ...]  # outgoing frame numbers of pairs answered after the timeout
+
+
+def fates(frames: tuple[OracleFrame, ...], end_ns: int) -> Fates:
+    """DESIGN.md "Lost frame", written out: pair as DESIGN.md "Pairing" says; an outgoing
+    frame left unpaired is lost, unless sent within the last timeout of the capture (10 x
+    the median round trip, at least 1 ms); a pair answered after the timeout is late."""
+    pending: dict[tuple, list[OracleFrame]] = {}
+    pairs: list[tuple[int, int]] = []  # (round trip, outgoing frame number)
+    for fr in frames:
+        if not fr.returned:
+            pending.setdefault(fr.pair_key, []).append(fr)
+        elif pending.get(fr.pair_key):
+            out = pending[fr.pair_key].pop()
+            pairs.append((fr.ts_ns - out.ts_ns, out.number))
+    rts = sorted(rt for rt, _ in pairs)
+    if rts:
+        n = len(rts)
+        timeout = max(5 * (rts[(n - 1) // 2] + rts[n // 2]), 1_000_000)  # 10 x median
+    else:
+        timeout = 1_000_000
+    left = sorted((f for v in pending.values() for f in v), key=lambda f: f.number)
+    return Fates(
+        timeout,
+        tuple(f.number for f in left if f.ts_ns <= end_ns - timeout),
+        tuple(f.number for f in left if f.ts_ns > end_ns - timeout),
+        tuple(sorted(n for rt, n in pairs if rt > timeout)),
+    )

@@ -41,7 +41,8 @@ def test_analyze_json_contract(cli, corpus):
     code, out, err = cli("capture", "analyze", PCAP / "ethercrab__replay-issue-255.pcapng",
                          "--format", "json")
     rep = json.loads(out)
-    assert rep["wkc"]["reference"] == "first-seen" and rep["wkc"]["checked_datagrams"] > 0
+    assert rep["wkc"]["reference"] == "inferred" == rep["wkc_reference"]
+    assert rep["wkc"]["checked_datagrams"] == rep["wkc_checked"] > 0
     assert rep["wkc_mismatches"] == 0 and rep["lost_frames"] == 0
     assert code == 0, err
     for key in ("schema", "frames_total", "ecat_frames", "non_ecat_frames", "malformed_frames",
@@ -130,3 +131,61 @@ def test_list_bad_filter_is_usage_error(cli, corpus):
     code, _, err = cli("capture", "list", PCAP / "ethercrab__replay-sdo-error.pcapng",
                        "--filter", "bogus")
     assert code == 2 and "bogus" in err
+
+
+@pytest.mark.parametrize("name", ["ethercrab__twincat-scan-boxes.pcapng",
+                                  "ethercrab__soem-sdinfo-no-slaves.pcapng",
+                                  "ethercrab__replay-issue-255.pcapng"])
+def test_plot_never_a_traceback(cli, corpus, tmp_path, name):
+    """Quantised and backward timestamps (scan-boxes), nothing to plot (no-slaves), a
+    healthy stream: plots or a clean skip, never a traceback."""
+    code, _, err = cli("capture", "analyze", PCAP / name, "--plot", tmp_path, "-f", "json")
+    assert "Traceback" not in err and code in (0, 1)
+    written = sorted(p.name for p in tmp_path.glob("*.png"))
+    stem = name.removesuffix(".pcapng")
+    if name.startswith("ethercrab__soem-sdinfo-no-slaves"):
+        assert written == [f"{stem}-cycle-period.png"]  # periods, but no round trip at all
+    else:
+        assert written == sorted(f"{stem}-{k}.png" for k in ("cycle-period", "round-trip",
+                                                           "round-trip-cdf"))
+
+
+def test_plot_without_matplotlib_is_one_line(cli, faulty, tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
+    code, _, err = cli("capture", "analyze", faulty, "--plot", tmp_path)
+    assert code == 2 and "needs matplotlib" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("path", sorted(PCAP.glob("*")) if PCAP.is_dir() else [],
+                         ids=lambda p: p.name)
+def test_human_output_reads_at_80_columns(cli, path):
+    """Piped output is 80 columns wide (cli/common.py); names wrap, numbers are rounded to
+    fit, never cut (no ellipsis anywhere)."""
+    code, out, _ = cli("capture", "analyze", path)
+    lines = out.splitlines()
+    assert lines[0] == str(path) and lines[2].startswith("Verdict: ")
+    # lines of text stay whole (for grep); every table line fits
+    text = (str(path), "Datagrams by command:", "DC:", "AL status", "SDO abort:",
+            "A frame unanswered", "Verdict:", "unusable:", "cycle jitter:", "WKC ")
+    table = [x for x in lines[1:] if not x.startswith(text)]
+    assert max(len(line.rstrip()) for line in table) <= 80
+    assert "…" not in "".join(x for x in lines if not x.startswith("… "))
+
+
+def test_sdo_table_says_how_many_more_and_all_shows_them(cli, corpus):
+    path = PCAP / "ethercrab__replay-ek1914-no-complete-access.pcapng"
+    code, out, _ = cli("capture", "analyze", path)
+    assert "… 34 more, --all to show" in out
+    rows = [x for x in out.splitlines() if x.strip().startswith("0x100")]
+    assert len(rows) == 50
+    code, out, _ = cli("capture", "analyze", path, "--all")
+    assert "more, --all" not in out
+    assert len([x for x in out.splitlines() if x.strip().startswith("0x100")]) == 84
+
+
+def test_every_abort_has_its_own_line(cli, corpus):
+    code, out, _ = cli("capture", "analyze", PCAP / "ethercrab__replay-sdo-error.pcapng")
+    assert ("SDO abort: slave 0x1000 0x1001:00 0x06020000 Object does not exist in the object"
+            in out.replace("\n", " "))

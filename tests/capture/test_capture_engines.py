@@ -160,18 +160,23 @@ def test_c_kernel_refuses_state_it_would_index_out_of_bounds_with():
     def call(st=None, pn=None, ifs=ifs, n_if=1):
         st = z(S.S_SIZE) if st is None else st
         pn = z(slots) if pn is None else pn
+        obs = 2 * slots
         return k.scan(np.zeros(8, np.uint8), 0, 8, True, 1, False, False, ifs, n_if, st,
-                      z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH),
-                      z(slots * S.DEPTH), z(slots), z(slots), z(slots), z(slots), z(rows),
+                      z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH * S.PCOLS),
+                      z(slots), z(slots), z(obs), z(obs), z(obs * S.OCOLS), z(rows),
                       z(rows), z(rows), z(rows), z(rows), z(rows), z(rows * S.MBX_COLS),
-                      z(rows * S.WKC_COLS))
+                      z(rows * S.CFG_COLS), z(rows * S.EVICT_COLS))
 
     assert call()[1] == S.ST_CORRUPT  # 8 zero bytes: a block of length 0
     negative_row = z(S.S_SIZE)
     negative_row[S.S_N_DC] = -1
+    negative_counts = [z(S.S_SIZE) for _ in range(3)]
+    for st, i in zip(negative_counts, (S.S_N_CFG, S.S_BACKWARDS, S.S_MALFORMED), strict=True):
+        st[i] = -1  # these index st and the output rows
     deep = z(slots)
     deep[7] = S.DEPTH + 1
-    for bad in (dict(st=negative_row), dict(pn=deep), dict(n_if=-1),
+    for bad in (dict(st=negative_row), *(dict(st=st) for st in negative_counts), dict(pn=deep),
+                dict(n_if=-1),
                 dict(ifs=np.array([0, 1, 0, 0, 1], np.int64)),        # divisor 0
                 dict(ifs=np.array([1, -3, 0, 0, 1], np.int64)),       # negative shift
                 dict(ifs=np.array([0, 1, 1, 1 << 62, 1], np.int64))):  # offset overflows
@@ -226,3 +231,77 @@ def test_engines_hash_frames_alike_in_signature_mode(tmp_path, fast):
     got = _outcome(path, fast)
     assert got == _outcome(path, "python")
     assert got["cyclic_stream"] == "signature" and got["cyclic_frames"] == 1
+
+
+def _rich_capture(cooked: bool) -> bytes:
+    """Every path of the scanner in one file: a master whose MAC has the locally
+    administered bit (direction inferred), a resent lost frame, FMMU, station-address and
+    AL-control writes, AL status reads, WKC changes, a backward timestamp; as Ethernet, or
+    as Linux cooked v2 (then the packet type tells the direction) beside an Ethernet
+    interface."""
+    import struct
+
+    from lolacli.capture import writer as w
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    mac = bytes.fromhex("cadecadedeff")
+    t = [1_700_000_000 * 10**9]
+    out: list[bytes] = []
+
+    def emit(datagrams, ret: bool, dt: int = 30_000) -> None:  # noqa: ANN001
+        eth = encode_frame(make_frame(datagrams, src=mac), pad=True)
+        t[0] += dt
+        if cooked:
+            head = struct.pack(">HHIHBB8s", 0x88A4, 0, 2, 1, 0 if ret else 4, 6,
+                               mac.ljust(8, b"\0"))
+            out.append(w.epb(t[0], head + eth[14:], interface=1))
+        else:
+            out.append(w.epb(t[0], eth))
+
+    P = Datagram.physical  # noqa: N806
+    for k in range(3):
+        station = 0x1001 + k
+        for ret in (False, True):
+            emit([P(Command.APWR, (-k) & 0xFFFF if not ret else 3 - k, 0x0010,
+                    struct.pack("<H", station), index=k, wkc=int(ret))], ret)
+        fmmu = struct.pack("<IHBBHBBB3x", k * 4, 4, 0, 7, 0x1000, 0, 3, 1)
+        for ret in (False, True):
+            emit([P(Command.FPWR, station, 0x0600, fmmu, index=k + 8, wkc=int(ret))], ret)
+    for ret in (False, True):
+        emit([P(Command.BWR, 3 if ret else 0, 0x0120, b"\x08\x00", index=20, wkc=3 * ret)], ret)
+    lost = P(Command.FPRD, 0x1002, 0x0130, 2, index=21)
+    emit([lost], False)
+    emit([lost], False, 40_000_000)  # resent 40 ms later, answered
+    emit([P(Command.FPRD, 0x1002, 0x0130, struct.pack("<HHH", 0x14, 0, 0x1B)[:2], index=21,
+            wkc=1)], True)
+    for i in range(60):
+        wkc = 9 if i < 40 else 6
+        lrw = [Datagram.logical(Command.LRW, 0, 12, index=i, wkc=0),
+               P(Command.BRD, 0, 0x0130, 2, index=i)]
+        emit(lrw, False, 1_000_000)
+        emit([Datagram.logical(Command.LRW, 0, 12, index=i, wkc=wkc),
+              P(Command.BRD, 3, 0x0130, b"\x08\x00", index=i, wkc=3)], True)
+        if i == 30:
+            t[0] -= 2_500_000  # the clock steps back
+    head = w.shb() + (w.idb(link_type=1) + w.idb(link_type=276) if cooked else w.idb())
+    return head + b"".join(out)
+
+
+@pytest.mark.parametrize("cooked", [False, True], ids=["inferred", "sll2"])
+def test_engines_agree_on_every_path_and_its_damage(tmp_path, fast, cooked):
+    data = _rich_capture(cooked)
+    path = tmp_path / "rich.pcapng"
+    path.write_bytes(data)
+    whole = _outcome(path, fast)
+    assert whole == _outcome(path, "python")
+    assert whole["direction_rule"] == ("packet_type" if cooked else "inferred")
+    kinds = [f["kind"] for f in whole["findings"]]
+    assert {"lost", "wkc-mismatch", "not-op", "timestamps-backwards"} <= set(kinds), kinds
+    lrw = [g for g in whole["wkc"]["datagrams"] if g["cmd"] == "LRW"]
+    assert lrw[0]["expected"] == 9  # 3 slaves x (2 + 1), from the FMMU writes
+    rnd = random.Random(7 + cooked)
+    for k in range(VARIANTS * 2):
+        damaged = tmp_path / f"{k}.pcapng"
+        damaged.write_bytes(_mutate(data, rnd))
+        assert _outcome(damaged, fast) == _outcome(damaged, "python"), k

@@ -328,11 +328,12 @@ def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
     k = CKernels()
     z = lambda n: np.zeros(n, np.int64)  # noqa: E731
     rows = 1 << 14
+    pv = 128 * S.DEPTH * S.PCOLS
     args = dict(st=z(S.S_SIZE), cmd_counts=z(256), dg=z(S.MAX_DGRAMS), pk=z(128), pn=z(128),
-                pts=z(128 * S.DEPTH), pmeta=z(128 * S.DEPTH), sk=z(128), sc=z(128), wk=z(256),
-                wv=z(256), o_rt=z(rows), o_rtts=z(rows), o_rtcyc=z(rows), o_period=z(rows),
+                pv=z(pv), sk=z(128), sc=z(128), wk=z(512), wn=z(512), wv=z(512 * S.OCOLS),
+                o_rt=z(rows), o_rtts=z(rows), o_rtfr=z(rows), o_period=z(rows),
                 o_burst=z(rows), o_dc=z(rows), o_mbx=z(rows * S.MBX_COLS),
-                o_wkc=z(rows * S.WKC_COLS))
+                o_cfg=z(rows * S.CFG_COLS), o_evict=z(rows * S.EVICT_COLS))
     buf = np.zeros(100, np.uint8)
 
     def call(**change):
@@ -343,11 +344,12 @@ def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
     # 100 zero bytes as classic pcap: six empty 16-byte records, then 4 bytes left over
     assert call() == (96, S.ST_CORRUPT)
     assert args["st"][S.S_FRAMES] == 6 == args["st"][S.S_MALFORMED]
-    for bad in (dict(end=101), dict(pts=z(10)), dict(pk=z(48), pn=z(48)),
-                dict(pk=z(64), pn=z(64), pts=z(64 * S.DEPTH), pmeta=z(64 * S.DEPTH)),
-                dict(wk=z(128), wv=z(128)), dict(sk=z(64), sc=z(64)), dict(o_dc=z(5)),
-                dict(st=z(3)), dict(o_mbx=z(rows)), dict(buf=np.zeros(100, np.int64)),
-                dict(st=np.zeros(S.S_SIZE, np.int32))):
+    for bad in (dict(end=101), dict(pv=z(10)), dict(pk=z(48), pn=z(48)),
+                dict(pk=z(64), pn=z(64), pv=z(64 * S.DEPTH * S.PCOLS)),
+                dict(wk=z(256), wn=z(256), wv=z(256 * S.OCOLS)), dict(wv=z(512)),
+                dict(sk=z(64), sc=z(64)), dict(o_dc=z(5)), dict(o_cfg=z(rows)),
+                dict(o_evict=z(rows)), dict(st=z(3)), dict(o_mbx=z(rows)),
+                dict(buf=np.zeros(100, np.int64)), dict(st=np.zeros(S.S_SIZE, np.int32))):
         with pytest.raises(ValueError):
             call(**bad)
 

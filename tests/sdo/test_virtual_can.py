@@ -200,7 +200,7 @@ def test_cli_options_of_the_other_bus_are_usage_errors(cli, channel, gateway, tm
     assert code == 2 and "give --eds" in err
     code, _out, err = cli("sdo", "read", "16", "0x1000", *_can(channel), "--esi", str(tmp_path))
     assert code == 2 and "EtherCAT" in err
-    code, _out, err = cli("sdo", "read", "1", "0x1000")
-    assert code == 2 and "no transport" in err
-    code, _out, err = cli("sdo", "read", "1", "0x1000", "--iface", "lo")
-    assert code == 2 and "--backend soem" in err
+    code, _out, err = cli("sdo", "read", "1", "0x1000", "--backend", "soem")
+    assert code == 2 and "--iface" in err
+    code, _out, err = cli("sdo", "read", "1", "0x1000", "--backend", "twincat")
+    assert code == 2 and "unknown --backend" in err

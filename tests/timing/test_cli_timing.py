@@ -111,11 +111,63 @@ def test_capture_gives_the_measured_total(cli, capture):
     stats = analyze_file(capture).to_dict()["round_trip_cyclic_us"]
     code, doc, _ = run_json(cli, "--capture", str(capture), "--frame-bytes", "64", "--slaves", "3")
     assert code == 0
-    assert doc["measured_from"] == "capture:round_trip_cyclic_us.mean"
-    assert doc["measured_total_us"] == pytest.approx(stats["mean"], abs=1e-3)
+    assert doc["measured_from"] == f"capture: minimum of {stats['count']} cyclic round trips"
+    assert doc["measured_total_us"] == pytest.approx(stats["min"], abs=1e-3)
+    code, doc, _ = run_json(cli, "--capture", str(capture), "--statistic", "median")
+    assert doc["measured_total_us"] == pytest.approx(stats["median"], abs=1e-3)
 
 
 def test_capture_without_pairs_exits_3(cli, corpus):
     path = corpus / "pcap" / "ethercrab__soem-sdinfo-no-slaves.pcapng"
     code, _, err = cli("bus", "timing", "--capture", str(path))
     assert code == 3 and "round trip" in err
+
+
+def test_capture_gives_slaves_and_frame_bytes_with_their_sources(cli, corpus):
+    """3 slaves (BRD WKC) and a 77-byte cyclic frame (LRW 3 B + 3 FPRD 2 B) from the
+    capture itself; the a-priori prediction keeps the assumed 1000 ns per slave, and the
+    calibrated delay (30.7 us: host latency, not slaves) comes with a warning."""
+    path = corpus / "pcap" / "ethercrab__replay-issue-255.pcapng"
+    code, doc, err = run_json(cli, "--capture", str(path))
+    assert code == 0
+    assert (doc["slaves"], doc["frame_bytes"]) == (3, 77)
+    assert doc["sources"]["slaves"] == "capture: the highest WKC of a BRD/BWR"
+    assert doc["sources"]["frame_bytes"].startswith("capture: its longest cyclic frame")
+    assert doc["prediction"]["per_slave_delay_ns"] == 1000
+    assert doc["predicted_total_us"] == doc["prediction"]["total_us"] == 9.19
+    assert doc["measured_total_us"] == 98.233  # the minimum cyclic round trip
+    assert doc["calibrated_per_slave_delay_ns"] == 30681
+    assert doc["calibration_plausible"] is False and "outside what ESCs do" in err
+    assert doc["calibration_warning"] in err
+    # with the host latency of that host, the slaves get a plausible delay
+    code, doc, err = run_json(cli, "--capture", str(path), "--host-latency-us", "88")
+    assert doc["calibration_plausible"] is True and doc["calibration_warning"] is None
+    assert doc["predicted_total_us"] == 9.19 + 88 and "outside" not in err
+
+
+def test_measured_total_is_never_shown_as_a_prediction(cli):
+    code, doc, _ = run_json(cli, "--measured", "124.1us")
+    assert doc["predicted_total_us"] == 92.93  # 67.68 + 25 x 1 us + 0.25 us cable
+    assert doc["measured_total_us"] == 124.1 and doc["per_slave_delay_ns"] == 2247
+    code, out, _ = cli("bus", "timing", "--measured", "124.1us")
+    assert "92.93 µs" in out and "model, a priori" in out
+
+
+def test_capture_round_trips_shorter_than_the_wire_time_are_bad_input(cli, tmp_path):
+    """A veth has no wire time: a 1026-byte LRW 'returns' in 30 us."""
+    from lolacli.capture import writer as w
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    recs = []
+    for i in range(10):
+        for ret in (False, True):
+            d = Datagram.logical(Command.LRW, 0, 1026, index=i, wkc=3 if ret else 0)
+            brd = Datagram.physical(Command.BRD, 1 if ret else 0, 0x130, 2, index=i,
+                                    wkc=1 if ret else 0)
+            f = encode_frame(make_frame([d, brd], src=b"\x02" * 6 if ret else b"\x00" * 6))
+            recs.append(w.pcap_record(10**18 + i * 10**6 + (30_000 if ret else 0), f, ns=True))
+    path = tmp_path / "veth.pcap"
+    path.write_bytes(w.pcap_header(ns=True) + b"".join(recs))
+    code, _, err = cli("bus", "timing", "--capture", str(path))
+    assert code == 3 and "shorter than the wire time" in err and "Traceback" not in err

@@ -76,7 +76,10 @@ def test_estimate_lola_with_measurement():
     assert est.wire_time_with_overhead_ns == 69_280
     assert est.per_slave_delay_source is DelaySource.CALIBRATED
     assert est.per_slave_delay_ns == 2257
-    assert est.predicted_total_ns == 67_680 + 25 * 2257
+    # the prediction stays a priori: never the calibration fed back into itself
+    assert est.predicted_total_ns == 67_680 + 25 * DEFAULT_PER_SLAVE_DELAY_NS
+    assert est.a_priori_source is DelaySource.ASSUMED
+    assert est.calibration_plausible is True  # 2.26 us is within 0.3-3 us
     assert est.total_ns == 124_100
     assert est.within_budget is True
     doc = est.to_dict()
@@ -102,6 +105,20 @@ def test_given_delay_wins_but_calibration_is_still_reported():
     assert est.per_slave_delay_source is DelaySource.GIVEN
     assert est.predicted_total_ns == 67_680 + 12_500
     assert est.calibrated_per_slave_delay_ns == 2257
+
+
+def test_host_latency_is_part_of_the_prediction_and_of_the_calibration():
+    # 3 slaves, 64 B (5.12 us on the wire), the minimum round trip of
+    # ethercrab__replay-ek1100-el2828-el2889.pcapng (88.647 us): without the host latency
+    # the slaves get 27.8 us each, which no ESC does; with 80 us of host latency 1.18 us
+    est = estimate(64, 3, cable_m_per_segment=0, measured_total_ns=88_647)
+    assert est.calibrated_per_slave_delay_ns == 27_842 and est.calibration_plausible is False
+    est = estimate(64, 3, cable_m_per_segment=0, measured_total_ns=88_647,
+                   host_latency_ns=80_000)
+    assert est.calibrated_per_slave_delay_ns == 1_176 and est.calibration_plausible is True
+    assert est.predicted_total_ns == 5_120 + 3 * 1000 + 80_000
+    with pytest.raises(UsageError):
+        estimate(64, 3, measured_total_ns=50_000, host_latency_ns=80_000)
 
 
 def test_budget_exceeded():

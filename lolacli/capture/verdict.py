@@ -1,0 +1,152 @@
+"""Findings: what a capture says about the bus, each with its frame numbers (pure).
+
+DESIGN.md "Lost frame": an outgoing frame no return matches at all is lost, unless it
+was sent within the capture's last ``timeout`` (in flight at the end); a return later than
+the timeout is late. The timeout defaults to 10 x the median round trip, at least 1 ms.
+DESIGN.md "Timestamp quality": round trips of 0 (quantised timestamps), timestamps going
+backwards and cut-short files are findings, and the statistics built on them are marked
+unusable.
+
+A finding has a severity: ``failure`` (the command exits 1), ``warning`` or ``info``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+FAILURE = "failure"
+WARNING = "warning"
+INFO = "info"
+FRAMES_SHOWN = 5
+MIN_TIMEOUT_NS = 1_000_000
+TIMEOUT_ROUND_TRIPS = 10
+
+
+@dataclass(frozen=True, slots=True)
+class Finding:
+    kind: str
+    severity: str
+    message: str
+    frames: tuple[int, ...] = ()
+    count: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "severity": self.severity, "message": self.message,
+                "frames": list(self.frames), "count": self.count}
+
+
+def first(frames: Any, n: int = FRAMES_SHOWN) -> tuple[int, ...]:
+    return tuple(int(f) for f in sorted(set(int(x) for x in frames))[:n])
+
+
+def timeout_ns(median_round_trip_ns: float | None, given_ns: int | None) -> tuple[int, str]:
+    """The in-flight timeout and where it came from."""
+    if given_ns is not None:
+        return given_ns, "--timeout"
+    scaled = None if median_round_trip_ns is None else median_round_trip_ns * TIMEOUT_ROUND_TRIPS
+    if scaled is not None and scaled > MIN_TIMEOUT_NS:
+        return round(scaled), "10 x the median round trip"
+    return MIN_TIMEOUT_NS, "the 1 ms minimum"
+
+
+@dataclass(slots=True)
+class FrameFate:
+    """Lost, late and in-flight outgoing frames."""
+
+    timeout_ns: int
+    timeout_source: str
+    lost: np.ndarray  # outgoing frame numbers, sorted
+    in_flight: np.ndarray
+    late: int
+    late_frames: tuple[int, ...]
+    lost_cyclic: int = 0
+
+
+def fates(
+    pending_frames: np.ndarray, pending_ts: np.ndarray, pending_cyclic: np.ndarray,
+    end_ts: int, timeout: tuple[int, str], late_count: int, late_frames: tuple[int, ...],
+) -> FrameFate:
+    t, source = timeout
+    flying = pending_ts > end_ts - t
+    order = np.argsort(pending_frames, kind="stable")
+    frames, flying, cyc = pending_frames[order], flying[order], pending_cyclic[order]
+    return FrameFate(t, source, frames[~flying], frames[flying], late_count, late_frames,
+                     int(np.count_nonzero(cyc & ~flying)))
+
+
+@dataclass(slots=True)
+class Findings:
+    items: list[Finding] = field(default_factory=list)
+
+    def add(self, kind: str, severity: str, message: str, frames: Any = (), count: int = 0
+            ) -> None:
+        self.items.append(Finding(kind, severity, message, first(frames), count))
+
+    @property
+    def failed(self) -> bool:
+        return any(f.severity == FAILURE for f in self.items)
+
+    def of(self, *kinds: str) -> list[Finding]:
+        return [f for f in self.items if f.kind in kinds]
+
+
+def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_lost: int,
+                   direction_rule: str) -> None:
+    """No EtherCAT, a bus that never answered, one-way captures, lost/late/in flight."""
+    ecat, sent, back = counts["ecat_frames"], counts["outgoing_frames"], counts["returned_frames"]
+    if ecat == 0:
+        out.add("no-ethercat", FAILURE,
+                f"no EtherCAT frame among {counts['frames_total']} packets: wrong interface, "
+                "or a capture filter that dropped them?")
+        return
+    if sent and not back:
+        out.add("no-answer", FAILURE,
+                f"the bus never answered: {sent} frames sent, none came back (no slave "
+                "connected or powered, cable, or a capture of the master's sending side only)",
+                fate.lost if fate.lost.size else fate.in_flight, sent)
+    if back and not sent:
+        out.add("direction-unknown", WARNING,
+                f"all {back} frames look returned and none echoes another: the direction "
+                f"cannot be told ({direction_rule} rule); nothing is paired")
+    lost = int(fate.lost.size)
+    if lost:
+        cyc = f", {fate.lost_cyclic} of them cyclic" if fate.lost_cyclic else ""
+        out.add("lost", FAILURE if lost > max_lost else WARNING,
+                f"{lost} outgoing frames never came back{cyc} (threshold {max_lost}; a frame "
+                "can also be missing because the capture itself dropped it)",
+                fate.lost, lost)
+    if fate.late:
+        out.add("late", WARNING,
+                f"{fate.late} frames came back later than the timeout "
+                f"({fate.timeout_ns / 1000:g} µs, {fate.timeout_source}); counted apart from "
+                "lost frames", fate.late_frames, fate.late)
+    if fate.in_flight.size:
+        out.add("in-flight-at-end", INFO,
+                f"{fate.in_flight.size} frames sent within the last "
+                f"{fate.timeout_ns / 1000:g} µs of the capture had no answer yet (not lost)",
+                fate.in_flight, int(fate.in_flight.size))
+
+
+def timestamp_findings(
+    out: Findings, rt_zero: int, rt_negative: int, rt_bad_frames: tuple[int, ...],
+    pairs: int, backwards: int, backwards_frames: tuple[int, ...],
+    periods_bad: int,
+) -> list[str]:
+    """Quantised and backward timestamps; returns the statistics they make unusable."""
+    unusable: list[str] = []
+    if rt_zero:
+        out.add("timestamps-quantised", WARNING,
+                f"{rt_zero} of {pairs} round trips are 0 µs: the capture's clock is coarser "
+                "than a round trip; round-trip statistics are unusable", rt_bad_frames, rt_zero)
+    if backwards:
+        out.add("timestamps-backwards", WARNING,
+                f"timestamps go backwards {backwards} times; statistics that span those "
+                "steps are unusable", backwards_frames, backwards)
+    if rt_zero or rt_negative:
+        unusable += ["round_trip_us", "round_trip_cyclic_us"]
+    if periods_bad:
+        unusable.append("cycle_period_us")
+    return unusable

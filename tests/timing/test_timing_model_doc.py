@@ -1,0 +1,42 @@
+"""docs/timing-model.md is generated from the corpus by tools/timing_model_check.py; this
+fails when the model, the capture analysis or the corpus changed and the table did not."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+from conftest import CORPUS
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location(
+        "timing_model_check", ROOT / "tools" / "timing_model_check.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_timing_model_table_is_current(corpus):
+    tool = _tool()
+    rows = tool.measure(CORPUS)
+    current = (ROOT / "docs" / "timing-model.md").read_text(encoding="utf-8")
+    assert current == tool.render(rows), "stale: run python tools/timing_model_check.py"
+
+
+def test_the_table_holds_every_capture_with_a_slave_count(corpus):
+    rows = _tool().measure(CORPUS)
+    assert len(rows) == 14  # soem-sdinfo-no-slaves: nothing answered, no slave count
+    usable = [r for r in rows if r.min_us is not None]
+    assert len(usable) == 10
+    # the model (bus only) is short of every host capture by tens of µs at least
+    assert all(r.error_us > 30 for r in usable)
+    # a host latency fitted on the same host's other captures closes most of it
+    fitted = [r for r in usable if r.host_latency_us is not None]
+    left = sorted(abs(r.error_us - r.host_latency_us) for r in fitted)
+    assert len(fitted) >= 5 and left[len(left) // 2] < 10
