@@ -30,6 +30,14 @@ def assigned_pdos(pdos: tuple[Pdo, ...], direction: Direction) -> list[Pdo]:
     return [p for p in of if p.sync_manager is not None] or of
 
 
+_UNSIGNED_BY_LENGTH = {
+    1: DataType.UNSIGNED8,
+    2: DataType.UNSIGNED16,
+    4: DataType.UNSIGNED32,
+    8: DataType.UNSIGNED64,
+}
+
+
 class Device:
     """A generic device: its process data are plain object-dictionary entries."""
 
@@ -51,6 +59,7 @@ class Device:
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
+        self._init_cmd_objects()
 
     # ---------------------------------------------------------- definition
     def define(self) -> None:
@@ -127,6 +136,25 @@ class Device:
                 index, "PDO assignment", subs, code=ObjectCode.ARRAY, writable_count=True
             )
             self.od.set(index, 0, used)
+
+    def _init_cmd_objects(self) -> None:
+        """Objects the ENI's CoE InitCmds write that the model lacks (a manufacturer's
+        parameter, a generic device's 0x6060): the configurator took them from the device's
+        ESI, so the real device has them. Each becomes a read-write entry of the written
+        length (unsigned for 1/2/4/8 bytes, else an octet string). Complete-access writes
+        are left alone: the sub-indexes' sizes are not in the ENI."""
+        mailbox = self.slave.mailbox
+        if mailbox is None:
+            return
+        for cmd in mailbox.coe_init_cmds:
+            if cmd.ccs != 1 or cmd.complete_access or not cmd.data:
+                continue
+            if (cmd.index, cmd.subindex) in self.od:
+                continue
+            data_type = _UNSIGNED_BY_LENGTH.get(len(cmd.data), DataType.OCTET_STRING)
+            name = cmd.comment or f"Object 0x{cmd.index:04X}:{cmd.subindex:02X}"
+            entry = self.od.ensure_entry(cmd.index, cmd.subindex, name, data_type)
+            entry.value = bytes(len(cmd.data))
 
     # ------------------------------------------------------------- mapping
     def mapping(self, direction: Direction) -> list[tuple[int, int, int]]:

@@ -31,16 +31,16 @@ from tests.conftest import corpus_files, corpus_ids
 from tests.emulator.bus import EXAMPLES
 
 #: corpus ENIs whose chain our emulator cannot take to OP, the InitCmd that is refused and
-#: why that is right (the master reports the emulated slave's answer faithfully)
+#: why that is right (the master reports the emulated slave's answer faithfully). Objects the
+#: ENI's CoE InitCmds write are added to an emulated device that lacks them (rocos eni1's
+#: generic drive: 0x6060; murrelektronik's manufacturer objects 0x2001...), as the
+#: configurator took them from the device's ESI.
 REFUSED = {
-    # the ENI gives the Elmo drive's process data only as sizes (no PDOs, no CiA 402
-    # entries), so the emulated device is a generic one; a CoE InitCmd writes 0x6060
-    # (modes of operation), which it lacks: abort 0x06020000, as such a slave would answer
-    "rocos-ethercat__eni1.xml": ("PS", "0x6060:00", None),
-    # a CoE InitCmd writes the I/O module's manufacturer object 0x2001 (pin/port layout),
-    # which the emulated device's object dictionary (built from the ENI's PDOs) lacks:
-    # abort 0x06020000 "object does not exist", as a real slave without it would answer
-    "murrelektronik-variox__eni.xml": ("PS", "0x2001:00", None),
+    # the ENI's own "set fmmu 0/1" InitCmds for slave 2 carry garbage (logical start
+    # 0xEB030B5F, 3,012 bytes, bits 3..252: an exporter's uninitialised memory), so the
+    # cyclic LRW at 0x10000000 never reaches the slave's outputs; with no valid outputs the
+    # ESC stays in SAFEOP and the ENI's own "check device state for OP" fails, as on hardware
+    "murrelektronik-variox__eni.xml": ("SO", "check device state for OP", None),
 }
 
 
