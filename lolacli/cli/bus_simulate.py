@@ -106,7 +106,7 @@ def simulate_cmd(
         raise typer.BadParameter(f"{drop_p} is not in [0, 1]", param_hint="--drop-p")
     n_cycles = cycles
     if n_cycles is None:
-        ns = parse_duration_ns(duration) if duration is not None else 10_000_000_000
+        ns = parse_duration_ns(duration, "s") if duration is not None else 10_000_000_000
         n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
     cut = parse_link_down(link_down) if link_down is not None else None
     pairs = []

@@ -181,6 +181,13 @@ def test_bad_input_is_one_line_with_its_exit_code(args, code: int, words: str) -
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in r.stderr
 
 
+def test_a_bare_duration_is_seconds_as_in_bus_emulate() -> None:
+    """`--duration 1` is one second (as `bus emulate --duration` and `sdo serve --duration`
+    take it), not 1 µs, which ran 0 cycles and passed."""
+    doc = json.loads(run("bus", "simulate", "--duration", "1", "--format", "json").stdout)
+    assert doc["cycles"] == 2000
+
+
 def test_an_eni_without_cyclic_frames_is_exit_3(tmp_path: Path) -> None:
     r = run("bus", "simulate", "--cycles", "10", "--eni", str(_eni_without_cyclic(tmp_path)))
     assert r.returncode == 3 and "no cyclic frame" in r.stderr and len(r.stderr.splitlines()) == 1
