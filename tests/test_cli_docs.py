@@ -1,7 +1,13 @@
-"""docs/cli.md is generated from the app; this fails when a command changed and the docs did not."""
+"""docs/cli.md is generated from the app; this fails when a command changed and the docs did not.
+The README's Python examples run as written."""
 
 import importlib.util
+import re
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -15,3 +21,19 @@ def test_cli_reference_is_current():
     expected = module.render()
     current = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
     assert current == expected, "docs/cli.md is stale: run python tools/gen_cli_docs.py"
+
+
+def _readme_python_blocks() -> list[str]:
+    text = (ROOT / "README.md").read_text()
+    return re.findall(r"```python\n(.*?)```", text, flags=re.S)
+
+
+@pytest.mark.parametrize("index", range(len(_readme_python_blocks())))
+def test_readme_python_examples_run_as_written(index: int) -> None:
+    """Each ```python block of the README runs on its own from the repository root (a new
+    user copies one block, not the page)."""
+    code = _readme_python_blocks()[index]
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
