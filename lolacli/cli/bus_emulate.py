@@ -50,9 +50,9 @@ def emulate_cmd(
         str | None,
         typer.Option(
             "--link-down",
-            metavar="K[@SECONDS]",
-            help="Cut the cable after slave position K (0: all), from the start or SECONDS "
-            "after serving starts.",
+            metavar="K[@T]",
+            help="Cut the cable after slave position K (0: all), from the start or T "
+            "after serving starts (seconds, or 500ms).",
         ),
     ] = None,
     duration_s: Annotated[

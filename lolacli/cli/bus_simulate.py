@@ -46,9 +46,9 @@ def simulate_cmd(
         str | None,
         typer.Option(
             "--link-down",
-            metavar="K[@SECONDS]",
-            help="Cut the cable after slave K (0: at the master), from the start or SECONDS "
-            "into the cyclic run.",
+            metavar="K[@T]",
+            help="Cut the cable after slave K (0: at the master), from the start or T "
+            "into the cyclic run (seconds, or 500ms).",
         ),
     ] = None,
     drift_ppb: Annotated[

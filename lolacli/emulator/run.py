@@ -14,6 +14,7 @@ from lolacli.emulator.slave import build_chain
 from lolacli.eni.esi import EsiDevice, EsiFile
 from lolacli.eni.model import Eni, Slave
 from lolacli.errors import EniError, UsageError
+from lolacli.timing.model import parse_duration_ns
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,13 +110,16 @@ def arm_link_loss(chain: Chain, options: EmulateOptions, start_ns: int) -> None:
 
 
 def parse_link_down(text: str) -> tuple[int, float]:
-    """``K`` or ``K@SECONDS`` -> (position K, seconds; 0 = from the start); UsageError."""
+    """``K`` or ``K@T`` -> (position K, seconds; 0 = from the start); UsageError. T is a
+    duration (``0.5``, ``0.5s``, ``500ms``; bare numbers are seconds)."""
     position_text, at, seconds_text = text.partition("@")
     try:
         position = int(position_text)
-        seconds = float(seconds_text) if at else 0.0
-    except ValueError:
-        raise UsageError(f"--link-down {text!r}: expected K or K@SECONDS") from None
+        seconds = parse_duration_ns(seconds_text, "s") / 1e9 if at else 0.0
+    except (ValueError, UsageError):
+        raise UsageError(
+            f"--link-down {text!r}: expected K or K@T (T in seconds, or 500ms, 0.5s)"
+        ) from None
     if position < 0 or not 0.0 <= seconds < 1e9 or (at and seconds == 0.0):
         raise UsageError(f"--link-down {text!r}: K >= 0, SECONDS > 0")
     return position, seconds

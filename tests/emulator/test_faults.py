@@ -198,6 +198,8 @@ def test_dc_drift_makes_the_system_time_difference_grow() -> None:
 def test_parse_link_down() -> None:
     assert parse_link_down("3") == (3, 0.0)
     assert parse_link_down("3@1.5") == (3, 1.5)
+    # the form the issue writes, and any duration unit
+    assert parse_link_down("5@0.5s") == parse_link_down("5@500ms") == (5, 0.5)
     for bad in ("x", "3@", "3@0", "3@-1", "-1", "3@abc", "3@1@2"):
         with pytest.raises(UsageError):
             parse_link_down(bad)
