@@ -601,6 +601,7 @@ class _Pass:
         self._file_findings(findings, st)
         wkc = verdict(self._observations(S.KIND_WKC), self.layout, eni)
         _wkc_findings(findings, wkc, max_wkc, eni, self.layout)
+        _slave_count_finding(findings, eni, st[S.S_BRD_MAX])
         al = last_al_status(self._observations(S.KIND_AL_STATUS))
         _al_findings(findings, al, self.layout)
         for t in self.sdo.aborts():
@@ -742,6 +743,19 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
         out.add("eni-slave-unmapped", FAILURE,
                 f"{len(missing)} ENI slaves with process data have no FMMU in the master's "
                 f"layout (not in the bus, or not configured): {names}", (), len(missing))
+
+
+def _slave_count_finding(out: Findings, eni: Eni | None, brd_wkc_max: int) -> None:
+    """A bus whose broadcasts never counted the ENI's slaves is not the ENI's bus (each
+    slave increments a BRD/BWR's WKC once, so the highest WKC is the slaves on the line)."""
+    if eni is None or not brd_wkc_max or brd_wkc_max == len(eni.slaves):
+        return
+    fewer = brd_wkc_max < len(eni.slaves)
+    out.add("eni-slave-count", FAILURE,
+            f"the bus answered broadcasts with at most {brd_wkc_max} slaves, the ENI has "
+            f"{len(eni.slaves)}" + (" (slaves missing, or a different bus)" if fewer
+                                    else " (extra slaves, or a different ENI)"),
+            (), abs(len(eni.slaves) - brd_wkc_max))
 
 
 def _al_findings(out: Findings, reads: list[AlStatusRead], layout: MasterLayout) -> None:

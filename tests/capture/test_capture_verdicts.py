@@ -97,6 +97,17 @@ def test_akd_nc_mode_counts(corpus):
                                           "cycle_period_us"}
 
 
+def test_an_eni_of_another_bus_fails_on_the_slave_count(corpus, cli):
+    """twincat-run's broadcasts count 2 slaves (EK1100 + EL1004); kpierczy's ENI has 5: the
+    capture is not of that ENI's bus, whatever the few datagrams it can check say."""
+    code, rep = _analyze(cli, corpus / "pcap" / "ethercrab__twincat-run-ek1100-el1004.pcapng",
+                         "--eni", corpus / "eni" / "kpierczy-ethercat-lib__test_eni.xml")
+    assert rep["bus_seen"]["slaves"] == 2
+    found = [f for f in rep["findings"] if f["kind"] == "eni-slave-count"]
+    assert code == 1 and rep["verdict"] == "fail"
+    assert len(found) == 1 and "at most 2 slaves, the ENI has 5" in found[0]["message"]
+
+
 # --- synthetic captures ------------------------------------------------------------------
 
 OUT_MAC = b"\x10\x10\x10\x10\x10\x10"
