@@ -56,7 +56,7 @@ def list_dictionary(slave: str, options: TransportOptions) -> dict[str, Any]:
         node = parse_node_id(slave)
         return dictionary_report(str(node), load_eds(options.eds, node))
     if options.can is None and options.iface is None and options.esi:
-        return dictionary_report(slave, _offline_esi(slave, options))
+        return dictionary_report(*_offline_esi(slave, options))
     with open_session(options) as session:
         target = session.target(slave)
         found = target.client.dictionary() or target.dictionary
@@ -70,20 +70,49 @@ def list_dictionary(slave: str, options: TransportOptions) -> dict[str, Any]:
         return dictionary_report(target.label, found)
 
 
-def _offline_esi(slave: str, options: TransportOptions) -> Dictionary:
+def _offline_esi(slave: str, options: TransportOptions) -> tuple[str, Dictionary]:
+    """The dictionary ``sdo list --esi`` shows without a bus, and the label it goes by: the
+    ENI slave's device when ``--eni`` names the slave, else the ESI's only device with a
+    dictionary (SLAVE is not on any bus then: the label says which device it is)."""
+    from lolacli.errors import InputError
     from lolacli.files import load_eni, load_esi
     from lolacli.sdo.address import resolve_slave
     from lolacli.sdo.files import esi_dictionary
 
     files = [load_esi(p) for p in options.esi]
-    identity = None
+    with_od = [(f, d) for f in files for d in f.devices if d.dictionary is not None]
+    names = ", ".join(str(p) for p in options.esi)
+    if not with_od:
+        raise InputError(
+            "no device in it has an object dictionary (no <Profile><Dictionary>): "
+            "sdo list needs one, or a bus's SDO Information",
+            path=names,
+        )
     if options.eni is not None:
-        identity = resolve_slave(slave, load_eni(options.eni)).identity
-    found = esi_dictionary(files, identity)
-    if found is None:
-        which = "the slave's identity" if identity is not None else "one device (give --eni)"
-        raise UsageError(f"no ESI device with a dictionary matches {which}")
-    return found
+        target = resolve_slave(slave, load_eni(options.eni))
+        found = esi_dictionary(files, target.identity)
+        if found is None:
+            i = target.identity
+            raise UsageError(
+                f"slave {slave} ({target.name}: vendor 0x{i.vendor_id:08X}, product "
+                f"0x{i.product_code:08X}, revision 0x{i.revision:08X}) is not a device of "
+                f"{names} that has a dictionary"
+            )
+        return f"{slave} {target.name}", found
+    if len(with_od) > 1:
+        shown = "; ".join(
+            f"{d.name[:40]} (product 0x{d.identity.product_code:08X}, "
+            f"revision 0x{d.identity.revision:08X})"
+            for _, d in with_od[:3]
+        )
+        more = f"; {len(with_od) - 3} more" if len(with_od) > 3 else ""
+        raise UsageError(
+            f"{names} describes {len(with_od)} devices with a dictionary ({shown}{more}): "
+            "give --eni FILE so SLAVE picks one"
+        )
+    found = esi_dictionary(files, None)
+    assert found is not None
+    return f"{with_od[0][1].name} (ESI, no bus)", found
 
 
 __all__ = ["dictionary_report", "list_dictionary"]

@@ -37,9 +37,15 @@ def test_every_corpus_esi_lists_or_says_why(cli, path: Path, corpus) -> None:
     code, out, err = cli("sdo", "list", "1", "--esi", str(path), "-f", "json")
     if len(with_od) == 1:
         assert code == 0, err
-        assert len(json.loads(out)["objects"]) == len(with_od[0].dictionary.objects)
-    else:  # no dictionary, or several devices to choose from: a usage error that says so
-        assert code == 2 and "no ESI device with a dictionary" in err
+        doc = json.loads(out)
+        assert len(doc["objects"]) == len(with_od[0].dictionary.objects)
+        assert doc["slave"] == f"{with_od[0].name} (ESI, no bus)"  # not "slave 1" of a bus
+    elif not with_od:  # nothing to list: bad input, naming the file
+        assert code == 3 and path.name in err and "no device in it has an object dictionary" in err
+    else:  # several devices to choose from: a usage error naming them and the way out
+        assert code == 2 and f"describes {len(with_od)} devices with a dictionary" in err
+        assert with_od[0].name[:40] in err and "give --eni FILE" in err
+    assert len(err.strip().splitlines()) <= 1
 
 
 def test_esi_device_picked_by_the_eni_slave(cli, corpus) -> None:
