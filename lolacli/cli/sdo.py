@@ -282,6 +282,13 @@ def write_cmd(
             complete_access=complete,
         )
 
+    if options.can is None and options.iface is None:
+        from lolacli.cli.common import warn
+
+        warn(
+            "note: the emulated chain lives in this process: the value is gone when it ends "
+            "(sdo check runs a file's writes and reads on one chain)"
+        )
     _run_access(fmt, _base(slave, obj), lambda: _access(slave, obj, options, action))
 
 

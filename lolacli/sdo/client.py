@@ -229,6 +229,12 @@ def write(
         return SdoValue(slave, index, subindex, raw, raw, kind, "option", "", True)
     choice = choose_type(index, subindex, data_type, dictionary)
     if choice.data_type is None:
+        # a slave that describes itself (SDO Information) can say; optional for clients
+        ask = getattr(client, "entry_type", None)
+        found = ask(index, subindex) if ask is not None else None
+        if found is not None and type_name(found) != f"0x{found:04X}":
+            choice = TypeChoice(found, "sdo_info", choice.name)
+    if choice.data_type is None:
         raise UsageError(
             f"the data type of 0x{index:04X}:{subindex:02X} is not known: give --type "
             "(or the object dictionary with --eds/--esi)"

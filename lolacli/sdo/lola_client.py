@@ -129,6 +129,16 @@ class LolaClient:
         except (TransportError, WireError) as exc:
             raise self._failed(index, subindex, exc) from None
 
+    def entry_type(self, index: int, subindex: int) -> int | None:
+        """The entry's data type by the SDO Information service (one Get Entry
+        Description), or None where the slave has no such service or entry."""
+        from lolacli.master.sdo_info import entry_description
+
+        try:
+            return entry_description(self.mailbox, index, subindex).data_type or None
+        except (SdoAbortError, WireError, TransportError):
+            return None
+
     def dictionary(self) -> Dictionary | None:
         """The slave's own description (SDO Information); None when it has no such
         service (an SDO Info Error or mailbox error answer to Get OD List)."""

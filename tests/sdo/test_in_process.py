@@ -91,6 +91,16 @@ def test_write_then_read_in_one_session() -> None:
         assert read(session.target("5").client, 0x607F, 0, data_type=0x0007).value == 0
 
 
+def test_a_write_takes_its_type_from_sdo_information_and_says_it_is_not_kept(cli) -> None:
+    """No --type and no dictionary file: the slave's SDO Information gives 0x607F's type
+    (UNSIGNED32), and stderr says the emulated chain (and the value) ends with the process."""
+    code, out, err = cli("sdo", "write", "5", "0x607F", "250000", "-f", "json")
+    doc = json.loads(out)
+    assert code == 0 and (doc["data_type"], doc["type_source"]) == ("UNSIGNED32", "sdo_info")
+    assert doc["raw_hex"] == "90d00300"
+    assert "gone when it ends" in err and len(err.strip().splitlines()) == 1
+
+
 def test_only_the_slaves_asked_for_leave_init() -> None:
     """Slave 5 reaches PREOP through the mailbox sync managers of its ENI InitCmds;
     every other slave stays in INIT, untouched."""
