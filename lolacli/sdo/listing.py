@@ -93,10 +93,15 @@ def _offline_esi(slave: str, options: TransportOptions) -> tuple[str, Dictionary
         found = esi_dictionary(files, target.identity)
         if found is None:
             i = target.identity
+            ident = (
+                f"vendor 0x{i.vendor_id:08X}, product 0x{i.product_code:08X}, "
+                f"revision 0x{i.revision:08X}"
+                if i is not None
+                else "no identity in the ENI"
+            )
             raise UsageError(
-                f"slave {slave} ({target.name}: vendor 0x{i.vendor_id:08X}, product "
-                f"0x{i.product_code:08X}, revision 0x{i.revision:08X}) is not a device of "
-                f"{names} that has a dictionary"
+                f"slave {slave} ({target.name}: {ident}) is not a device of {names} "
+                "that has a dictionary"
             )
         return f"{slave} {target.name}", found
     if len(with_od) > 1:
