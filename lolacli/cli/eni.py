@@ -89,7 +89,13 @@ def _render_inspect(report: dict[str, Any]) -> None:
         )
     console.print(slaves)
     for i, frame in enumerate(report["cyclic_frames"], 1):
-        console.print(_frame_table(i, frame))
+        # the heading as a line of text (never broken inside a number), the table below
+        console.print(
+            f"Cyclic frame {i}: {frame['frame_bytes']} B on the wire, "
+            f"{frame['wire_time_us']} µs at 100 Mbit/s "
+            f"({frame['wire_time_with_overhead_us']} µs with preamble and gap)"
+        )
+        console.print(_frame_table(frame))
     pi = report["process_image"]
     console.print(
         f"Process image: inputs {pi['inputs_bytes']} B, outputs {pi['outputs_bytes']} B, "
@@ -97,15 +103,10 @@ def _render_inspect(report: dict[str, Any]) -> None:
     )
 
 
-def _frame_table(number: int, frame: dict[str, Any]) -> Any:
+def _frame_table(frame: dict[str, Any]) -> Any:
     from rich.table import Table
 
-    table = Table(
-        title=f"Cyclic frame {number}: {frame['frame_bytes']} B on the wire, "
-        f"{frame['wire_time_us']} µs at 100 Mbit/s "
-        f"({frame['wire_time_with_overhead_us']} µs with preamble and gap)",
-        title_justify="left",
-    )
+    table = Table()
     for col in ("cmd", "address", "length", "expected WKC", "states"):
         table.add_column(col, justify="left" if col in ("cmd", "address", "states") else "right")
     for d in frame["datagrams"]:
