@@ -75,16 +75,6 @@ class TransportError(LolaError):
     exit_code = 4
 
 
-class WorkingCounterError(LolaError):
-    """A datagram came back with a working counter other than the expected one."""
-
-    def __init__(self, cmd: str, expected: int, received: int) -> None:
-        self.cmd = cmd
-        self.expected = expected
-        self.received = received
-        super().__init__(f"{cmd}: working counter {received}, expected {expected}")
-
-
 class SdoAbortError(LolaError):
     """An SDO transfer ended with an abort (CiA 301 abort code)."""
 

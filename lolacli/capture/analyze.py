@@ -73,11 +73,6 @@ OBS_SLOTS = 1 << 10
 Progress = Callable[[int, int], None]
 
 
-def stats_us(values_ns: np.ndarray) -> dict[str, float | int] | None:
-    """``{count, min, mean, median, std, p99, max}`` in µs of integer nanoseconds."""
-    return summary_us([np.asarray(values_ns, np.int64)])
-
-
 def _jitter(stats: dict[str, float | int] | None) -> dict[str, float] | None:
     """Cycle jitter: std and the largest deviation from the median (µs)."""
     if stats is None:

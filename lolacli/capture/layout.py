@@ -141,10 +141,6 @@ class MasterLayout:
                 out.setdefault(slave, []).append(w.fmmu)
         return out
 
-    @property
-    def has_fmmus(self) -> bool:
-        return bool(self.fmmu_writes)
-
     def requested(self, station: int | None) -> AlRequest | None:
         """The last AL state request that reached ``station`` (None: broadcasts only)."""
         pos = self.position_of(station) if station is not None else None

@@ -74,10 +74,6 @@ class Interface:
     os: str = ""
 
     @property
-    def is_ethernet(self) -> bool:
-        return self.link_type == LINKTYPE_ETHERNET
-
-    @property
     def analysed(self) -> bool:
         """Ethernet or Linux cooked (SLL/SLL2)."""
         return self.link_type in ANALYSED_LINK_TYPES

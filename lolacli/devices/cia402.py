@@ -242,10 +242,6 @@ class Cia402Drive(Device):
         e[STATUSWORD].value = status.to_bytes(2, "little")
 
 
-def _get(entry: Entry, *, signed: bool = False) -> int:
-    return int.from_bytes(entry.value, "little", signed=signed)
-
-
 _I32 = struct.Struct("<i")
 _ZERO2 = bytes(2)
 _ZERO4 = bytes(4)

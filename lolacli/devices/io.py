@@ -15,7 +15,7 @@ import struct
 from collections.abc import Callable
 
 from lolacli.devices.base import Device
-from lolacli.devices.od import DataType, Entry, decode_value, encode_value
+from lolacli.devices.od import DataType, Entry, decode_value
 from lolacli.eni.model import Direction
 
 
@@ -59,17 +59,6 @@ class DigitalIo(Device):
         return out
 
 
-def _sine_value(data_type: int, bits: int, phase: float, t_ns: int, scale: float) -> bytes:
-    s = math.sin(2 * math.pi * (t_ns / 1e9) + phase)
-    if data_type in (DataType.REAL32, DataType.REAL64):
-        return encode_value(data_type, s * scale)
-    full = (1 << (bits - 1)) - 1 if bits > 1 else 1
-    value = int(round(s * full * 0.5))
-    if data_type in (DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32):
-        value += full
-    return (value & ((1 << bits) - 1)).to_bytes(max(1, (bits + 7) // 8), "little")
-
-
 class AnalogInput(Device):
     """Inputs are sines; they are sampled every ``sample_period_ns`` (1 kHz, like the
     sensors behind a real terminal or gateway), not on every bus cycle."""
@@ -96,7 +85,7 @@ class AnalogInput(Device):
                 )
 
     def _channels(self) -> list[_Channel]:
-        """Per input entry what :func:`_sine_value` needs, worked out once per mapping."""
+        """Per input entry what its sine needs, worked out once per mapping."""
         key = self.od.version
         cached = self._channel_cache
         if cached is not None and cached[0] == key:

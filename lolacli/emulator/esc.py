@@ -904,10 +904,6 @@ class Esc:
         address = r.LOST_LINK_COUNTER + port
         self.mem[address] = min(0xFF, self.mem[address] + 1)
 
-    def count_processing_error(self) -> None:
-        address = r.PROCESSING_UNIT_ERROR
-        self.mem[address] = min(0xFF, self.mem[address] + 1)
-
 
 # Error counters cleared together by a write to any of them (ESC datasheet section II,
 # 0x0300-0x0313): RX and forwarded RX errors, processing unit, PDI, lost links.

@@ -231,9 +231,6 @@ class RawSocketServer:
             self._next = frame, ancillary
             return True
 
-    def _receive_failed(self, exc: OSError) -> TransportError:
-        return TransportError(f"{self.iface}: receive failed: {exc.strerror or exc}")
-
     def _frame_waiting(self) -> bool:
         """Whether the master's next frame is here (looked for at most every
         :data:`YIELD_CHECK_NS`, so the check costs little against the work it interrupts)."""

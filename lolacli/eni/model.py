@@ -263,9 +263,6 @@ class Eni:
     def cyclic_frames(self) -> tuple[CyclicFrame, ...]:
         return tuple(f for task in self.cyclic for f in task.frames)
 
-    def slave_by_station_address(self, address: int) -> Slave | None:
-        return next((s for s in self.slaves if s.station_address == address), None)
-
 
 __all__ = [
     "CoeInitCmd",

@@ -74,10 +74,6 @@ class FramePlan:
                 bad += 1
         return bad
 
-    def wkc_received(self, reply: bytes) -> list[tuple[WkcCheck, int]]:
-        """Every checked datagram with the WKC it came back with."""
-        return [(c, _U16.unpack_from(reply, c.offset)[0]) for c in self.wkc]
-
 
 def plan_frame(
     frame: CyclicFrame,

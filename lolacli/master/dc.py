@@ -48,6 +48,3 @@ def system_time_offsets(
     ref_time = local_at_latch[reference] + reference_offset
     return [(ref_time + delays[i] - local_at_latch[i]) % _U64 for i in range(len(local_at_latch))]
 
-
-def signed64(value: int) -> int:
-    return value - _U64 if value >= 1 << 63 else value

@@ -254,13 +254,3 @@ class ForceTorqueSensor(BusSlave):
         snap = self.image.snapshot
         return tuple(snap[self.axes[f"Torque {a}"]] for a in "XYZ")
 
-
-def cia402_slaves(image: ProcessImage) -> list[str]:
-    """ENI slave names that have a statusword and a target position: the CiA 402 drives."""
-    names: list[str] = []
-    for name in image.variables:
-        slave, _, rest = name.partition(".")
-        last = rest.rsplit(".", 1)[-1].lower()
-        if last in ("statusword", "status word") and slave not in names:
-            names.append(slave)
-    return names

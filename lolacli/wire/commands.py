@@ -47,14 +47,6 @@ def mnemonic(cmd: int) -> str:
         return f"CMD{cmd}"
 
 
-def parse_command(name: str) -> Command:
-    """A command from its mnemonic (any case) or its number."""
-    text = name.strip().upper()
-    if text.isdigit():
-        return Command(int(text))
-    return Command[text]
-
-
 def wkc_increment(cmd: int, *, read: bool = True, write: bool = True) -> int:
     """How much one addressed slave adds to the working counter.
 

@@ -306,17 +306,6 @@ def encode_fmmu(f: Fmmu) -> bytes:
     )
 
 
-class SmControl(IntFlag):
-    """Sync-manager control byte (ETG.1000.4 Table 59)."""
-
-    BUFFERED = 0x00  # 3-buffer mode (operation mode bits 0-1 = 00)
-    MAILBOX = 0x02  # operation mode bits 0-1 = 10
-    WRITE = 0x04  # direction bits 2-3 = 01: ECAT writes, PDI reads
-    ECAT_EVENT = 0x08
-    PDI_EVENT = 0x10
-    WATCHDOG = 0x40
-
-
 @dataclass(frozen=True, slots=True)
 class SyncManager:
     """One sync manager channel (8 bytes at 0x0800 + 8 n; ETG.1000.4 Table 59).
