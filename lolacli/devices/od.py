@@ -14,6 +14,7 @@ from enum import IntEnum
 
 from lolacli.errors import SdoAbortError
 from lolacli.wire.registers import AlState
+from lolacli.wire.sdo import SdoAbortCode
 
 
 class DataType(IntEnum):
@@ -40,31 +41,6 @@ class ObjectCode(IntEnum):
     VAR = 0x07
     ARRAY = 0x08
     RECORD = 0x09
-
-
-class AbortCode(IntEnum):
-    """SDO abort codes (CiA 301 Table 22, ETG.1000.6 Table 41)."""
-
-    TOGGLE_BIT = 0x05030000
-    TIMEOUT = 0x05040000
-    COMMAND_SPECIFIER = 0x05040001
-    OUT_OF_MEMORY = 0x05040005
-    UNSUPPORTED_ACCESS = 0x06010000
-    WRITE_ONLY = 0x06010001
-    READ_ONLY = 0x06010002
-    SUBINDEX_0_NOT_ZERO = 0x06010003
-    COMPLETE_ACCESS_UNSUPPORTED = 0x06010004
-    OBJECT_DOES_NOT_EXIST = 0x06020000
-    NOT_MAPPABLE = 0x06040041
-    PDO_TOO_LONG = 0x06040042
-    LENGTH_MISMATCH = 0x06070010
-    LENGTH_TOO_HIGH = 0x06070012
-    LENGTH_TOO_LOW = 0x06070013
-    SUBINDEX_DOES_NOT_EXIST = 0x06090011
-    VALUE_RANGE = 0x06090030
-    GENERAL = 0x08000000
-    CANNOT_TRANSFER = 0x08000020
-    CANNOT_TRANSFER_STATE = 0x08000022
 
 
 _INT_FORMATS: dict[int, str] = {
@@ -292,32 +268,33 @@ class ObjectDictionary:
     def entry(self, index: int, subindex: int) -> Entry:
         obj = self.objects.get(index)
         if obj is None:
-            raise SdoAbortError(index, subindex, AbortCode.OBJECT_DOES_NOT_EXIST)
+            raise SdoAbortError(index, subindex, SdoAbortCode.NO_OBJECT)
         entry = obj.entries.get(subindex)
         if entry is None:
-            raise SdoAbortError(index, subindex, AbortCode.SUBINDEX_DOES_NOT_EXIST)
+            raise SdoAbortError(index, subindex, SdoAbortCode.NO_SUBINDEX)
         return entry
 
     def read(self, index: int, subindex: int) -> bytes:
         """SDO upload: the entry's bytes, or an abort."""
         entry = self.entry(index, subindex)
         if not entry.readable:
-            raise SdoAbortError(index, subindex, AbortCode.WRITE_ONLY)
+            raise SdoAbortError(index, subindex, SdoAbortCode.WRITE_ONLY)
         return entry.value
 
     def write(self, index: int, subindex: int, data: bytes) -> None:
         """SDO download: type length checked, read-only refused."""
         entry = self.entry(index, subindex)
         if not entry.writable:
-            raise SdoAbortError(index, subindex, AbortCode.READ_ONLY)
+            raise SdoAbortError(index, subindex, SdoAbortCode.READ_ONLY)
         if self.al_state not in (None, AlState.PREOP) and pdo_configuration(index):
-            raise SdoAbortError(index, subindex, AbortCode.CANNOT_TRANSFER_STATE)
+            raise SdoAbortError(index, subindex, SdoAbortCode.CANNOT_TRANSFER_DEVICE_STATE)
         if entry.data_type not in _VARIABLE_LENGTH:
             size = max(1, (type_bits(entry.data_type) + 7) // 8)
-            if len(data) > size:
-                raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_HIGH)
-            if len(data) < size:
-                raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_LOW)
+            if len(data) != size:
+                # CiA 301 also has 0x06070012 (too high) and 0x06070013 (too low); the
+                # general 0x06070010 is what CANopen stacks and SOEM's slaves answer, so
+                # every backend of `lolacli sdo write` reports one code for one mistake
+                raise SdoAbortError(index, subindex, SdoAbortCode.LENGTH_MISMATCH)
         entry.value = bytes(data)
         self.version += 1
         self.writes += 1

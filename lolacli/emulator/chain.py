@@ -50,7 +50,6 @@ from lolacli.emulator.registers import (
     SYNC_MANAGER_BASE,
     SYNC_MANAGER_BYTES,
     AlState,
-    AlStatusCode,
 )
 from lolacli.emulator.sii import sii_layout
 from lolacli.errors import UsageError, WireError
@@ -72,6 +71,7 @@ from lolacli.wire.frame import (
     decode_ethernet_header,
     decode_frame,
 )
+from lolacli.wire.registers import AlStatusCode
 
 _U16 = struct.Struct("<H")
 _HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word

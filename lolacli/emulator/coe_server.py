@@ -17,8 +17,9 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from lolacli.devices.od import AbortCode, ObjectDictionary, access_flags
+from lolacli.devices.od import ObjectDictionary, access_flags
 from lolacli.errors import SdoAbortError
+from lolacli.wire.sdo import SdoAbortCode
 
 _MBX = struct.Struct("<HHBB")
 _SDO = struct.Struct("<BHB")
@@ -122,7 +123,7 @@ class SdoServer:
             if ccs == 4:
                 self._upload = self._download = None
                 return b""
-            raise SdoAbortError(index, subindex, AbortCode.COMMAND_SPECIFIER)
+            raise SdoAbortError(index, subindex, SdoAbortCode.UNKNOWN_COMMAND)
         except SdoAbortError as exc:
             return self._abort(exc.index, exc.subindex, exc.code)
 
@@ -161,20 +162,20 @@ class SdoServer:
         the entries in order, each by its own size (ETG.1000.6 §5.6.2.1)."""
         obj = self.od.objects.get(index)
         if obj is None:
-            raise SdoAbortError(index, subindex, AbortCode.OBJECT_DOES_NOT_EXIST)
+            raise SdoAbortError(index, subindex, SdoAbortCode.NO_OBJECT)
         if subindex > 1:
-            raise SdoAbortError(index, subindex, AbortCode.UNSUPPORTED_ACCESS)
+            raise SdoAbortError(index, subindex, SdoAbortCode.UNSUPPORTED_ACCESS)
         pos, count = 0, obj.max_subindex
         if subindex == 0:
             if len(data) < 2:
-                raise SdoAbortError(index, subindex, AbortCode.LENGTH_TOO_LOW)
+                raise SdoAbortError(index, subindex, SdoAbortCode.LENGTH_MISMATCH)
             count, pos = data[0], 2
         writes = []
         for sub in range(1, count + 1):
             entry = self.od.entry(index, sub)
             size = max(1, (entry.bit_size + 7) // 8)
             if pos + size > len(data):
-                raise SdoAbortError(index, sub, AbortCode.LENGTH_TOO_LOW)
+                raise SdoAbortError(index, sub, SdoAbortCode.LENGTH_MISMATCH)
             writes.append((sub, data[pos : pos + size]))
             pos += size
         if subindex == 0:
@@ -187,10 +188,12 @@ class SdoServer:
     def _download_segment(self, command: int, body: bytes) -> bytes:
         transfer = self._download
         if transfer is None:
-            raise SdoAbortError(0, 0, AbortCode.COMMAND_SPECIFIER)
+            raise SdoAbortError(0, 0, SdoAbortCode.UNKNOWN_COMMAND)
         toggle = command & 0x10
         if toggle != transfer.toggle:
-            raise SdoAbortError(transfer.index, transfer.subindex, AbortCode.TOGGLE_BIT)
+            raise SdoAbortError(
+                transfer.index, transfer.subindex, SdoAbortCode.TOGGLE_BIT_NOT_ALTERNATED
+            )
         segment = body[1:]
         if len(segment) <= 7:
             segment = segment[: 7 - ((command >> 1) & 0x07)]
@@ -230,9 +233,9 @@ class SdoServer:
         """Complete access: sub 0 (padded to 16 bits when starting at 0) and every entry."""
         obj = self.od.objects.get(index)
         if obj is None:
-            raise SdoAbortError(index, subindex, AbortCode.OBJECT_DOES_NOT_EXIST)
+            raise SdoAbortError(index, subindex, SdoAbortCode.NO_OBJECT)
         if subindex > 1:
-            raise SdoAbortError(index, subindex, AbortCode.UNSUPPORTED_ACCESS)
+            raise SdoAbortError(index, subindex, SdoAbortCode.UNSUPPORTED_ACCESS)
         count = obj.entries[0].value[0] if 0 in obj.entries else 0
         out = bytearray()
         if subindex == 0:
@@ -244,10 +247,12 @@ class SdoServer:
     def _upload_segment(self, command: int) -> bytes:
         transfer = self._upload
         if transfer is None:
-            raise SdoAbortError(0, 0, AbortCode.COMMAND_SPECIFIER)
+            raise SdoAbortError(0, 0, SdoAbortCode.UNKNOWN_COMMAND)
         toggle = command & 0x10
         if toggle != transfer.toggle:
-            raise SdoAbortError(transfer.index, transfer.subindex, AbortCode.TOGGLE_BIT)
+            raise SdoAbortError(
+                transfer.index, transfer.subindex, SdoAbortCode.TOGGLE_BIT_NOT_ALTERNATED
+            )
         room = self.mailbox_bytes - MAILBOX_HEADER_BYTES - COE_HEADER_BYTES - 1
         segment = bytes(transfer.data[:room])
         del transfer.data[:room]
@@ -284,7 +289,7 @@ class SdoServer:
                 return self._entry_description(index, sub, info)
         except SdoAbortError as exc:
             return self._info_reply(INFO_ERROR, _U32.pack(exc.code))
-        return self._info_reply(INFO_ERROR, _U32.pack(AbortCode.COMMAND_SPECIFIER))
+        return self._info_reply(INFO_ERROR, _U32.pack(SdoAbortCode.UNKNOWN_COMMAND))
 
     def _od_list(self, list_type: int) -> list[bytes]:
         objects = list(self.od)
@@ -299,7 +304,7 @@ class SdoServer:
     def _object_description(self, index: int) -> list[bytes]:
         obj = self.od.objects.get(index)
         if obj is None:
-            raise SdoAbortError(index, 0, AbortCode.OBJECT_DOES_NOT_EXIST)
+            raise SdoAbortError(index, 0, SdoAbortCode.NO_OBJECT)
         first = obj.entries.get(1 if obj.max_subindex else 0)
         dtype = first.data_type if first else 0
         payload = struct.pack("<HHBB", index, dtype, obj.max_subindex, obj.object_code)

@@ -17,11 +17,11 @@ from functools import lru_cache
 from typing import Any, Protocol
 
 from lolacli.emulator import registers as r
-from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import SiiLayout, sii_layout
 from lolacli.wire.commands import Command
 from lolacli.wire.mailbox import MAILBOX_HEADER_BYTES, decode_mailbox_header
-from lolacli.wire.registers import decode_system_time_difference
+from lolacli.wire.registers import AlStatusCode, decode_system_time_difference
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")

@@ -1,12 +1,11 @@
 """ESC register addresses and codes the emulator uses (ETG.1000.4 §6, ET1100 datasheet §2).
 
-AL states come from :mod:`lolacli.wire.registers`; the AL status codes here are the ones
-the emulated slaves raise (a superset of the wire module's frequent ones, 0x0019 included).
+AL states and AL status codes come from :mod:`lolacli.wire.registers`.
 """
 
 from __future__ import annotations
 
-from enum import IntEnum, IntFlag
+from enum import IntFlag
 
 from lolacli.wire.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
 
@@ -105,24 +104,6 @@ PROCESS_RAM = 0x1000
 MEMORY_BYTES = 0x10000
 
 
-class AlStatusCode(IntEnum):
-    """AL status codes (ETG.1000.6 Table 11) the emulated slaves raise."""
-
-    NO_ERROR = 0x0000
-    UNSPECIFIED = 0x0001
-    INVALID_REQUESTED_STATE_CHANGE = 0x0011
-    UNKNOWN_REQUESTED_STATE = 0x0012
-    BOOTSTRAP_NOT_SUPPORTED = 0x0013
-    INVALID_MAILBOX_CONFIGURATION_PREOP = 0x0016
-    INVALID_SYNC_MANAGER_CONFIGURATION = 0x0017
-    NO_VALID_INPUTS = 0x0018
-    NO_VALID_OUTPUTS = 0x0019
-    SYNCHRONIZATION_ERROR = 0x001A
-    SYNC_MANAGER_WATCHDOG = 0x001B
-    INVALID_OUTPUT_CONFIGURATION = 0x001D
-    INVALID_INPUT_CONFIGURATION = 0x001E
-
-
 class EscFeature(IntFlag):
     """ESC features supported, register 0x0008 (ETG.1000.4 Table 31)."""
 
@@ -135,4 +116,4 @@ class EscFeature(IntFlag):
     SEPARATE_FCS_ERRORS = 0x0080
 
 
-__all__ = ["AL_ERROR_INDICATOR", "AL_STATE_MASK", "AlState", "AlStatusCode", "EscFeature"]
+__all__ = ["AL_ERROR_INDICATOR", "AL_STATE_MASK", "AlState", "EscFeature"]

@@ -6,10 +6,10 @@ import pytest
 
 from lolacli.devices import CanGateway, Cia402Drive, DigitalIo, device_for
 from lolacli.devices.cia402 import Cia402State, Command, decode_controlword
-from lolacli.devices.od import AbortCode
 from lolacli.eni.model import Direction
 from lolacli.errors import SdoAbortError
 from lolacli.files import load_eni
+from lolacli.wire.sdo import SdoAbortCode
 from tests.emulator.bus import EXAMPLES
 
 MS = 1_000_000
@@ -89,13 +89,13 @@ def test_csp_actual_follows_target_rate_limited(drive: Cia402Drive) -> None:
 def test_object_access_checks(drive: Cia402Drive) -> None:
     with pytest.raises(SdoAbortError) as exc:
         drive.od.write(0x6041, 0, b"\x00\x00")
-    assert exc.value.code == AbortCode.READ_ONLY
+    assert exc.value.code == SdoAbortCode.READ_ONLY
     with pytest.raises(SdoAbortError) as exc:
         drive.od.read(0x6100, 0)
-    assert exc.value.code == AbortCode.OBJECT_DOES_NOT_EXIST
+    assert exc.value.code == SdoAbortCode.NO_OBJECT
     with pytest.raises(SdoAbortError) as exc:
         drive.od.write(0x607A, 0, b"\x00" * 5)
-    assert exc.value.code == AbortCode.LENGTH_TOO_HIGH
+    assert exc.value.code == SdoAbortCode.LENGTH_MISMATCH
 
 
 def test_pdo_mapping_packs_and_unpacks(drive: Cia402Drive) -> None:

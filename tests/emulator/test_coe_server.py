@@ -7,7 +7,6 @@ import struct
 import pytest
 
 from lolacli.devices.cia402 import Cia402Drive
-from lolacli.devices.od import AbortCode
 from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.slave import build_chain
 from lolacli.files import load_eni
@@ -20,6 +19,7 @@ from lolacli.wire.sdo import (
     OdListRequest,
     OdListResponse,
     SdoAbort,
+    SdoAbortCode,
     SdoDownloadResponse,
     SdoDownloadSegmentRequest,
     SdoInfoError,
@@ -60,10 +60,10 @@ def test_download_round_trip_and_aborts(bus: Bus) -> None:
     assert isinstance(reply, SdoDownloadResponse)
     assert bus.sdo_upload(STATION, 0x607F, 0, MBX) == struct.pack("<I", 50_000)
     cases = [
-        (0x2345, 0, b"\x01", AbortCode.OBJECT_DOES_NOT_EXIST),
-        (0x1018, 9, b"\x01", AbortCode.SUBINDEX_DOES_NOT_EXIST),
-        (0x1000, 0, b"\x01\x02\x03\x04", AbortCode.READ_ONLY),
-        (0x607F, 0, b"\x01\x02", AbortCode.LENGTH_TOO_LOW),
+        (0x2345, 0, b"\x01", SdoAbortCode.NO_OBJECT),
+        (0x1018, 9, b"\x01", SdoAbortCode.NO_SUBINDEX),
+        (0x1000, 0, b"\x01\x02\x03\x04", SdoAbortCode.READ_ONLY),
+        (0x607F, 0, b"\x01\x02", SdoAbortCode.LENGTH_MISMATCH),
     ]
     for index, sub, data, code in cases:
         reply = bus.sdo_download(STATION, index, sub, data, MBX)
@@ -92,7 +92,7 @@ def test_wrong_toggle_aborts_a_segmented_download(bus: Bus) -> None:
     bus.mailbox_exchange(STATION, encode_sdo(first), *MBX)
     wrong = SdoDownloadSegmentRequest(b"defghij", toggle=True, last=True)
     reply = decode_sdo(bus.mailbox_exchange(STATION, encode_sdo(wrong), *MBX))
-    assert isinstance(reply, SdoAbort) and reply.code == AbortCode.TOGGLE_BIT
+    assert isinstance(reply, SdoAbort) and reply.code == SdoAbortCode.TOGGLE_BIT_NOT_ALTERNATED
 
 
 def test_complete_access_upload_of_pdo_assignment(bus: Bus) -> None:

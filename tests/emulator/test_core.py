@@ -39,7 +39,7 @@ from lolacli.emulator.chain import Chain, Faults, chain_engine
 from lolacli.emulator.core import ChainCore, CompiledPlan, SlaveTable, core_available
 from lolacli.emulator.esc import Esc
 from lolacli.emulator.plan import layout_key
-from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.registers import AlState
 from lolacli.emulator.run import state_summary
 from lolacli.emulator.slave import build_chain, device_of
 from lolacli.eni.model import Eni
@@ -48,6 +48,7 @@ from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
 from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
 from lolacli.wire.mailbox import MailboxType, encode_mailbox, make_mailbox
+from lolacli.wire.registers import AlStatusCode
 from lolacli.wire.sdo import SdoUploadRequest, encode_sdo
 from tests.emulator.bus import EXAMPLES, Bus
 from tests.emulator.test_general_path import _random_frame as _register_frame

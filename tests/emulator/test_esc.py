@@ -10,12 +10,13 @@ import pytest
 from lolacli.emulator import registers as r
 from lolacli.emulator.chain import Chain, ChainTiming
 from lolacli.emulator.esc import Esc
-from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
 from lolacli.emulator.slave import build_chain
 from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
 from lolacli.wire.frame import Datagram
+from lolacli.wire.registers import AlStatusCode
 from tests.emulator.bus import EXAMPLES, Bus
 
 

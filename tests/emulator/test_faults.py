@@ -9,12 +9,13 @@ import pytest
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.chain import Chain, Faults
-from lolacli.emulator.registers import AlState, AlStatusCode
+from lolacli.emulator.registers import AlState
 from lolacli.emulator.run import EmulateOptions, make_chain, parse_link_down
 from lolacli.emulator.slave import build_chain
 from lolacli.errors import UsageError
 from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
+from lolacli.wire.registers import AlStatusCode
 from tests.emulator.bus import EXAMPLES, Bus
 from tests.emulator.test_esc import _addressed_dc_chain
 
