@@ -38,7 +38,12 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "lolacli" / "eni_examples"
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from lolacli.wire.commands import wkc_increment  # noqa: E402
+
+OUT_DIR = ROOT / "lolacli" / "eni_examples"
 
 # EtherCAT command codes (ETG.1000.4 Table 16).
 APRD, APWR, FPRD, FPWR, BRD, BWR, LRW, ARMW = 1, 2, 4, 5, 7, 8, 12, 13
@@ -442,8 +447,11 @@ def image_bytes(placed: list[Placed], inputs: bool) -> int:
 
 
 def lrw_wkc(placed: list[Placed]) -> int:
-    """DESIGN.md "Expected WKC": LRW counts 1 per reading slave, 2 per writing slave."""
-    return sum((1 if p.device.in_bytes else 0) + (2 if p.device.out_bytes else 0) for p in placed)
+    """DESIGN.md "Expected WKC" of the LRW over every slave's inputs and outputs."""
+    return sum(
+        wkc_increment(LRW, read=bool(p.device.in_bytes), write=bool(p.device.out_bytes))
+        for p in placed
+    )
 
 
 def frame_bytes(lengths: list[int]) -> int:

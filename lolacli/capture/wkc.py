@@ -26,15 +26,21 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from lolacli.capture.layout import MasterLayout, Target, covered
-from lolacli.wire.commands import Command, mnemonic
+from lolacli.wire.commands import (
+    BROADCAST,
+    READ_MULTIPLE_WRITES,
+    Command,
+    addressed_wkc,
+    mnemonic,
+    wkc_increment,
+)
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni, Slave
 
 LOGICAL = (Command.LRD, Command.LWR, Command.LRW)
-_ONE_SLAVE_RW: dict[int, int] = {Command.APRD: 1, Command.APWR: 1, Command.FPRD: 1, Command.FPWR: 1,
-                 Command.APRW: 3, Command.FPRW: 3}
-_BROADCAST: dict[int, int] = {Command.BRD: 1, Command.BWR: 1, Command.BRW: 3}
+_ONE_SLAVE = frozenset({Command.APRD, Command.APWR, Command.APRW,
+                        Command.FPRD, Command.FPWR, Command.FPRW})
 ENI_BASES = ("eni", "eni+capture-fmmu", "eni-fmmu", "eni-addressing")
 S_DC_SYSTIME = 0x0910
 
@@ -193,12 +199,7 @@ def _from_fmmus(d: DatagramVerdict, fmmus: dict[Target, list[Any]],
         reads, writes = covered(fl, d.address, d.length_bytes)
         if weight is not None:
             reads, writes = weight(slave, reads, writes)
-        if d.cmd == Command.LRW:
-            total += 2 * writes + reads
-        elif d.cmd == Command.LRD:
-            total += reads
-        else:
-            total += writes
+        total += wkc_increment(d.cmd, read=reads, write=writes)
         outs += writes
         ins += reads
     return total, outs, ins
@@ -226,9 +227,6 @@ def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Any]]) -> Non
               + (", no FMMU of the master covers it)" if d.logical and capture_fmmus else ")"))
 
 
-_READ_MULTIPLE_WRITE = (Command.ARMW, Command.FRMW)
-
-
 def _eni_command(d: DatagramVerdict, eni: Eni) -> tuple[int, str] | None:
     """The ENI's ``<Cnt>`` of the same cyclic command, and a note. Distributing the DC
     system time (0x0910) by ARMW or FRMW is one job: a master may pick either (SOEM sends
@@ -242,7 +240,7 @@ def _eni_command(d: DatagramVerdict, eni: Eni) -> tuple[int, str] | None:
                 if c.data_length_bytes != d.length_bytes:
                     continue
                 if c.cmd != d.cmd:
-                    dc = (c.cmd in _READ_MULTIPLE_WRITE and d.cmd in _READ_MULTIPLE_WRITE
+                    dc = (c.cmd in READ_MULTIPLE_WRITES and d.cmd in READ_MULTIPLE_WRITES
                           and c.ado == d.address >> 16 == S_DC_SYSTIME)
                     if dc and c.expected_wkc is not None:
                         return c.expected_wkc, (f"the ENI's <Cnt> of its {mnemonic(c.cmd)} "
@@ -281,11 +279,11 @@ def _from_eni(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
     if d.logical:
         _eni_logical(d, eni, layout, capture_fmmus)
         return
-    if d.cmd in _ONE_SLAVE_RW:
-        d.expected, d.basis = _ONE_SLAVE_RW[d.cmd], "eni-addressing"
+    if d.cmd in _ONE_SLAVE:
+        d.expected, d.basis = addressed_wkc(d.cmd, 1), "eni-addressing"
         d.note = "one slave addressed"
-    elif d.cmd in _BROADCAST:
-        d.expected = _BROADCAST[d.cmd] * len(eni.slaves)
+    elif d.cmd in BROADCAST:
+        d.expected = addressed_wkc(d.cmd, len(eni.slaves))
         d.basis, d.note = "eni-addressing", f"every one of the ENI's {len(eni.slaves)} slaves"
     elif d.cmd == Command.NOP:
         d.expected, d.basis, d.note = 0, "eni-addressing", "no slave processes a NOP"

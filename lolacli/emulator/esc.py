@@ -19,7 +19,18 @@ from typing import Any, Protocol
 from lolacli.emulator import registers as r
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import SiiLayout, sii_layout
-from lolacli.wire.commands import Command
+from lolacli.wire.commands import (
+    AUTO_INCREMENT,
+    BROADCAST,
+    CONFIGURED,
+    LOGICAL,
+    READ_MULTIPLE_WRITES,
+    READ_WRITES,
+    READS,
+    WRITES,
+    Command,
+    wkc_increment,
+)
 from lolacli.wire.mailbox import MAILBOX_HEADER_BYTES, decode_mailbox_header
 from lolacli.wire.registers import AlStatusCode, decode_system_time_difference
 
@@ -44,17 +55,17 @@ _LOGICAL = frozenset({Command.LRD, Command.LWR, Command.LRW})
 # command -> how it addresses and what it does, as plain ints (enum lookups are slow)
 _BROADCAST, _AUTO_INCREMENT, _CONFIGURED, _LOGICAL_KIND, _OTHER = range(5)
 _KIND: dict[int, int] = {
-    **{int(c): _BROADCAST for c in (Command.BRD, Command.BWR, Command.BRW)},
-    **{int(c): _AUTO_INCREMENT for c in (Command.APRD, Command.APWR, Command.APRW, Command.ARMW)},
-    **{int(c): _CONFIGURED for c in (Command.FPRD, Command.FPWR, Command.FPRW, Command.FRMW)},
-    **{int(c): _LOGICAL_KIND for c in (Command.LRD, Command.LWR, Command.LRW)},
+    **{int(c): _BROADCAST for c in BROADCAST},
+    **{int(c): _AUTO_INCREMENT for c in AUTO_INCREMENT},
+    **{int(c): _CONFIGURED for c in CONFIGURED},
+    **{int(c): _LOGICAL_KIND for c in LOGICAL},
 }
 _READ, _WRITE, _READ_WRITE, _READ_MULTIPLE_WRITE = range(4)
 _ACCESS: dict[int, int] = {
-    **{int(c): _READ for c in (Command.APRD, Command.FPRD, Command.BRD)},
-    **{int(c): _WRITE for c in (Command.APWR, Command.FPWR, Command.BWR)},
-    **{int(c): _READ_WRITE for c in (Command.APRW, Command.FPRW, Command.BRW)},
-    **{int(c): _READ_MULTIPLE_WRITE for c in (Command.ARMW, Command.FRMW)},
+    **{int(c): _READ for c in READS - LOGICAL},
+    **{int(c): _WRITE for c in WRITES - LOGICAL},
+    **{int(c): _READ_WRITE for c in READ_WRITES - LOGICAL},
+    **{int(c): _READ_MULTIPLE_WRITE for c in READ_MULTIPLE_WRITES},
 }
 _ARMW, _FRMW, _BRD, _BRW = int(Command.ARMW), int(Command.FRMW), int(Command.BRD), int(Command.BRW)
 _SYSTEM_TIME = r.DC_SYSTEM_TIME
@@ -341,8 +352,8 @@ class Esc:
                 return 1 if self._read(ado, data, t_ns, merge=False) else 0
             return 1 if self._write(ado, bytes(data), t_ns) else 0
         incoming = bytes(data)  # APRW, FPRW, BRW
-        wkc = 1 if self._read(ado, data, t_ns, merge=cmd == _BRW) else 0
-        return wkc + (2 if self._write(ado, incoming, t_ns) else 0)
+        read = self._read(ado, data, t_ns, merge=cmd == _BRW)
+        return wkc_increment(cmd, read=read, write=self._write(ado, incoming, t_ns))
 
     def _read(self, address: int, data: memoryview, t_ns: int, *, merge: bool) -> bool:
         end = address + len(data)
@@ -733,28 +744,22 @@ class Esc:
 
     def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
         """LRD/LWR/LRW through the FMMUs (ETG.1000.4 §6.5): this slave's write FMMUs
-        take from the datagram first, then its read FMMUs put into it; WKC +1 for a read,
-        +1 (LWR) or +2 (LRW) for a write."""
+        take from the datagram first, then its read FMMUs put into it; the WKC as
+        :func:`~lolacli.wire.commands.wkc_increment` counts what it did."""
         end = address + len(data)
         config = self._config()
-        wkc = 0
+        wrote = read = False
         if cmd != Command.LRD:
-            wrote = False
             for f in config.write_fmmus:
                 if f.logical_start < end and address < f.logical_start + f.length_bytes:
                     self._fmmu_write(f, address, data)
                     wrote = True
-            if wrote:
-                wkc += 2 if cmd == Command.LRW else 1
         if cmd != Command.LWR:
-            read = False
             for f in config.read_fmmus:
                 if f.logical_start < end and address < f.logical_start + f.length_bytes:
                     self._fmmu_read(f, address, data)
                     read = True
-            if read:
-                wkc += 1
-        return wkc
+        return wkc_increment(cmd, read=read, write=wrote)
 
     def _fmmu_write(self, f: FmmuEntry, address: int, incoming: memoryview) -> None:
         if f.physical_start < PLAN_FREE_REGISTERS:

@@ -41,7 +41,7 @@ from lolacli.emulator.esc import (
     _byte_aligned,
     system_time_loop,
 )
-from lolacli.wire.commands import Command
+from lolacli.wire.commands import Command, wkc_increment
 
 _HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
 _U16 = struct.Struct("<H")
@@ -374,6 +374,7 @@ class _Logical(_Op):
         mem = memoryview(esc.mem)
         step = _SlaveStep(esc, port0_ns, writes=[], reads=[])
         assert step.writes is not None and step.reads is not None
+        wrote = read = False
         if d.cmd != Command.LRD:
             hits = [f for f in config.write_fmmus if _fmmu_hits(f, lo, hi)]
             for f in hits:
@@ -386,8 +387,7 @@ class _Logical(_Op):
                 step.writes.append((mem[p:q], self.data[a:b], a, b))
                 step.write_memory.append((p, q))
                 step.events += len(kinds)
-            if hits:
-                step.wkc += 2 if d.cmd == Command.LRW else 1
+            wrote = bool(hits)
         if d.cmd != Command.LWR:
             hits = [f for f in config.read_fmmus if _fmmu_hits(f, lo, hi)]
             for f in hits:
@@ -397,8 +397,8 @@ class _Logical(_Op):
                     return _SlaveStep(esc, port0_ns, generic=True)
                 step.reads.append((self.data[a:b], mem[p:q], a, b))
                 step.read_memory.append((p, q))
-            if hits:
-                step.wkc += 1
+            read = bool(hits)
+        step.wkc = wkc_increment(d.cmd, read=read, write=wrote)
         return step
 
     def writes_deferrable(self, later: list[_Op]) -> bool:

@@ -16,7 +16,7 @@ from enum import StrEnum
 from typing import Any
 
 from lolacli.eni.model import CyclicCommand, Direction, Eni, Fmmu, InitCmd, Mailbox, Slave
-from lolacli.wire.commands import BROADCAST, LOGICAL, Command, mnemonic
+from lolacli.wire.commands import LOGICAL, Command, addressed_wkc, mnemonic, wkc_increment
 from lolacli.wire.frame import MAX_DATAGRAM_DATA
 
 VALIDATE_SCHEMA = "lolacli.eni-validate/1"
@@ -268,30 +268,15 @@ def _slave_touches(s: Slave, c: CyclicCommand) -> tuple[bool, bool]:
 
 def expected_logical_wkc(eni: Eni, c: CyclicCommand) -> int:
     """Working counter a logical command should return, from the slaves' mappings."""
-    total = 0
-    for s in eni.slaves:
-        reads, writes = _slave_touches(s, c)
-        if c.cmd == Command.LRD:
-            total += 1 if reads else 0
-        elif c.cmd == Command.LWR:
-            total += 1 if writes else 0
-        else:
-            total += (1 if reads else 0) + (2 if writes else 0)
-    return total
+    return sum(wkc_increment(c.cmd, read=r, write=w)
+               for r, w in (_slave_touches(s, c) for s in eni.slaves))
 
 
 def expected_wkc(eni: Eni, c: CyclicCommand) -> int | None:
     """The WKC a cyclic command should return, or None where it cannot be known."""
-    n = len(eni.slaves)
     if c.cmd in LOGICAL:
         return expected_logical_wkc(eni, c)
-    if c.cmd in BROADCAST:
-        return 3 * n if c.cmd == Command.BRW else n
-    if c.cmd in (Command.ARMW, Command.FRMW):
-        return n
-    if c.cmd == Command.NOP:
-        return 0
-    return 3 if c.cmd in (Command.APRW, Command.FPRW) else 1
+    return addressed_wkc(c.cmd, len(eni.slaves))
 
 
 def check_wkc(eni: Eni) -> Iterator[Finding]:

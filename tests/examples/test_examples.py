@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from lolacli.wire.commands import addressed_wkc, wkc_increment
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "lolacli" / "eni_examples"
 NAMES = ["lola.xml", "single_drive.xml", "ek1100_io.xml"]
@@ -186,16 +188,16 @@ def test_lola_images_are_dense():
 
 @pytest.mark.parametrize("name", NAMES)
 def test_cnt_follows_the_expected_wkc_rule(name):
-    """LRW: 1 per slave with inputs + 2 per slave with outputs; ARMW and BRD: 1 per slave."""
+    """LRW: each slave by its FMMUs' types; ARMW and BRD: 1 per slave (wire's one rule)."""
     cfg = config(name)
     slaves = cfg.findall("Slave")
     want_lrw = 0
     for s in slaves:
         kinds = {m[3] for m in fmmus(s)}
-        want_lrw += (1 if 1 in kinds else 0) + (2 if 2 in kinds else 0)
+        want_lrw += wkc_increment(LRW, read=1 in kinds, write=2 in kinds)
     for c in cyclic_cmds(cfg):
         cmd, cnt = num(c.findtext("Cmd")), num(c.findtext("Cnt"))
-        assert cnt == (want_lrw if cmd == LRW else len(slaves))
+        assert cnt == (want_lrw if cmd == LRW else addressed_wkc(cmd, len(slaves)))
 
 
 @pytest.mark.parametrize("name", NAMES)
