@@ -7,13 +7,9 @@ Run by hand after changing a description; the output is deterministic and commit
     python tools/make_examples.py --check    # exits 1 if a committed file differs
 
 Element structure follows ETG.2100 (EtherCAT Network Information) as the TwinCAT and acontis
-exports in the corpus use it. Register layouts:
+exports in the corpus use it. Register layouts: sync managers and FMMUs as
+:mod:`lolacli.wire.registers` encodes them (ETG.1000.4 Tables 56 and 59);
 
-* sync manager, 8 bytes at 0x0800 + 8·n: start u16, length u16, control u8, status u8,
-  activate u8, PDI control u8 (ETG.1000.4 Table 59, "Sync Manager");
-* FMMU, 16 bytes at 0x0600 + 16·n: logical start u32, length u16, logical start bit u8,
-  logical stop bit u8, physical start u16, physical start bit u8, type u8 (1 read, 2 write),
-  activate u8, 3 reserved (ETG.1000.4 Table 56);
 * DC: 0x0910 system time, 0x0920 offset, 0x0928 delay, 0x0980 cyclic unit control +
   activation (AssignActivate 0x0300 = SYNC0 + cyclic operation), 0x0990 start time,
   0x09A0 SYNC0 / 0x09A4 SYNC1 cycle time (ETG.1000.4 Table 61 / ESC datasheet section 2).
@@ -42,6 +38,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from lolacli.wire.commands import wkc_increment  # noqa: E402
+from lolacli.wire.registers import (  # noqa: E402
+    Fmmu,
+    SyncManager,
+    encode_fmmu,
+    encode_sync_manager,
+    fmmu_address,
+    sync_manager_address,
+)
 
 OUT_DIR = ROOT / "lolacli" / "eni_examples"
 
@@ -51,8 +55,6 @@ APRD, APWR, FPRD, FPWR, BRD, BWR, LRW, ARMW = 1, 2, 4, 5, 7, 8, 12, 13
 # Frame arithmetic (DESIGN.md "Definitions").
 ETH_HEADER, ECAT_HEADER, DATAGRAM_OVERHEAD, FCS, MIN_FRAME = 14, 2, 12, 4, 64
 
-SM_REGISTER = struct.Struct("<HHBBBB")
-FMMU_REGISTER = struct.Struct("<IHBBHBBB3x")
 FMMU_READ, FMMU_WRITE = 1, 2
 
 LOGICAL_BASE = 0x0001_0000  # logical address of the first process-data byte
@@ -534,8 +536,11 @@ def write_master(config: ET.Element, chain: ChainSpec) -> None:
     init_cmd(cmds, ip, "count slaves (AL status)", BRD, 0, 0x0130, bytes(2), before_slave=True)
     init_cmd(cmds, ip, "clear station addresses", BWR, 0, 0x0010, bytes(2), before_slave=True)
     back = ("IP", "PI", "SI", "OI")
-    init_cmd(cmds, back, "clear FMMUs", BWR, 0, 0x0600, length=256, before_slave=True)
-    init_cmd(cmds, ip, "clear sync managers", BWR, 0, 0x0800, length=256, before_slave=True)
+    init_cmd(cmds, back, "clear FMMUs", BWR, 0, fmmu_address(0), length=256, before_slave=True)
+    init_cmd(
+        cmds, ip, "clear sync managers", BWR, 0, sync_manager_address(0), length=256,
+        before_slave=True,
+    )
     if any(s.device.dc_sync for s in chain.slaves):
         init_cmd(cmds, ip, "latch DC receive times", BWR, 0, 0x0900, bytes(4), before_slave=True)
         init_cmd(
@@ -763,8 +768,8 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
             "SM0 mailbox out",
             FPWR,
             s,
-            0x0800,
-            SM_REGISTER.pack(out_start, out_len, 0x26, 0, 1, 0),
+            sync_manager_address(0),
+            encode_sync_manager(SyncManager(out_start, out_len, 0x26, activate=1)),
             cnt=1,
         )
         init_cmd(
@@ -773,8 +778,8 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
             "SM1 mailbox in",
             FPWR,
             s,
-            0x0808,
-            SM_REGISTER.pack(in_start, in_len, 0x22, 0, 1, 0),
+            sync_manager_address(1),
+            encode_sync_manager(SyncManager(in_start, in_len, 0x22, activate=1)),
             cnt=1,
         )
     init_cmd(cmds, ("IP",), "request PREOP", FPWR, s, 0x0120, u16(0x0002), cnt=1, timeout_ms=3000)
@@ -791,14 +796,17 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
     )
     for sm, size, label in ((d.sm_out, d.out_bytes, "outputs"), (d.sm_in, d.in_bytes, "inputs")):
         if sm is not None:
-            data = SM_REGISTER.pack(sm.start, size, sm.control, 0, 1, 0)
+            data = encode_sync_manager(SyncManager(sm.start, size, sm.control, activate=1))
             init_cmd(
-                cmds, ("PS",), f"SM{sm.index} {label}", FPWR, s, 0x0800 + 8 * sm.index, data, cnt=1
+                cmds, ("PS",), f"SM{sm.index} {label}", FPWR, s,
+                sync_manager_address(sm.index), data, cnt=1,
             )
     for n, (kind, sm, size) in enumerate(_fmmus(d)):
-        data = FMMU_REGISTER.pack(LOGICAL_BASE + p.logical_offset, size, 0, 7, sm.start, 0, kind, 1)
+        fmmu = Fmmu(LOGICAL_BASE + p.logical_offset, size, physical_start=sm.start, type=kind,
+                    activate=1)
+        data = encode_fmmu(fmmu)
         label = "outputs (write)" if kind == FMMU_WRITE else "inputs (read)"
-        init_cmd(cmds, ("PS",), f"FMMU{n} {label}", FPWR, s, 0x0600 + 16 * n, data, cnt=1)
+        init_cmd(cmds, ("PS",), f"FMMU{n} {label}", FPWR, s, fmmu_address(n), data, cnt=1)
     if d.dc_sync:
         cycle_ns = chain.cycle_time_us * 1000
         init_cmd(cmds, ("PS",), "clear DC activation", FPWR, s, 0x0980, bytes(2), cnt=1)
@@ -860,7 +868,7 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
     init_cmd(cmds, ("OP", "SP"), "request PREOP", FPWR, s, 0x0120, u16(0x0002), timeout_ms=200)
     for n, _ in enumerate(_fmmus(d)):
         init_cmd(
-            cmds, ("OP", "SP", "OI", "SI"), f"clear FMMU{n}", FPWR, s, 0x0600 + 16 * n, bytes(16)
+            cmds, ("OP", "SP", "OI", "SI"), f"clear FMMU{n}", FPWR, s, fmmu_address(n), bytes(16)
         )
     if d.dc_sync:
         init_cmd(cmds, ("OP", "SP", "OI", "SI"), "clear DC activation", FPWR, s, 0x0980, bytes(2))

@@ -137,7 +137,7 @@ class MasterLayout:
             cleared = broadcast.get(index)
             if cleared is not None and cleared.frame > w.frame:
                 continue  # a later broadcast write (zeros, in practice) replaced it
-            if w.fmmu.active and w.fmmu.length_bytes > 0:
+            if w.fmmu.enabled and w.fmmu.length_bytes > 0:
                 out.setdefault(slave, []).append(w.fmmu)
         return out
 

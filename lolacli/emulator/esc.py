@@ -32,14 +32,20 @@ from lolacli.wire.commands import (
     wkc_increment,
 )
 from lolacli.wire.mailbox import MAILBOX_HEADER_BYTES, decode_mailbox_header
-from lolacli.wire.registers import AlStatusCode, decode_system_time_difference
+from lolacli.wire.registers import (
+    SYNC_MANAGER_LAYOUT,
+    AlStatusCode,
+    Fmmu,
+    decode_fmmu,
+    decode_system_time_difference,
+    fmmu_address,
+)
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _I64 = struct.Struct("<q")
-_FMMU = struct.Struct("<IHBBHBBB3x")
-_SM = struct.Struct("<HHBBBB")
+_SM = SYNC_MANAGER_LAYOUT
 
 MAX_CORRECTION_NS = 1000
 _TWICE_MAX_CORRECTION_NS = 2 * MAX_CORRECTION_NS
@@ -119,20 +125,6 @@ class EscConfig:
     pdi_control: int = 0x0005  # SPI
     watchdog_divider: int = 0x09C2  # 100 µs at 25 MHz
     watchdog_time_process_data: int = 1000  # 100 ms
-
-
-@dataclass(frozen=True, slots=True)
-class FmmuEntry:
-    """An FMMU as programmed (ETG.1000.4 Table 56)."""
-
-    logical_start: int
-    length_bytes: int
-    logical_start_bit: int
-    logical_stop_bit: int
-    physical_start: int
-    physical_start_bit: int
-    type: int
-    enabled: bool
 
 
 @dataclass(slots=True)
@@ -736,11 +728,8 @@ class Esc:
         self._post_next_mailbox()
 
     # -------------------------------------------------------------- logical
-    def fmmu(self, index: int) -> FmmuEntry:
-        ls, length, lsb, lstop, ps, psb, typ, act = _FMMU.unpack_from(
-            self.mem, r.FMMU_BASE + r.FMMU_BYTES * index
-        )
-        return FmmuEntry(ls, length, lsb, lstop, ps, psb, typ, bool(act & 1))
+    def fmmu(self, index: int) -> Fmmu:
+        return decode_fmmu(self._view, fmmu_address(index))
 
     def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
         """LRD/LWR/LRW through the FMMUs (ETG.1000.4 §6.5): this slave's write FMMUs
@@ -761,7 +750,7 @@ class Esc:
                     read = True
         return wkc_increment(cmd, read=read, write=wrote)
 
-    def _fmmu_write(self, f: FmmuEntry, address: int, incoming: memoryview) -> None:
+    def _fmmu_write(self, f: Fmmu, address: int, incoming: memoryview) -> None:
         if f.physical_start < PLAN_FREE_REGISTERS:
             self.epoch[0] += 1  # a write into registers, bypassing their side effects
             self.addressing[0] += 1
@@ -778,7 +767,7 @@ class Esc:
             self.mem[byte] = (self.mem[byte] & ~(1 << (pbit & 7))) | (value << (pbit & 7))
         self._sm_written(f.physical_start, f.physical_start + f.length_bytes)
 
-    def _fmmu_read(self, f: FmmuEntry, address: int, data: memoryview) -> None:
+    def _fmmu_read(self, f: Fmmu, address: int, data: memoryview) -> None:
         if _byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(data), f.logical_start + f.length_bytes)
@@ -1035,11 +1024,11 @@ class _Config:
 
     sms: list[SmView]
     active: list[SmView]
-    write_fmmus: list[FmmuEntry]
-    read_fmmus: list[FmmuEntry]
+    write_fmmus: list[Fmmu]
+    read_fmmus: list[Fmmu]
 
     @staticmethod
-    def build(sms: list[SmView], fmmus: list[FmmuEntry]) -> _Config:
+    def build(sms: list[SmView], fmmus: list[Fmmu]) -> _Config:
         active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
         usable = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
         write = [f for f in usable if f.type & r.FMMU_TYPE_WRITE]
@@ -1047,7 +1036,7 @@ class _Config:
         return _Config(sms, active, write, read)
 
 
-def _sm_open(f: FmmuEntry, sms: list[SmView]) -> bool:
+def _sm_open(f: Fmmu, sms: list[SmView]) -> bool:
     """FMMU access to a sync manager's buffer needs that SM enabled and PDI-active."""
     end = f.physical_start + f.length_bytes
     for sm in sms:
@@ -1060,11 +1049,11 @@ def _overlaps(a0: int, a1: int, b0: int, b1: int) -> bool:
     return a0 < b1 and b0 < a1
 
 
-def _byte_aligned(f: FmmuEntry) -> bool:
+def _byte_aligned(f: Fmmu) -> bool:
     return f.logical_start_bit == 0 and f.logical_stop_bit == 7 and f.physical_start_bit == 0
 
 
-def _bit_pairs(f: FmmuEntry, address: int, n: int) -> list[tuple[int, int]]:
+def _bit_pairs(f: Fmmu, address: int, n: int) -> list[tuple[int, int]]:
     """(datagram bit, memory bit) for every bit the FMMU maps inside the datagram."""
     first = f.logical_start * 8 + f.logical_start_bit
     last = (f.logical_start + f.length_bytes - 1) * 8 + f.logical_stop_bit
@@ -1159,4 +1148,4 @@ def _register_write(start: int, end: int) -> _RegisterWrite:
     return _RegisterWrite(tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags))
 
 
-__all__ = ["DcClock", "Esc", "EscApplication", "EscConfig", "FmmuEntry", "SmView", "field"]
+__all__ = ["DcClock", "Esc", "EscApplication", "EscConfig", "SmView", "field"]

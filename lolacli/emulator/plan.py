@@ -35,13 +35,13 @@ from lolacli.emulator.esc import (
     PLAN_FREE_REGISTERS,
     DcClock,
     Esc,
-    FmmuEntry,
     PortTimes,
     SmView,
     _byte_aligned,
     system_time_loop,
 )
 from lolacli.wire.commands import Command, wkc_increment
+from lolacli.wire.registers import Fmmu
 
 _HEAD = struct.Struct("<BBHHH")  # cmd, index, adp, ado, length word
 _U16 = struct.Struct("<H")
@@ -508,11 +508,11 @@ def _within(lo: int, hi: int, ranges: tuple[tuple[int, int], ...]) -> bool:
     return any(a <= lo and hi <= b for a, b in ranges)
 
 
-def _fmmu_hits(f: FmmuEntry, lo: int, hi: int) -> bool:
+def _fmmu_hits(f: Fmmu, lo: int, hi: int) -> bool:
     return f.logical_start < hi and lo < f.logical_start + f.length_bytes
 
 
-def _copy_range(f: FmmuEntry, lo: int, hi: int) -> tuple[int, int, int, int]:
+def _copy_range(f: Fmmu, lo: int, hi: int) -> tuple[int, int, int, int]:
     """(memory start, memory end, data start, data end) of a byte-aligned FMMU's copy."""
     a = max(lo, f.logical_start)
     b = min(hi, f.logical_start + f.length_bytes)

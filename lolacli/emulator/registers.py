@@ -1,59 +1,63 @@
 """ESC register addresses and codes the emulator uses (ETG.1000.4 §6, ET1100 datasheet §2).
 
-AL states and AL status codes come from :mod:`lolacli.wire.registers`.
+Addresses, AL states and AL status codes are :mod:`lolacli.wire.registers`'s; here they are
+plain ints under the emulator's names (module constants, cheap in the hot path), with the
+bit masks only the emulated ESC needs.
 """
 
 from __future__ import annotations
 
 from enum import IntFlag
 
+from lolacli.wire import registers as wire
 from lolacli.wire.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
+from lolacli.wire.registers import Register as _R
 
 # --- ESC information (ETG.1000.4 Table 31) --------------------------------------------
-TYPE = 0x0000
-REVISION = 0x0001
-BUILD = 0x0002
-FMMUS_SUPPORTED = 0x0004
-SYNC_MANAGERS_SUPPORTED = 0x0005
-RAM_SIZE_KIB = 0x0006
-PORT_DESCRIPTOR = 0x0007
-FEATURES = 0x0008
+TYPE = int(_R.TYPE)
+REVISION = int(_R.REVISION)
+BUILD = int(_R.BUILD)
+FMMUS_SUPPORTED = int(_R.FMMU_COUNT)
+SYNC_MANAGERS_SUPPORTED = int(_R.SM_COUNT)
+RAM_SIZE_KIB = int(_R.RAM_SIZE)
+PORT_DESCRIPTOR = int(_R.PORT_DESCRIPTOR)
+FEATURES = int(_R.ESC_FEATURES)
 
 # --- station address, data link layer --------------------------------------------------
-STATION_ADDRESS = 0x0010
-STATION_ALIAS = 0x0012
-DL_CONTROL = 0x0100
+STATION_ADDRESS = int(_R.STATION_ADDRESS)
+STATION_ALIAS = int(_R.STATION_ALIAS)
+DL_CONTROL = int(_R.DL_CONTROL)
 DL_CONTROL_ALIAS_ENABLE_BYTE = 0x0103  # bit 0: station alias used for configured addressing
-DL_STATUS = 0x0110
+DL_STATUS = int(_R.DL_STATUS)
 
 # --- application layer (ETG.1000.6 §5.3) -----------------------------------------------
-AL_CONTROL = 0x0120
-AL_STATUS = 0x0130
-AL_STATUS_CODE = 0x0134
-PDI_CONTROL = 0x0140
+AL_CONTROL = int(_R.AL_CONTROL)
+AL_STATUS = int(_R.AL_STATUS)
+AL_STATUS_CODE = int(_R.AL_STATUS_CODE)
+PDI_CONTROL = int(_R.PDI_CONTROL)
 
 # --- error counters (ETG.1000.4 Table 45..48) -------------------------------------------
-RX_ERROR_COUNTER = 0x0300  # 2 bytes per port: invalid frame, RX error
-FORWARDED_RX_ERROR = 0x0308
-PROCESSING_UNIT_ERROR = 0x030C
-PDI_ERROR = 0x030D
-LOST_LINK_COUNTER = 0x0310
+RX_ERROR_COUNTER = int(_R.RX_ERROR_COUNTER)  # 2 bytes per port: invalid frame, RX error
+FORWARDED_RX_ERROR = int(_R.FORWARDED_RX_ERROR_COUNTER)
+PROCESSING_UNIT_ERROR = int(_R.PROCESSING_UNIT_ERROR_COUNTER)
+PDI_ERROR = int(_R.PDI_ERROR_COUNTER)
+LOST_LINK_COUNTER = int(_R.LOST_LINK_COUNTER)
 ERROR_COUNTERS_END = 0x0314
 
 # --- watchdogs -------------------------------------------------------------------------
-WATCHDOG_DIVIDER = 0x0400
-WATCHDOG_TIME_PDI = 0x0410
-WATCHDOG_TIME_PROCESS_DATA = 0x0420
-WATCHDOG_STATUS_PROCESS_DATA = 0x0440  # bit 0: 1 = OK, 0 = expired
-WATCHDOG_COUNTER_PROCESS_DATA = 0x0442
+WATCHDOG_DIVIDER = int(_R.WATCHDOG_DIVIDER)
+WATCHDOG_TIME_PDI = int(_R.WD_TIME_PDI)
+WATCHDOG_TIME_PROCESS_DATA = int(_R.WD_TIME_PD)
+WATCHDOG_STATUS_PROCESS_DATA = int(_R.WD_STATUS_PD)  # bit 0: 1 = OK, 0 = expired
+WATCHDOG_COUNTER_PROCESS_DATA = int(_R.WD_COUNTER_PD)
 
 # --- SII EEPROM interface (ETG.1000.4 Table 49..52) --------------------------------------
-EEPROM_CONFIG = 0x0500
-EEPROM_PDI_ACCESS = 0x0501
-EEPROM_CONTROL = 0x0502
-EEPROM_ADDRESS = 0x0504
-EEPROM_DATA = 0x0508
-EEPROM_END = 0x0510
+EEPROM_CONFIG = int(_R.SII_CONFIG)
+EEPROM_PDI_ACCESS = int(_R.SII_PDI_ACCESS)
+EEPROM_CONTROL = int(_R.SII_CONTROL_STATUS)
+EEPROM_ADDRESS = int(_R.SII_ADDRESS)
+EEPROM_DATA = int(_R.SII_DATA)
+EEPROM_END = int(_R.MII_CONTROL_STATUS)  # the SII interface ends where MII begins
 
 EEPROM_STATUS_READ_8_BYTES = 0x0040
 EEPROM_STATUS_BUSY = 0x8000
@@ -64,10 +68,10 @@ EEPROM_COMMAND_RELOAD = 0x0300
 EEPROM_ERROR_COMMAND = 0x2000
 
 # --- FMMU and sync managers (ETG.1000.4 Tables 56 and 58) -------------------------------
-FMMU_BASE = 0x0600
-FMMU_BYTES = 16
-SYNC_MANAGER_BASE = 0x0800
-SYNC_MANAGER_BYTES = 8
+FMMU_BASE = int(_R.FMMU)
+FMMU_BYTES = wire.FMMU_BYTES
+SYNC_MANAGER_BASE = int(_R.SM)
+SYNC_MANAGER_BYTES = wire.SYNC_MANAGER_BYTES
 
 SM_CONTROL_MODE_MASK = 0x03
 SM_MODE_BUFFERED = 0x00
@@ -84,23 +88,24 @@ FMMU_TYPE_READ = 0x01
 FMMU_TYPE_WRITE = 0x02
 
 # --- distributed clocks (ETG.1000.4 Table 60, ET1100 §2.45) ------------------------------
-DC_RECEIVE_TIME_PORT0 = 0x0900  # 4 bytes per port; a write latches all ports
-DC_SYSTEM_TIME = 0x0910  # 8 bytes
-DC_RECEIVE_TIME_PROCESSING_UNIT = 0x0918  # 8 bytes
-DC_SYSTEM_TIME_OFFSET = 0x0920  # 8 bytes
-DC_SYSTEM_TIME_DELAY = 0x0928  # 4 bytes
-DC_SYSTEM_TIME_DIFFERENCE = 0x092C  # 4 bytes, bit 31 sign: 1 = local copy smaller
-DC_SPEED_COUNTER_START = 0x0930
-DC_SPEED_COUNTER_DIFF = 0x0932
-DC_FILTER_DEPTH = 0x0934
-DC_CYCLIC_UNIT_CONTROL = 0x0980
-DC_ACTIVATION = 0x0981
-DC_SYNC0_START_TIME = 0x0990
-DC_SYNC0_CYCLE_TIME = 0x09A0
-DC_SYNC1_CYCLE_TIME = 0x09A4
-DC_END = 0x09A8
+DC_RECEIVE_TIME_PORT0 = int(_R.DC_RECEIVE_TIME_PORT0)  # 4 bytes per port; a write latches all ports
+DC_SYSTEM_TIME = int(_R.DC_SYSTEM_TIME)  # 8 bytes
+DC_RECEIVE_TIME_PROCESSING_UNIT = int(_R.DC_RECEIVE_TIME_PU)  # 8 bytes
+DC_SYSTEM_TIME_OFFSET = int(_R.DC_SYSTEM_TIME_OFFSET)  # 8 bytes
+DC_SYSTEM_TIME_DELAY = int(_R.DC_SYSTEM_TIME_DELAY)  # 4 bytes
+# 4 bytes, bit 31 sign: 1 = local copy smaller
+DC_SYSTEM_TIME_DIFFERENCE = int(_R.DC_SYSTEM_TIME_DIFFERENCE)
+DC_SPEED_COUNTER_START = int(_R.DC_SPEED_COUNTER_START)
+DC_SPEED_COUNTER_DIFF = int(_R.DC_SPEED_COUNTER_DIFF)
+DC_FILTER_DEPTH = int(_R.DC_FILTER_DEPTH_SYSTEM_TIME)
+DC_CYCLIC_UNIT_CONTROL = int(_R.DC_CYCLIC_UNIT_CONTROL)
+DC_ACTIVATION = int(_R.DC_ACTIVATION)
+DC_SYNC0_START_TIME = int(_R.DC_START_TIME_CYCLIC)
+DC_SYNC0_CYCLE_TIME = int(_R.DC_SYNC0_CYCLE)
+DC_SYNC1_CYCLE_TIME = int(_R.DC_SYNC1_CYCLE)
+DC_END = int(_R.DC_LATCH0_CONTROL)  # the DC registers the emulator serves end here
 
-PROCESS_RAM = 0x1000
+PROCESS_RAM = int(_R.PROCESS_RAM)
 MEMORY_BYTES = 0x10000
 
 

@@ -47,23 +47,19 @@ from lolacli.eni.model import (
     Variable,
 )
 from lolacli.errors import EniError
-from lolacli.wire.frame import MAX_DATAGRAM_DATA
+from lolacli.wire import registers as reg
+from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, MAX_DATAGRAM_DATA
+from lolacli.wire.registers import (
+    FMMU_BYTES,
+    FMMU_COUNT_MAX,
+    SYNC_MANAGER_BYTES,
+    SYNC_MANAGER_COUNT_MAX,
+    Register,
+)
 
 #: Root elements we accept. acontis tools write the second with a plain (unencrypted) body.
 ENI_ROOTS = ("EtherCATConfig", "EncryptedEtherCATConfig")
 
-#: ESC registers (ETG.1000.4 Table 56 FMMU, Table 58 sync manager; ETG.1000.6 §5.6 DC).
-FMMU_REGISTER = 0x0600
-FMMU_BYTES = 16
-FMMU_COUNT = 16
-SM_REGISTER = 0x0800
-SM_BYTES = 8
-SM_COUNT = 16
-DC_ACTIVATION_REGISTER = 0x0980
-DATAGRAM_HEADER_BYTES = 10
-
-_FMMU = struct.Struct("<IHBBHBBB3x")  # ETG.1000.4 Table 56
-_SM = struct.Struct("<HHBBBB")  # ETG.1000.4 Table 58: start, length, control, status, activate, pdi
 _U16 = struct.Struct("<H")
 
 _El = Any  # an lxml element (lxml ships no type information)
@@ -652,20 +648,23 @@ def _register_writes(
 
 def decode_fmmu(index: int, block: bytes) -> Fmmu:
     """One FMMU register block (16 bytes, ETG.1000.4 Table 56)."""
-    start, length, start_bit, end_bit, phys, phys_bit, kind, activate = _FMMU.unpack(block)
-    return Fmmu(index, start, length, start_bit, end_bit, phys, phys_bit, kind, bool(activate & 1))
+    f = reg.decode_fmmu(block)
+    return Fmmu(index, f.logical_start, f.length_bytes, f.logical_start_bit, f.logical_stop_bit,
+                f.physical_start, f.physical_start_bit, f.type, f.enabled)
 
 
 def decode_sync_manager(index: int, block: bytes) -> SyncManager:
     """One sync manager register block (8 bytes, ETG.1000.4 Table 58)."""
-    start, length, control, _status, activate, _pdi = _SM.unpack(block)
-    return SyncManager(index, start, length, control, bool(activate & 1))
+    sm = reg.decode_sync_manager(block)
+    return SyncManager(index, sm.physical_start, sm.length_bytes, sm.control, sm.enabled)
 
 
 def fmmus_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[Fmmu, ...]:
     """The FMMUs the InitCmds configure (the last non-zero write of each wins)."""
     found: dict[int, Fmmu] = {}
-    for index, block, _ic in _register_writes(init_cmds, FMMU_REGISTER, FMMU_BYTES, FMMU_COUNT):
+    for index, block, _ic in _register_writes(
+        init_cmds, Register.FMMU, FMMU_BYTES, FMMU_COUNT_MAX
+    ):
         if any(block):
             found[index] = decode_fmmu(index, block)
     return tuple(found[i] for i in sorted(found))
@@ -674,7 +673,9 @@ def fmmus_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[Fmmu, ...]:
 def sync_managers_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[SyncManager, ...]:
     """The sync managers the InitCmds configure; bootstrap-only (``IB``) writes are skipped."""
     found: dict[int, SyncManager] = {}
-    for index, block, ic in _register_writes(init_cmds, SM_REGISTER, SM_BYTES, SM_COUNT):
+    for index, block, ic in _register_writes(
+        init_cmds, Register.SM, SYNC_MANAGER_BYTES, SYNC_MANAGER_COUNT_MAX
+    ):
         if any(block) and set(ic.transitions) != {"IB"}:
             found[index] = decode_sync_manager(index, block)
     return tuple(found[i] for i in sorted(found))
@@ -684,7 +685,8 @@ def dc_activation_from_init_cmds(init_cmds: Iterable[InitCmd]) -> int | None:
     """AssignActivate as written to register 0x0980 (the last non-zero write)."""
     value = None
     for ic in init_cmds:
-        if ic.ado == DC_ACTIVATION_REGISTER and len(ic.data) >= 2 and ic.logical_address is None:
+        dc_activation = ic.ado == Register.DC_CYCLIC_UNIT_CONTROL  # 0x0980 and 0x0981
+        if dc_activation and len(ic.data) >= 2 and ic.logical_address is None:
             (word,) = _U16.unpack_from(ic.data)
             if word:
                 value = word

@@ -38,7 +38,13 @@ from lolacli.master.core import Master, MasterOptions
 from lolacli.master.transport import Transport
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
-from lolacli.wire.registers import AlState, Register
+from lolacli.wire.registers import (
+    AlState,
+    Register,
+    SyncManager,
+    encode_sync_manager,
+    sync_manager_address,
+)
 
 #: SOEM's station addresses: 0x1001, 0x1002, … in line order (ecx_config_init)
 FIRST_STATION = 0x1001
@@ -75,7 +81,6 @@ EEPROM_POLLS = 100
 SM_MAILBOX_OUT_CONTROL = 0x26
 SM_MAILBOX_IN_CONTROL = 0x22
 SM_ENABLE = 0x01
-_SM = struct.Struct("<HHBBBB")
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _AL_MASK = b"\x1f\x00"  # state and error indicator
@@ -225,15 +230,15 @@ def preop_init_cmds(station: int, mailbox: Mailbox | None) -> tuple[InitCmd, ...
     ]
     if mailbox is None:
         return tuple(cmds)
-    sm0 = _SM.pack(
-        mailbox.out_start, mailbox.out_length_bytes, SM_MAILBOX_OUT_CONTROL, 0, SM_ENABLE, 0
-    )
-    sm1 = _SM.pack(
-        mailbox.in_start, mailbox.in_length_bytes, SM_MAILBOX_IN_CONTROL, 0, SM_ENABLE, 0
-    )
+    sm0 = encode_sync_manager(SyncManager(
+        mailbox.out_start, mailbox.out_length_bytes, SM_MAILBOX_OUT_CONTROL, activate=SM_ENABLE
+    ))
+    sm1 = encode_sync_manager(SyncManager(
+        mailbox.in_start, mailbox.in_length_bytes, SM_MAILBOX_IN_CONTROL, activate=SM_ENABLE
+    ))
     cmds += [
-        cmd(Command.FPWR, Register.SM, sm0, "SM0 mailbox out"),
-        cmd(Command.FPWR, Register.SM + 8, sm1, "SM1 mailbox in"),
+        cmd(Command.FPWR, sync_manager_address(0), sm0, "SM0 mailbox out"),
+        cmd(Command.FPWR, sync_manager_address(1), sm1, "SM1 mailbox in"),
         cmd(Command.FPWR, Register.AL_CONTROL, _U16.pack(AlState.PREOP), "request PREOP"),
         check(AlState.PREOP, "check PREOP"),
     ]

@@ -256,8 +256,13 @@ def al_status_text(code: int) -> str:
 
 # --- FMMU and sync manager ----------------------------------------------------------------
 
+#: FMMU register block: logical start u32, length u16, logical start bit u8, logical stop
+#: bit u8, physical start u16, physical start bit u8, type u8, activate u8, 3 reserved
 _FMMU = struct.Struct("<IHBBHBBB3s")
-_SM = struct.Struct("<HHBBBB")
+#: Sync-manager register block: physical start u16, length u16, control u8, status u8,
+#: activate u8, PDI control u8 (the emulated ESC unpacks its registers with it directly)
+SYNC_MANAGER_LAYOUT = struct.Struct("<HHBBBB")
+_SM = SYNC_MANAGER_LAYOUT
 
 
 class FmmuType(IntFlag):
@@ -282,7 +287,7 @@ class Fmmu:
     reserved: bytes = bytes(3)
 
     @property
-    def active(self) -> bool:
+    def enabled(self) -> bool:
         return bool(self.activate & 1)
 
 

@@ -184,6 +184,6 @@ def test_sync_manager_and_fmmu_writes_el2828() -> None:
     (fmmu_dgram,) = decode_frame(FMMU0_WRITE).datagrams
     fmmu = decode_fmmu(fmmu_dgram.data)
     assert fmmu == Fmmu(1, 1, 0, 7, 0x0F00, 0, FmmuType.WRITE, 1)
-    assert fmmu.active
+    assert fmmu.enabled
     assert encode_fmmu(fmmu) == fmmu_dgram.data
     assert decode_coe_header(b"\x00\x30").service == CoeService.SDO_RESPONSE
