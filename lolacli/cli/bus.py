@@ -1,5 +1,6 @@
-"""`lolacli bus …`: the group. Commands live in their own modules (bus_timing, bus_emulate)
-and register themselves on :data:`app` when :mod:`lolacli.cli.main` imports them."""
+"""`lolacli bus …`: the group. Commands live in their own modules (bus_timing, bus_emulate,
+bus_simulate, bus_scan) and register themselves on :data:`app` when :mod:`lolacli.cli.main`
+imports them."""
 
 from __future__ import annotations
 

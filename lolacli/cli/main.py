@@ -9,7 +9,16 @@ import typer
 from typer.core import TyperGroup
 
 from lolacli import __version__
-from lolacli.cli import bus, bus_emulate, bus_simulate, bus_timing, capture, eni, sdo  # noqa: F401
+from lolacli.cli import (  # noqa: F401
+    bus,
+    bus_emulate,
+    bus_scan,
+    bus_simulate,
+    bus_timing,
+    capture,
+    eni,
+    sdo,
+)
 from lolacli.cli.coerce import install as _light_parameters
 from lolacli.cli.common import debug_enabled
 

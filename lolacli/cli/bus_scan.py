@@ -1,0 +1,142 @@
+"""`lolacli bus scan`: a live bus as our master sees it, and its differences from an ENI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from lolacli.cli.bus import app
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+
+
+@app.command("scan")
+def scan_cmd(
+    iface: Annotated[
+        str, typer.Option("--iface", "-i", help="Interface of the bus (NIC, veth, TAP).")
+    ],
+    eni: Annotated[
+        Path | None,
+        typer.Option("--eni", help="ENI to compare with: every difference is exit 1."),
+    ] = None,
+    state: Annotated[
+        str | None,
+        typer.Option(
+            "--state",
+            metavar="init|preop|safeop|op",
+            help="First bring the bus to this state with the ENI's InitCmds (configures "
+            "the bus; needs --eni), then scan: refusals show with their AL status codes.",
+        ),
+    ] = None,
+    timeout: Annotated[
+        str, typer.Option("--timeout", help="Wait this long for each frame (e.g. 20ms).")
+    ] = "20ms",
+    retries: Annotated[
+        int, typer.Option("--retries", min=0, help="Send a lost frame again this often.")
+    ] = 3,
+    no_sii: Annotated[
+        bool, typer.Option("--no-sii", help="Do not read the SII EEPROM (no identities).")
+    ] = False,
+    fmt: FormatOption = OutputFormat.human,
+) -> None:
+    """Scan the bus on IFACE with our master (lolacli.scan/1): every slave with its
+    identity and name from the SII, AL state and status code, ports and topology from
+    DL status, error counters 0x0300-0x0313. Without --state nothing is configured:
+    slaves are read by auto-increment address and no station address is assigned. With
+    --eni, every difference (missing, extra or wrong slave, wrong revision, the line
+    ending early, a state not reached) is exit 1; exit 0 when the bus matches; exit 4
+    when nothing answers, the interface does not exist or the socket is not permitted."""
+    from lolacli.files import load_eni
+    from lolacli.master.scan import ScanOptions, parse_state, scan
+    from lolacli.master.transport import RawSocketTransport
+    from lolacli.timing.model import parse_duration_ns
+
+    target = parse_state(state) if state is not None else None
+    timeout_ns = parse_duration_ns(timeout)
+    if timeout_ns <= 0:
+        raise typer.BadParameter(f"{timeout!r} is not a positive duration", param_hint="--timeout")
+    model = load_eni(eni) if eni is not None else None
+    if target is not None and model is None:
+        raise typer.BadParameter("--state needs --eni (its InitCmds bring the bus up)")
+    options = ScanOptions(timeout_ns=timeout_ns, retries=retries, read_sii=not no_sii, state=target)
+    transport = RawSocketTransport(iface)
+    try:
+        report = scan(transport, eni=model, options=options, iface=iface)
+    finally:
+        transport.close()
+    doc = report.to_dict()
+    if fmt is OutputFormat.json:
+        emit_json(doc)
+    else:
+        _render(doc)
+    if report.failed:
+        raise typer.Exit(1)
+
+
+def _identity(s: dict[str, Any]) -> str:
+    if s["vendor_id"] is None:
+        return "?"
+    return f"0x{s['vendor_id']:X}:0x{s['product_code']:X} rev 0x{s['revision']:X}"
+
+
+def _ports(s: dict[str, Any]) -> str:
+    return " ".join(
+        f"{p['port']}{'+' if p['open'] else '-'}"
+        for p in s["ports"]
+        if p["physical"] != "not implemented" or p["open"]
+    )
+
+
+def _errors(s: dict[str, Any]) -> str:
+    c = s["error_counters"]
+    if c is None:
+        return "?"
+    total = (
+        sum(c["invalid_frame"])
+        + sum(c["rx_error"])
+        + sum(c["forwarded_rx_error"])
+        + c["processing_unit_error"]
+        + c["pdi_error"]
+    )
+    lost = sum(c["lost_link"])
+    return f"{total}" + (f" (lost link {lost})" if lost else "")
+
+
+def _render(doc: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    from lolacli.cli.common import stdout_console
+
+    console = stdout_console()
+    table = Table(title=f"Bus on {doc['iface']}", title_justify="left")
+    for column in ("pos", "station", "name", "identity", "AL state", "ports", "parent", "errors"):
+        table.add_column(column, justify="right" if column in ("pos", "parent") else "left")
+    for s in doc["slaves"]:
+        al = s["al_state"]
+        if s["al_error"] or s["al_status_code"] != "0x0000":
+            al += f" {s['al_status_code']} {s['al_status_text']}"
+        table.add_row(
+            str(s["position"]),
+            f"0x{s['station_address']:04X}",
+            s["name"] or ("-" if s["answered"] else "no answer"),
+            _identity(s),
+            al,
+            _ports(s),
+            str(s["parent_position"]),
+            _errors(s),
+        )
+    console.print(table)
+    for r in doc["refusals"]:
+        console.print(
+            f"refused: slave {r['position']} ({r['slave']}) {r['transition']}: {r['text']}"
+        )
+    for f in doc["findings"]:
+        console.print(f"note: {f['message']}")
+    for d in doc["differences"]:
+        console.print(f"differs: {d['message']}")
+    summary = f"{doc['slaves_counted']} slaves on {doc['iface']}"
+    if doc["eni"] is not None:
+        n = len(doc["differences"])
+        summary += "; matches the ENI" if n == 0 else f"; {n} differences from the ENI"
+    console.print(summary)

@@ -1,0 +1,177 @@
+"""SII EEPROM decoding (lolacli.wire.sii): a real EL2004 image read back from a capture,
+images our emulator builds from ENIs and ESIs, hypothesis round trips and fuzz."""
+
+from __future__ import annotations
+
+import random
+import struct
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from wire_corpus import CORPUS, ROOT, read_packets
+
+from lolacli.errors import WireError
+from lolacli.wire.commands import Command
+from lolacli.wire.frame import decode_any
+from lolacli.wire.sii import (
+    HEADER_BYTES,
+    MailboxProtocol,
+    SiiCategory,
+    crc8_sii,
+    decode_sii,
+    decode_sii_general,
+    decode_sii_header,
+    decode_sii_strings,
+    protocol_names,
+    sii_string,
+)
+
+RS_SII = CORPUS / "pcap" / "ethercrab__rs-example-sii-el2004.pcapng"
+
+
+def sii_words_from_capture(packets: list[bytes], station: int) -> dict[int, bytes]:
+    """The SII words a master read from the slave at ``station`` (FPWR of a read command
+    to 0x0502, then FPRD of 0x0508), taken from the returned frames."""
+    words: dict[int, bytes] = {}
+    address: int | None = None
+    for raw in packets:
+        try:
+            frame = decode_any(raw)
+        except WireError:
+            continue
+        if not frame.ethernet.returned:
+            continue
+        for d in frame.datagrams:
+            if d.adp != station or not d.wkc:
+                continue
+            if d.cmd == Command.FPWR and d.ado == 0x0502 and len(d.data) >= 4:
+                control, word = struct.unpack_from("<HH", d.data)
+                address = word if control & 0x0700 == 0x0100 else None
+            elif d.cmd == Command.FPRD and d.ado == 0x0508 and address is not None:
+                for i in range(len(d.data) // 2):
+                    words[address + i] = d.data[2 * i : 2 * i + 2]
+    return words
+
+
+def test_el2004_image_read_by_ethercrab() -> None:
+    """ethercrab__rs-example-sii-el2004.pcapng, packets 355-564: ethercrab reads the
+    EL2004's (station 0x1001) identity words and its categories up to word 199."""
+    if not RS_SII.is_file():
+        pytest.skip(f"corpus capture {RS_SII.name} not found")
+    words = sii_words_from_capture(read_packets(RS_SII), 0x1001)
+    assert len(words) >= 100
+    image = bytearray(2 * (max(words) + 1))
+    for address, data in words.items():
+        image[2 * address : 2 * address + 2] = data
+    info = decode_sii(bytes(image))
+    assert (info.header.vendor_id, info.header.product_code) == (0x00000002, 0x07D43052)
+    assert info.name == "EL2004 4K. Dig. Ausgang 24V, 0.5A"
+    assert info.order == "EL2004"
+    assert info.group == "DigOut"
+    assert [c[0] for c in info.categories[:2]] == [SiiCategory.STRINGS, SiiCategory.GENERAL]
+    assert info.categories[0][1] == 0x40  # the first category sits at word 0x40
+
+
+def test_emulator_images_of_every_lola_slave() -> None:
+    """The SII the emulator builds from each ENI slave decodes to that slave's identity,
+    name and mailbox protocols; the header checksum holds."""
+    from lolacli.emulator.sii import sii_from_slave
+    from lolacli.files import load_eni
+
+    eni = load_eni(ROOT / "lolacli" / "eni_examples" / "lola.xml")
+    for slave in eni.slaves:
+        info = decode_sii(sii_from_slave(slave))
+        ident = slave.identity
+        h = info.header
+        assert (h.vendor_id, h.product_code, h.revision, h.serial) == (
+            ident.vendor_id,
+            ident.product_code,
+            ident.revision,
+            ident.serial,
+        )
+        assert info.name == slave.name
+        assert h.checksum_ok
+        want = slave.mailbox.protocols if slave.mailbox is not None else ()
+        assert set(protocol_names(h.mailbox_protocols)) == set(want)
+
+
+def test_esi_images_name_the_device(corpus) -> None:
+    """Images built from the corpus ESIs carry the device's type as order and name."""
+    from lolacli.emulator.sii import sii_from_esi_device
+    from lolacli.files import load_esi
+
+    checked = 0
+    for path in sorted((corpus / "esi").glob("*.xml")):
+        esi = load_esi(path)
+        for device in esi.devices[:3]:
+            info = decode_sii(sii_from_esi_device(device))
+            assert info.header.vendor_id == device.identity.vendor_id
+            assert info.header.product_code == device.identity.product_code
+            assert info.name  # every emulated image names its device
+            checked += 1
+    assert checked > 0
+
+
+def test_header_checksum_detects_a_changed_word() -> None:
+    head = bytearray(HEADER_BYTES)
+    head[0:2] = b"\x05\x0c"
+    head[14] = crc8_sii(bytes(head[:14]))
+    assert decode_sii_header(bytes(head)).checksum_ok
+    head[8] ^= 1  # the station alias changes, the checksum does not
+    assert not decode_sii_header(bytes(head)).checksum_ok
+
+
+def test_string_index_zero_and_out_of_range_are_none() -> None:
+    strings = ("a", "b")
+    assert sii_string(strings, 0) is None
+    assert sii_string(strings, 3) is None
+    assert sii_string(strings, 2) == "b"
+
+
+def test_truncated_categories_are_wire_errors() -> None:
+    image = bytearray(HEADER_BYTES) + struct.pack("<HH", SiiCategory.STRINGS, 10) + b"\x01\x03ab"
+    with pytest.raises(WireError, match="runs past the image end"):
+        decode_sii(bytes(image))
+    with pytest.raises(WireError):
+        decode_sii_strings(b"\x02\x03abc\x05ab")
+    with pytest.raises(WireError):
+        decode_sii_general(b"\x01\x02")
+    with pytest.raises(WireError):
+        decode_sii_header(bytes(100))
+
+
+def _encode_strings(strings: list[bytes]) -> bytes:
+    return bytes([len(strings)]) + b"".join(bytes([len(s)]) + s for s in strings)
+
+
+@given(st.lists(st.binary(max_size=255).map(lambda b: b.replace(b"\x00", b"x")), max_size=30))
+def test_strings_round_trip(strings: list[bytes]) -> None:
+    decoded = decode_sii_strings(_encode_strings(strings))
+    assert decoded == tuple(s.decode("latin-1") for s in strings)
+
+
+@given(st.integers(0, 0x3F))
+def test_protocol_names_name_every_bit(flags: int) -> None:
+    names = protocol_names(flags)
+    assert len(names) == bin(flags).count("1")
+    assert bool(flags & MailboxProtocol.COE) == ("CoE" in names)
+
+
+def test_random_bytes_raise_only_wire_error() -> None:
+    rng = random.Random(11)
+    seeds = [bytes(HEADER_BYTES) + struct.pack("<HH", 10, 3) + b"\x01\x03abc\xff\xff"]
+    for _ in range(3000):
+        base = bytearray(rng.choice(seeds))
+        n = rng.randrange(0, len(base) + 40)
+        data = bytes(rng.randrange(256) for _ in range(n)) if rng.random() < 0.3 else base
+        data = bytearray(data)
+        for _ in range(rng.randrange(1, 6)):
+            if data:
+                data[rng.randrange(len(data))] = rng.randrange(256)
+        data = data[: rng.randrange(0, len(data) + 1)] if rng.random() < 0.3 else data
+        for decoder in (decode_sii, decode_sii_strings, decode_sii_general, decode_sii_header):
+            try:
+                decoder(bytes(data))
+            except WireError:
+                pass
