@@ -15,6 +15,9 @@ from lolacli.errors import TransportError
 ETH_P_ECAT = 0x88A4
 PACKET_OUTGOING = 4  # sll_pkttype of a frame this host sent
 MAX_FRAME_BYTES = 1600
+#: SO_TIMESTAMPNS (= SCM_TIMESTAMPNS) of asm-generic/socket.h, 64-bit struct timespec:
+#: the kernel stamps each received frame with CLOCK_REALTIME when it enters the stack
+SO_TIMESTAMPNS = 35
 
 
 def open_socket(iface: str) -> socket.socket:

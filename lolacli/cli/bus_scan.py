@@ -74,10 +74,10 @@ def scan_cmd(
         raise typer.Exit(1)
 
 
-def _identity(s: dict[str, Any]) -> str:
+def _identity(s: dict[str, Any]) -> tuple[str, str]:
     if s["vendor_id"] is None:
-        return "?"
-    return f"0x{s['vendor_id']:X}:0x{s['product_code']:X} rev 0x{s['revision']:X}"
+        return "?", "?"
+    return f"0x{s['vendor_id']:X}:0x{s['product_code']:X}", f"0x{s['revision']:X}"
 
 
 def _ports(s: dict[str, Any]) -> str:
@@ -110,7 +110,8 @@ def _render(doc: dict[str, Any]) -> None:
 
     console = stdout_console()
     table = Table(title=f"Bus on {doc['iface']}", title_justify="left")
-    for column in ("pos", "station", "name", "identity", "AL state", "ports", "parent", "errors"):
+    columns = ("pos", "station", "name", "vendor:product", "revision", "AL state", "ports")
+    for column in (*columns, "parent", "errors"):
         table.add_column(column, justify="right" if column in ("pos", "parent") else "left")
     for s in doc["slaves"]:
         al = s["al_state"]
@@ -120,7 +121,7 @@ def _render(doc: dict[str, Any]) -> None:
             str(s["position"]),
             f"0x{s['station_address']:04X}",
             s["name"] or ("-" if s["answered"] else "no answer"),
-            _identity(s),
+            *_identity(s),
             al,
             _ports(s),
             str(s["parent_position"]),

@@ -83,16 +83,51 @@ def simulate_cmd(
             "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
         ),
     ] = False,
+    iface: Annotated[
+        str | None,
+        typer.Option(
+            "--iface",
+            "-i",
+            help="Run in real time on this interface (a live bus: `bus emulate` or hardware) "
+            "instead of the emulated chain in virtual time.",
+        ),
+    ] = None,
+    busy_wait_us: Annotated[
+        float,
+        typer.Option(
+            "--busy-wait-us", help="With --iface: busy-wait this last part of every cycle."
+        ),
+    ] = 200.0,
+    realtime_priority: Annotated[
+        int,
+        typer.Option(
+            "--realtime-priority",
+            min=0,
+            max=99,
+            help="With --iface: ask for SCHED_FIFO at this priority (0: do not ask); the "
+            "report says what the OS granted.",
+        ),
+    ] = 80,
+    max_lost: Annotated[
+        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
+    ] = 0,
+    max_wkc: Annotated[
+        int,
+        typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
+    ] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
     virtual time, enable the drives, move every joint on a minimum-jerk back-and-forth,
     and report round trip, WKC, lost frames, DC error and the per-cycle software sections
-    (lolacli.simulate/1). Exit 1 on WKC mismatches, lost frames or refused transitions;
-    2 for bad options, unknown variables, values of the wrong type or an unwritable
-    output; 3 for an ENI that cannot be read or simulated; 4 when no slave answers;
-    130 when interrupted (recordings are kept up to the last cycle)."""
+    (lolacli.simulate/1). With --iface the same runs in real time on a live bus, and the
+    report adds the achieved cycle period and jitter, late and lost frames, the
+    scheduling granted and the host's load. Exit 1 on WKC mismatches or lost frames (more
+    than --max-wkc-mismatches/--max-lost) or refused transitions; 2 for bad options,
+    unknown variables, values of the wrong type or an unwritable output; 3 for an ENI that
+    cannot be read or simulated; 4 when no slave answers or the interface cannot be
+    used; 130 when interrupted (recordings are kept up to the last cycle)."""
     import signal
 
     from lolacli.emulator.run import parse_link_down
@@ -131,6 +166,11 @@ def simulate_cmd(
         pace=pace,
         watch=tuple(watch or ()),
         set_values=tuple(pairs),
+        iface=iface,
+        busy_wait_us=busy_wait_us,
+        realtime_priority=realtime_priority,
+        max_lost=max_lost,
+        max_wkc_mismatches=max_wkc,
     )
     stop = {"flag": False}
 
@@ -140,7 +180,8 @@ def simulate_cmd(
     old_int = signal.signal(signal.SIGINT, _stop)
     old_term = signal.signal(signal.SIGTERM, _stop)
     try:
-        with _progress(quiet or not sys.stderr.isatty()) as progress:
+        # live: no progress bar (its refresh thread would take the GIL mid-cycle)
+        with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
             result = simulate(model, options, progress=progress, should_stop=lambda: stop["flag"])
     finally:
         signal.signal(signal.SIGINT, old_int)
@@ -192,6 +233,33 @@ class _progress:
             self._bar.__exit__(*exc)
 
 
+def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
+    period = doc["cycle_period_us"] or {}
+    late = doc["wakeup_lateness_us"] or {}
+    sched = doc["scheduling"]
+    granted = sched["policy"] + (f" {sched['priority']}" if sched["priority"] else "")
+    if sched["error"]:
+        granted += f" ({sched['error']})"
+    load = doc["load"]
+    return [
+        (
+            "cycle period",
+            f"mean {period.get('mean', 0):g} µs, std {period.get('std', 0):g}, "
+            f"min {period.get('min', 0):g}, max {period.get('max', 0):g}",
+        ),
+        ("wake-up lateness", f"p99 {late.get('p99', 0):g} µs, max {late.get('max', 0):g}"),
+        ("overruns (> half a cycle late)", str(doc["overruns"])),
+        ("late / never returned frames", f"{doc['late_frames']} / {doc['never_returned_frames']}"),
+        ("scheduling", f"{granted}, busy-wait {sched['busy_wait_us']:g} µs"),
+        (
+            "host load (1 min, before/after)",
+            f"{load['before']['loadavg_1min']} / {load['after']['loadavg_1min']} "
+            f"on {load['before']['cpus']} CPUs",
+        ),
+        ("master CPU", f"{doc['master_cpu_percent']} % of one core"),
+    ]
+
+
 def _render(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
@@ -219,6 +287,9 @@ def _render(doc: dict[str, Any]) -> None:
         ("max rate (bus + software)", f"{doc['max_rate_with_software_hz'] or 0:,} Hz"),
         ("virtual / wall time", f"{doc['realtime_factor']}×"),
     ]
+    if doc.get("mode") == "realtime":
+        rows[-1] = ("interface", str(doc["iface"]))
+        rows += _live_rows(doc)
     for name, value in rows:
         table.add_row(name, value)
     console.print(table)

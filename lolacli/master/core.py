@@ -104,6 +104,10 @@ class MasterOptions:
     dc_check_cycles: int = 200  # read every DC slave's 0x092C this often (0: never)
     sync_start_delay_ns: int = 100_000_000  # SYNC0 start: this far after "now"
     time_sections: bool = False  # time the cycle's sections (seed Fig. 7)
+    # real time: a cyclic frame must be back when the next cycle is due (else its inputs
+    # are late for it: lost), and a cycle that starts a whole cycle time late or more
+    # drops the slots it missed instead of running them back to back (skipped_cycles)
+    realtime: bool = False
     source_mac: bytes | None = None  # default: the ENI's, if usable
 
 
@@ -121,6 +125,7 @@ class MasterStats:
     round_trip_ns: list[int] = field(default_factory=list)  # of every cyclic frame
     dc_errors_ns: list[tuple[int, int]] = field(default_factory=list)  # (t, max |0x092C|)
     slaves_found: int | None = None
+    skipped_cycles: int = 0  # slots dropped in real time (MasterOptions.realtime)
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,7 +223,7 @@ class Master:
             self.last_sent_ns = self.transport.send(frame)
             self.stats.frames_sent += 1
             self.stats.acyclic_frames += 1
-            got = self._await(index, self.options.frame_timeout_ns)
+            got = self._await(index, self.options.frame_timeout_ns, self.last_sent_ns)
             if got is not None:
                 return decode_frame(got.frame).datagrams
             self.stats.frames_lost += 1
@@ -246,11 +251,13 @@ class Master:
             out += self.exchange(batch)
         return out
 
-    def _await(self, index: int, timeout_ns: int) -> Received | None:
+    def _await(self, index: int, timeout_ns: int, sent_ns: int = 0) -> Received | None:
         """The returned frame with ``index`` within ``timeout_ns``; other returned frames
-        that come meanwhile are kept for whoever waits for them."""
+        that come meanwhile are kept for whoever waits for them. A frame with ``index``
+        that returned before ``sent_ns`` answers an earlier frame with the same index (a
+        late one, in real time) and is dropped."""
         got = self._stray.pop(index, None)
-        if got is not None:
+        if got is not None and got.received_ns >= sent_ns:
             return got
         deadline = self.transport.now_ns() + timeout_ns
         while True:
@@ -259,7 +266,9 @@ class Master:
                 return None
             frame_index = r.frame[_INDEX_AT] if len(r.frame) > _INDEX_AT else -1
             if frame_index == index:
-                return r
+                if r.received_ns >= sent_ns:
+                    return r
+                continue
             self._stray[frame_index] = r
 
     def fprd(self, station: int, ado: int, length: int) -> Datagram:
@@ -670,6 +679,16 @@ class Master:
     def _finish_cycle(self) -> None:
         self.stats.cycles += 1
         self._next_cycle_ns += self.cycle_time_ns
+        if self.options.realtime:
+            missed = (self.transport.now_ns() - self._next_cycle_ns) // self.cycle_time_ns
+            if missed > 0:
+                self._next_cycle_ns += missed * self.cycle_time_ns
+                self.stats.skipped_cycles += missed
+
+    @property
+    def next_cycle_ns(self) -> int:
+        """When the next cycle is due (during a cycle: when this one was due)."""
+        return self._next_cycle_ns
 
     def _build(self) -> list[tuple[FramePlan, int, bytes]]:
         out = []
@@ -694,9 +713,14 @@ class Master:
         inputs = self.image.inputs
         mismatched = False
         now = self.transport.now_ns()
+        realtime = self.options.realtime
         for plan, index, sent in pending:
-            # a frame gets one cycle time to come back (more only when this cycle is late)
-            got = self._await(index, max(0, sent + self.cycle_time_ns - now))
+            # a frame gets one cycle time to come back (more only when this cycle is late;
+            # in real time no later than this cycle was due)
+            until = sent + self.cycle_time_ns
+            if realtime and until > self._next_cycle_ns:
+                until = self._next_cycle_ns
+            got = self._await(index, max(0, until - now), sent)
             if got is None:
                 stats.cyclic_lost += 1
                 stats.frames_lost += 1
@@ -750,7 +774,7 @@ class Master:
         pending, self._pending_dc = self._pending_dc, []
         now = self.transport.now_ns()
         for index, sent in pending:
-            got = self._await(index, max(0, sent + self.cycle_time_ns - now))
+            got = self._await(index, max(0, sent + self.cycle_time_ns - now), sent)
             if got is None:
                 self.stats.frames_lost += 1
                 continue

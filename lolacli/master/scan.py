@@ -382,7 +382,10 @@ def scan(
         report.differences = compare_with_eni(slaves, eni)
     if opts.state is not None:
         report.differences += state_differences(slaves, opts.state, refusals)
-    report.findings = findings(slaves)
+    stuck = {d.position for d in report.differences if d.kind == "state_not_reached"}
+    report.findings = [
+        f for f in findings(slaves) if not (f.kind == "al_error" and f.position in stuck)
+    ]
     report.frames_sent = master.stats.frames_sent
     report.frames_lost = master.stats.frames_lost
     report.duration_ns = time.monotonic_ns() - t0

@@ -1,4 +1,5 @@
-"""``lolacli bus simulate``: the master against the emulated chain, in virtual time.
+"""``lolacli bus simulate``: the master against the emulated chain in virtual time, or
+against a live bus in real time.
 
 The one module of :mod:`lolacli.master` that knows the emulator: it builds the chain of an
 ENI with the requested faults (:func:`lolacli.emulator.run.make_chain`), puts it behind a
@@ -10,6 +11,14 @@ OP, enable every CiA 402 drive and move every joint on a minimum-jerk back-and-f
 Faults (the emulator's, see :class:`lolacli.emulator.chain.Faults`): frames dropped on
 the master's cable with a probability, slaves stuck in SAFEOP, the cable cut after slave
 K from the start or T seconds after the cyclic run starts, clock drift along the line.
+
+With ``iface`` the same master and application run in real time on a network interface
+(a ``bus emulate`` on the other end of a veth pair, or hardware) through a
+:class:`~lolacli.master.transport.RawSocketTransport`: every cycle is busy-waited at its
+end, the thread runs SCHED_FIFO where the OS allows it, and the report adds what real
+time costs: the cycle period and its jitter as the frames left, how late each cycle left
+against its schedule, frames that came back late or never, the scheduling the OS
+granted, the host's load and the master's CPU share.
 """
 
 from __future__ import annotations
@@ -24,7 +33,7 @@ from lolacli.eni.model import Eni
 from lolacli.errors import EniError, LinkError, TransportError, UsageError
 from lolacli.master.core import SECTIONS, Master, MasterOptions
 from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu
-from lolacli.master.transport import ChainTransport
+from lolacli.master.transport import ChainTransport, Transport
 from lolacli.master.variables import BusVariable, variable_for
 from lolacli.motion.profile import back_and_forth
 from lolacli.timing.model import (
@@ -60,6 +69,12 @@ class SimulateOptions:
     amplitude_counts: int = 20_000
     period_s: float = 2.0
     time_sections: bool = True
+    iface: str | None = None  # a live bus in real time instead of the emulated chain
+    busy_wait_us: float = 200.0  # live: busy-wait this last part of every cycle
+    realtime_priority: int = 80  # live: SCHED_FIFO priority where permitted (0: do not ask)
+    frame_timeout_ms: float = 10.0  # live: an acyclic frame not back by then is lost
+    max_lost: int = 0  # lost frames allowed before the run fails
+    max_wkc_mismatches: int = 0
 
 
 @dataclass(slots=True)
@@ -81,13 +96,14 @@ def simulate(
     should_stop: Callable[[], bool] | None = None,
 ) -> SimulationResult:
     """Run the simulation (see the module docstring)."""
-    from lolacli.emulator.run import EmulateOptions, arm_link_loss, make_chain
-
     _check(eni, options)
-    cycle_ns = round(1e9 / options.rate_hz)
     recorders = _open_recorders(options)
     shm = None
     try:
+        if options.iface is not None:
+            return _live(eni, options, recorders, progress, should_stop)
+        from lolacli.emulator.run import EmulateOptions, arm_link_loss, make_chain
+
         cut = options.link_down
         emulate = EmulateOptions(
             drop_probability=options.drop_probability,
@@ -99,25 +115,9 @@ def simulate(
         )
         chain = make_chain(eni, emulate)
         transport = ChainTransport(chain)
-        pcap, mcap = recorders
-        if pcap is not None:
-            transport.taps.append(pcap)
-        master = Master(
-            eni,
-            transport,
-            options=MasterOptions(cycle_time_ns=cycle_ns, time_sections=options.time_sections),
-        )
-        app = _Application(master, options)
-        if options.shm:
-            from lolacli.master.shm import ShmPublisher
-
-            shm = ShmPublisher(options.shm, len(master.image.inputs), len(master.image.outputs))
-            app.shm = shm
-        app.install(mcap)
+        master, app, shm = _compose(eni, options, transport, recorders)
         wall0 = time.perf_counter()
-        master.bring_up(strict=False)
-        if master.stats.slaves_found == 0:
-            raise TransportError("no slaves answering (the line is cut at the master)")
+        _bring_up(master)
         start_ns = transport.now_ns()
         arm_link_loss(chain, emulate, start_ns)
         app.enable()
@@ -127,13 +127,140 @@ def simulate(
         states = _final_states(master)
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
-        doc["interrupted"] = interrupted
-        failed = bool(doc["wkc_mismatches"] or doc["lost_frames"] or master.refusals)
-        return SimulationResult(doc, failed, interrupted)
+        doc.update(_NO_LIVE_KEYS)
+        return _result(doc, options, master, interrupted)
     finally:
         for r in recorders:
             if r is not None:
                 r.close()
+        if shm is not None:
+            shm.close()
+
+
+def _compose(
+    eni: Eni, options: SimulateOptions, transport: Transport, recorders: tuple[Any, Any]
+) -> tuple[Master, _Application, Any]:
+    """The master over ``transport`` with recorders, application and shared memory."""
+    pcap, mcap = recorders
+    if pcap is not None:
+        transport.taps.append(pcap)
+    master_options = MasterOptions(
+        cycle_time_ns=round(1e9 / options.rate_hz), time_sections=options.time_sections
+    )
+    if options.iface is not None:
+        master_options.frame_timeout_ns = round(options.frame_timeout_ms * 1e6)
+        master_options.realtime = True
+    master = Master(eni, transport, options=master_options)
+    app = _Application(master, options)
+    shm = None
+    if options.shm:
+        from lolacli.master.shm import ShmPublisher
+
+        shm = ShmPublisher(options.shm, len(master.image.inputs), len(master.image.outputs))
+        app.shm = shm
+    app.install(mcap)
+    return master, app, shm
+
+
+def _bring_up(master: Master) -> None:
+    master.bring_up(strict=False)
+    if master.stats.slaves_found == 0:
+        raise TransportError("no slaves answering (the line is cut at the master)")
+
+
+def _result(
+    doc: dict[str, Any], options: SimulateOptions, master: Master, interrupted: bool
+) -> SimulationResult:
+    doc["interrupted"] = interrupted
+    failed = bool(
+        doc["wkc_mismatches"] > options.max_wkc_mismatches
+        or doc["lost_frames"] > options.max_lost
+        or master.refusals
+    )
+    return SimulationResult(doc, failed, interrupted)
+
+
+#: keys only a run on a live bus fills (null in virtual time)
+_NO_LIVE_KEYS: dict[str, Any] = {
+    "mode": "virtual",
+    "iface": None,
+    "cycle_period_us": None,
+    "cycle_jitter_us": None,
+    "wakeup_lateness_us": None,
+    "send_offset_us": None,
+    "overruns": None,
+    "late_frames": None,
+    "never_returned_frames": None,
+    "scheduling": None,
+    "load": None,
+    "master_cpu_percent": None,
+    "kernel_timestamps": None,
+    "skipped_cycles": None,
+}
+
+
+def _live(
+    eni: Eni,
+    options: SimulateOptions,
+    recorders: tuple[Any, Any],
+    progress: Progress | None,
+    should_stop: Callable[[], bool] | None,
+) -> SimulationResult:
+    """The master in real time on a live bus (``options.iface``): a raw socket, the
+    cycle busy-waited at its end, SCHED_FIFO where permitted (see
+    :mod:`lolacli.master.realtime`)."""
+    from lolacli.master.realtime import CycleClock, load_now, realtime_section
+    from lolacli.master.transport import RawSocketTransport
+
+    assert options.iface is not None
+    transport = RawSocketTransport(options.iface, spin_ns=round(options.busy_wait_us * 1000))
+    shm = None
+    try:
+        master, app, shm = _compose(eni, options, transport, recorders)
+        clock = CycleClock(master.cycle_time_ns, lambda: master.next_cycle_ns)
+        transport.taps.append(clock)
+        load_before = load_now()
+        with realtime_section(
+            options.realtime_priority, busy_wait_us=options.busy_wait_us
+        ) as scheduling:
+            wall0 = time.perf_counter()
+            _bring_up(master)
+            start_ns = transport.now_ns()
+            app.enable()
+            app.first_cycle = master.stats.cycles
+            master.start_cyclic()  # the schedule starts now, not where start-up left it
+            skipped0 = master.stats.skipped_cycles
+            cpu0, run0 = time.process_time(), time.perf_counter()
+            clock.active = True
+            wakes: list[int] = []
+            transport.wake_lateness_ns = wakes
+            interrupted = _run(master, options, progress, should_stop, wall0)
+            transport.wake_lateness_ns = None
+            clock.active = False
+            cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
+            master.drain()
+        states = _final_states(master)
+        wall_s = time.perf_counter() - wall0
+        doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
+        doc.update(_NO_LIVE_KEYS)
+        doc.update(clock.report(master.cycle_time_ns))
+        wake = summarize_array(wakes)
+        doc["wakeup_lateness_us"] = wake.to_dict(scale=1e-3) if wake is not None else None
+        doc.update(
+            {
+                "mode": "realtime",
+                "iface": options.iface,
+                "bus_emulation_us": None,
+                "scheduling": scheduling.to_dict(),
+                "load": {"before": load_before, "after": load_now()},
+                "master_cpu_percent": round(100 * cpu_s / run_s, 1) if run_s > 0 else None,
+                "kernel_timestamps": transport.kernel_timestamps,
+                "skipped_cycles": master.stats.skipped_cycles - skipped0,
+            }
+        )
+        return _result(doc, options, master, interrupted)
+    finally:
+        transport.close()
         if shm is not None:
             shm.close()
 
@@ -147,6 +274,28 @@ def _check(eni: Eni, options: SimulateOptions) -> None:
         raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to 100000 Hz")
     if options.cycles < 0:
         raise UsageError("the number of cycles cannot be negative")
+    if options.iface is not None:
+        faults = [
+            name
+            for name, given in (
+                ("--drop-p", options.drop_probability > 0),
+                ("--stuck-safeop", bool(options.stuck_safeop)),
+                ("--link-down", options.link_down is not None),
+                ("--drift-ppb", options.drift_ppb != 0),
+            )
+            if given
+        ]
+        if faults:
+            raise UsageError(
+                f"{', '.join(faults)}: faults of the emulated chain; on a live bus give them "
+                "to the `bus emulate` serving it"
+            )
+        if options.pace:
+            raise UsageError("--pace: a live bus runs in real time anyway")
+        if options.busy_wait_us < 0 or options.busy_wait_us * 1000 > 1e9 / options.rate_hz:
+            raise UsageError(
+                f"--busy-wait-us {options.busy_wait_us:g}: expected 0 to one cycle time"
+            )
 
 
 def _open_recorders(options: SimulateOptions) -> tuple[Any, Any]:

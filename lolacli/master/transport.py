@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import heapq
 import select
+import socket
+import struct
 import time
 from collections import deque
 from collections.abc import Callable
@@ -154,22 +156,33 @@ class RawSocketTransport:
     """A raw EtherCAT socket on ``iface``, real time (see the module docstring).
 
     Frames this host sent (``PACKET_OUTGOING``) are not returned frames and are skipped.
+    A returned frame's time is the kernel's receive stamp (``SO_TIMESTAMPNS``, taken to
+    the monotonic clock), not the time :meth:`recv` got round to reading it: a master that
+    collects the last cycle's frames at the start of the next one still measures their
+    round trip. ``spin_ns``: :meth:`wait_until` sleeps until that long before the time
+    and busy-waits the rest (a sleep wakes up late by tens of µs, more under load); with
+    :attr:`wake_lateness_ns` set to a list it records how late each wait ended.
     """
 
-    def __init__(self, iface: str) -> None:
+    def __init__(self, iface: str, *, spin_ns: int = 0) -> None:
         from lolacli.rawsocket import open_socket
 
         self.iface = iface
         self.taps: list[Tap] = []
+        self.spin_ns = spin_ns
+        self.wake_lateness_ns: list[int] | None = None  # a list: record how late waits end
         self._sock = open_socket(iface)
         self._sock.setblocking(False)
         self._sent: deque[int] = deque(maxlen=256)
+        self._realtime_offset = time.time_ns() - time.monotonic_ns()
+        self.kernel_timestamps = _enable_timestamps(self._sock)
 
     def now_ns(self) -> int:
         return time.monotonic_ns()
 
     def send(self, frame: bytes) -> int:
         t = time.monotonic_ns()
+        self._realtime_offset = time.time_ns() - t
         try:
             self._sock.send(frame)
         except OSError as exc:
@@ -185,7 +198,9 @@ class RawSocketTransport:
         deadline = time.monotonic_ns() + max(0, timeout_ns)
         while True:
             try:
-                frame, address = self._sock.recvfrom(MAX_FRAME_BYTES)
+                frame, ancillary, _flags, address = self._sock.recvmsg(
+                    MAX_FRAME_BYTES, _ANCILLARY_BYTES
+                )
             except BlockingIOError:
                 left = deadline - time.monotonic_ns()
                 if left <= 0:
@@ -200,18 +215,48 @@ class RawSocketTransport:
                 ) from None
             if len(address) > 2 and address[2] == PACKET_OUTGOING:
                 continue
-            t = time.monotonic_ns()
+            now = time.monotonic_ns()
+            t = min(now, _stamp(ancillary, self._realtime_offset) or now)
             for tap in self.taps:
                 tap(t, frame, True)
             sent = self._sent[-1] if self._sent else t
             return Received(frame, sent, t)
 
     def wait_until(self, t_ns: int) -> None:
-        while True:
-            left = t_ns - time.monotonic_ns()
-            if left <= 0:
-                return
-            time.sleep(left / 1e9)
+        clock = time.monotonic_ns
+        left = t_ns - clock()
+        if left > self.spin_ns:
+            time.sleep((left - self.spin_ns) / 1e9)
+        now = clock()
+        while now < t_ns:
+            now = clock()
+        if self.wake_lateness_ns is not None:
+            self.wake_lateness_ns.append(now - t_ns)
 
     def close(self) -> None:
         self._sock.close()
+
+
+_TIMESPEC = struct.Struct("qq")
+_ANCILLARY_BYTES = 64
+
+
+def _enable_timestamps(sock: socket.socket) -> bool:
+    from lolacli.rawsocket import SO_TIMESTAMPNS
+
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    except OSError:
+        return False
+    return True
+
+
+def _stamp(ancillary: list[tuple[int, int, bytes]], realtime_offset: int) -> int | None:
+    """The kernel's receive stamp in the monotonic clock, if the frame carries one."""
+    from lolacli.rawsocket import SO_TIMESTAMPNS
+
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+            return int(seconds) * 1_000_000_000 + int(nanoseconds) - realtime_offset
+    return None
