@@ -1,0 +1,106 @@
+"""`bus simulate --iface`: our master in real time against `bus emulate` over a veth pair
+(separate processes). CI runs a short run with generous thresholds (a loaded 2-core
+host); the 20,000-cycle measurement is benchmarks/simulate_realtime.py. Needs root."""
+
+from __future__ import annotations
+
+import gc
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from lolacli.files import load_eni
+from lolacli.master.simulate import SimulateOptions, simulate
+from tests.master.live import LOLA, run, run_json, start_emulator, stop_emulator
+
+pytestmark = [pytest.mark.root, pytest.mark.slow]
+CYCLE_US = 500.0
+
+
+def test_holds_2khz_against_bus_emulate(veth, tmp_path: Path) -> None:
+    pcap = tmp_path / "live.pcapng"
+    proc = start_emulator(veth[1], "--realtime-priority", "50")
+    try:
+        code, doc, err = run_json(
+            "bus",
+            "simulate",
+            "--iface",
+            veth[0],
+            "--rate",
+            "2000",
+            "--cycles",
+            "2000",
+            "--max-lost",
+            "200",
+            "--max-wkc-mismatches",
+            "200",
+            "--pcap",
+            str(pcap),
+        )
+    finally:
+        stop_emulator(proc)
+    assert code == 0, err
+    assert (doc["mode"], doc["iface"], doc["cycles"]) == ("realtime", veth[0], 2000)
+    assert doc["kernel_timestamps"] is True
+    period = doc["cycle_period_us"]
+    assert period["count"] == doc["cyclic_frames_timed"] - 1 >= 1999
+    assert abs(period["median"] - CYCLE_US) < 25
+    assert abs(period["mean"] - CYCLE_US) < 0.05 * CYCLE_US
+    assert doc["round_trip_us"]["median"] < CYCLE_US
+    assert doc["lost_frames"] <= 200 and doc["wkc_mismatches"] <= 200
+    assert doc["refusals"] == [] and set(doc["states"].values()) == {"OP"}
+    assert doc["drives"] == 21 and doc["drives_enabled"] >= 18
+    sched = doc["scheduling"]
+    assert sched["policy"] == "SCHED_FIFO" and sched["priority"] == 80, sched
+    assert sched["busy_wait_us"] == 200 and sched["gc_disabled"] is True
+    assert doc["load"]["before"]["cpus"] == os.cpu_count()
+    assert 0 < doc["master_cpu_percent"] <= 110
+    assert doc["wakeup_lateness_us"]["median"] < 50  # busy-waited: on time to the µs
+    # capture analyze reads the live recording back to the same cycle period
+    ana = run("capture", "analyze", str(pcap), "--eni", str(LOLA), "--format", "json")
+    assert ana.returncode in (0, 1), ana.stderr
+    analyzed = json.loads(ana.stdout)
+    assert analyzed["malformed_frames"] == 0
+    assert abs(analyzed["cycle_period_us"]["median"] - period["median"]) < 5
+    assert analyzed["pairs"] >= 2000 - doc["lost_frames"]
+    # a frame capture analyze never saw return is one our master counted lost too
+    assert analyzed["lost_frames"] <= doc["lost_frames"]
+
+
+def test_scheduling_and_gc_are_put_back_after_a_run(veth) -> None:
+    """The library call in this very process: SCHED_FIFO and the disabled collector
+    last only as long as the run."""
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, gc.isenabled())
+    proc = start_emulator(veth[1], "--realtime-priority", "50")
+    try:
+        result = simulate(
+            load_eni(LOLA),
+            SimulateOptions(iface=veth[0], cycles=200, realtime_priority=10, max_lost=200),
+        )
+    finally:
+        stop_emulator(proc)
+    assert result.doc["scheduling"]["policy"] == "SCHED_FIFO"
+    assert result.doc["scheduling"]["priority"] == 10
+    assert result.doc["cycles"] == 200
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, gc.isenabled()) == before
+
+
+def test_the_emulators_faults_are_refused_on_a_live_bus() -> None:
+    for extra, message in (
+        (("--drop-p", "0.1"), "--drop-p: faults of the emulated chain"),
+        (("--stuck-safeop", "3", "--link-down", "4"), "--stuck-safeop, --link-down: faults"),
+        (("--busy-wait-us", "600"), "--busy-wait-us 600: expected 0 to one cycle time"),
+        (("--pace",), "--pace: a live bus runs in real time anyway"),
+    ):
+        done = run("bus", "simulate", "--iface", "lo", "--cycles", "10", *extra)
+        assert done.returncode == 2, (extra, done.stderr)
+        assert message in done.stderr and done.stderr.count("\n") == 1
+
+
+def test_no_bus_behind_the_interface_is_exit_4(veth) -> None:
+    done = run("bus", "simulate", "--iface", veth[0], "--cycles", "10", timeout=120)
+    assert done.returncode == 4
+    assert done.stderr.startswith("lolacli: error: no answer to ")
+    assert done.stderr.count("\n") == 1
