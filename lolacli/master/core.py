@@ -105,8 +105,9 @@ class MasterOptions:
     sync_start_delay_ns: int = 100_000_000  # SYNC0 start: this far after "now"
     time_sections: bool = False  # time the cycle's sections (seed Fig. 7)
     # real time: a cyclic frame must be back when the next cycle is due (else its inputs
-    # are late for it: lost), and a cycle that starts a whole cycle time late or more
-    # drops the slots it missed instead of running them back to back (skipped_cycles)
+    # are late for it: lost), DC diagnosis answers are taken when they are there (no
+    # wait inside a cycle), and a cycle that starts a whole cycle time late or more drops
+    # the slots it missed instead of running them back to back (skipped_cycles)
     realtime: bool = False
     source_mac: bytes | None = None  # default: the ENI's, if usable
 
@@ -771,11 +772,18 @@ class Master:
         self._pending_dc.append((index, sent))
 
     def _take_dc_checks(self) -> None:
+        """The answers to the DC diagnosis frames; in real time without waiting: one not
+        back yet is looked for again next cycle (lost after the frame timeout)."""
         pending, self._pending_dc = self._pending_dc, []
         now = self.transport.now_ns()
+        realtime = self.options.realtime
         for index, sent in pending:
-            got = self._await(index, max(0, sent + self.cycle_time_ns - now), sent)
+            wait = 0 if realtime else max(0, sent + self.cycle_time_ns - now)
+            got = self._await(index, wait, sent)
             if got is None:
+                if realtime and now - sent < self.options.frame_timeout_ns:
+                    self._pending_dc.append((index, sent))
+                    continue
                 self.stats.frames_lost += 1
                 continue
             worst = 0
