@@ -160,7 +160,7 @@ class CycleClock:
         lateness = np.asarray(self.lateness_ns, dtype=np.int64)
         median = float(np.median(periods)) if periods.size else None
         end = int(sent[-1]) if sent.size else 0
-        in_flight = sum(1 for t in self._outstanding.values() if t >= end - in_flight_ns)
+        in_flight = sum(1 for t in self._outstanding.values() if t > end - in_flight_ns)
         offset = summarize_array(lateness)
         return {
             "cycle_period_us": period.to_dict(scale=1e-3) if period is not None else None,

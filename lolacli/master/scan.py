@@ -37,7 +37,7 @@ from collections.abc import Generator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from lolacli.eni.model import Eni, Slave
+from lolacli.eni.model import Eni, Identity, Slave
 from lolacli.eni.model import Master as EniMaster
 from lolacli.eni.model import ProcessImage as EniProcessImage
 from lolacli.errors import TransportError, UsageError, WireError
@@ -177,14 +177,6 @@ def decode_error_counters(raw: bytes) -> ErrorCounters:
         raw[13],
         (raw[16], raw[17], raw[18], raw[19]),
     )
-
-
-@dataclass(frozen=True, slots=True)
-class Identity:
-    vendor_id: int
-    product_code: int
-    revision: int
-    serial: int
 
 
 @dataclass(slots=True)
@@ -817,7 +809,6 @@ __all__ = [
     "SCHEMA",
     "Difference",
     "ErrorCounters",
-    "Identity",
     "Port",
     "ScanOptions",
     "ScanReport",

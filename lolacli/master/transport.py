@@ -155,7 +155,10 @@ class ChainTransport:
 class RawSocketTransport:
     """A raw EtherCAT socket on ``iface``, real time (see the module docstring).
 
-    Frames this host sent (``PACKET_OUTGOING``) are not returned frames and are skipped.
+    Frames this host sent (``PACKET_OUTGOING``) are not returned frames and are skipped,
+    and so are frames whose source MAC is not the one this transport sends with (the
+    first ESC sets the locally administered bit, nothing else): another master's frames
+    on a shared segment, counted in :attr:`foreign_frames`.
     A returned frame's time is the kernel's receive stamp (``SO_TIMESTAMPNS``, taken to
     the monotonic clock), not the time :meth:`recv` got round to reading it: a master that
     collects the last cycle's frames at the start of the next one still measures their
@@ -174,6 +177,8 @@ class RawSocketTransport:
         self._sock = open_socket(iface)
         self._sock.setblocking(False)
         self._sent: deque[int] = deque(maxlen=256)
+        self._source: bytes | None = None  # our source MAC, locally administered bit set
+        self.foreign_frames = 0  # EtherCAT frames of another master, ignored
         self._realtime_offset = time.time_ns() - time.monotonic_ns()
         self.kernel_timestamps = _enable_timestamps(self._sock)
 
@@ -183,6 +188,8 @@ class RawSocketTransport:
     def send(self, frame: bytes) -> int:
         t = time.monotonic_ns()
         self._realtime_offset = time.time_ns() - t
+        if len(frame) >= 12:
+            self._source = bytes((frame[6] | 0x02,)) + frame[7:12]
         try:
             self._sock.send(frame)
         except OSError as exc:
@@ -214,6 +221,10 @@ class RawSocketTransport:
                     f"{self.iface}: receive failed: {exc.strerror or exc}"
                 ) from None
             if len(address) > 2 and address[2] == PACKET_OUTGOING:
+                continue
+            source = self._source
+            if source is not None and (frame[6] | 0x02 != source[0] or frame[7:12] != source[1:]):
+                self.foreign_frames += 1  # another master on this segment: not ours
                 continue
             now = time.monotonic_ns()
             t = min(now, _stamp(ancillary, self._realtime_offset) or now)

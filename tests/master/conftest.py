@@ -1,4 +1,4 @@
-"""Fixtures of the master tests: a veth pair for a live bus (see tests/master/live.py)."""
+"""Fixtures of the master tests: a live bus in a namespace of its own (tests/master/live.py)."""
 
 from __future__ import annotations
 
@@ -6,14 +6,14 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.master.live import make_veth, remove_veth
+from tests.master.live import LiveBus, make_bus, remove_bus
 
 
 @pytest.fixture
-def veth() -> Iterator[tuple[str, str]]:
-    """A fresh veth pair (master end, emulator end), removed afterwards."""
-    master, emulator = make_veth()
+def bus() -> Iterator[LiveBus]:
+    """A fresh veth pair in a fresh network namespace, removed afterwards."""
+    live = make_bus()
     try:
-        yield master, emulator
+        yield live
     finally:
-        remove_veth(master)
+        remove_bus(live)

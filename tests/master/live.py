@@ -2,18 +2,24 @@
 (its own GIL, as a real slave chain has its own silicon), our master or pysoem on the
 other. Needs root and iproute2; tests using it skip cleanly otherwise.
 
-Interface names start with ``f11`` and carry the pid, so runs in parallel (other
-engineers' tests on the same host) never touch each other's pairs.
+Each pair lives in a network namespace of its own (``f11n…``; interfaces ``f11m…`` and
+``f11e…``, with the pid), so runs in parallel on the same host never see each other's
+frames; the emulator and the CLI run inside it through ``ip netns exec``, in-process
+users open their sockets inside it with :func:`inside`.
 """
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,46 +42,89 @@ def _ip(*args: str) -> None:
     subprocess.run(["ip", *args], check=True, capture_output=True)
 
 
-def make_veth() -> tuple[str, str]:
-    """A fresh veth pair (master end, emulator end), up, without IPv6 chatter."""
+@dataclass(frozen=True, slots=True)
+class LiveBus:
+    """A veth pair inside its own network namespace: no other process on the host can
+    open these interfaces or send on them (on a shared host one did: another master's
+    frames turned up on a pair of ours)."""
+
+    netns: str
+    master: str  # our master's end
+    emulator: str  # `bus emulate`'s end
+
+    def command(self, *argv: str) -> list[str]:
+        """``argv`` run inside the namespace."""
+        return ["ip", "netns", "exec", self.netns, *argv]
+
+    def ip(self, *args: str) -> None:
+        _ip("-n", self.netns, *args)
+
+
+def make_bus() -> LiveBus:
+    """A fresh namespace with a veth pair, up, without IPv6 chatter."""
     need_root()
     tag = f"{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
-    master, emulator = f"{PREFIX}m{tag}", f"{PREFIX}e{tag}"
-    _ip("link", "add", master, "type", "veth", "peer", "name", emulator)
+    bus = LiveBus(f"{PREFIX}n{tag}", f"{PREFIX}m{tag}", f"{PREFIX}e{tag}")
+    _ip("netns", "add", bus.netns)
     try:
-        for name in (master, emulator):
+        bus.ip("link", "add", bus.master, "type", "veth", "peer", "name", bus.emulator)
+        for name in (bus.master, bus.emulator):
             subprocess.run(
-                ["sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"],
+                bus.command("sysctl", "-qw", f"net.ipv6.conf.{name}.disable_ipv6=1"),
                 capture_output=True,
                 check=False,
             )
-            _ip("link", "set", name, "up")
+            bus.ip("link", "set", name, "up")
     except BaseException:
-        remove_veth(master)
+        remove_bus(bus)
         raise
-    return master, emulator
+    return bus
 
 
-def remove_veth(master: str) -> None:
-    subprocess.run(["ip", "link", "del", master], capture_output=True, check=False)
+def remove_bus(bus: LiveBus) -> None:
+    """Delete the namespace (and the pair in it)."""
+    subprocess.run(["ip", "netns", "del", bus.netns], capture_output=True, check=False)
 
 
-def start_emulator(iface: str, *extra: str, eni: Path = LOLA) -> subprocess.Popen[str]:
-    """`lolacli bus emulate` serving ``eni`` on ``iface`` (returns once it answers)."""
+_CLONE_NEWNET = 0x40000000
+
+
+@contextmanager
+def inside(bus: LiveBus) -> Iterator[None]:
+    """This thread in the bus's namespace for the block: sockets opened here (our
+    transport's, pysoem's) stay in it afterwards."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    home = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
+    target = os.open(f"/run/netns/{bus.netns}", os.O_RDONLY)
+    try:
+        if libc.setns(target, _CLONE_NEWNET) != 0:
+            raise OSError(ctypes.get_errno(), f"setns into {bus.netns} failed")
+        try:
+            yield
+        finally:
+            if libc.setns(home, _CLONE_NEWNET) != 0:
+                raise OSError(ctypes.get_errno(), "setns back failed")
+    finally:
+        os.close(home)
+        os.close(target)
+
+
+def start_emulator(bus: LiveBus, *extra: str, eni: Path = LOLA) -> subprocess.Popen[str]:
+    """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers)."""
     proc = subprocess.Popen(
-        [
+        bus.command(
             sys.executable,
             "-m",
             "lolacli",
             "bus",
             "emulate",
             "--iface",
-            iface,
+            bus.emulator,
             "--eni",
             str(eni),
             "--quiet",
             *extra,
-        ],
+        ),
         cwd=ROOT,
         stderr=subprocess.PIPE,
         stdout=subprocess.PIPE,
@@ -101,10 +150,13 @@ def stop_emulator(proc: subprocess.Popen[str]) -> None:
     assert proc.returncode == 0, err
 
 
-def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    """``python -m lolacli ARGS`` from the worktree."""
+def run(
+    *args: str, bus: LiveBus | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
+    """``python -m lolacli ARGS`` from the worktree (inside the bus's namespace)."""
+    argv = [sys.executable, "-m", "lolacli", *args]
     return subprocess.run(
-        [sys.executable, "-m", "lolacli", *args],
+        bus.command(*argv) if bus is not None else argv,
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -112,8 +164,10 @@ def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     )
 
 
-def run_json(*args: str, timeout: float = 120) -> tuple[int, dict[str, Any], str]:
+def run_json(
+    *args: str, bus: LiveBus | None = None, timeout: float = 120
+) -> tuple[int, dict[str, Any], str]:
     """Exit code, the JSON document on stdout, stderr."""
-    done = run(*args, "--format", "json", timeout=timeout)
+    done = run(*args, "--format", "json", bus=bus, timeout=timeout)
     doc = json.loads(done.stdout) if done.stdout.strip() else {}
     return done.returncode, doc, done.stderr

@@ -19,7 +19,7 @@ from lolacli.master.transport import RawSocketTransport
 from lolacli.rawsocket import ETH_P_ECAT
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
-from tests.master.live import ROOT, need_root, run
+from tests.master.live import ROOT, inside, need_root, run
 
 pytestmark = [pytest.mark.root]
 
@@ -31,11 +31,12 @@ def _frame(index: int, *, returned: bool = False) -> bytes:
 
 
 @pytest.fixture
-def pair(veth) -> Iterator[tuple[RawSocketTransport, socket.socket]]:
+def pair(bus) -> Iterator[tuple[RawSocketTransport, socket.socket]]:
     """The transport on the master end, a raw socket (all ethertypes) on the other."""
-    transport = RawSocketTransport(veth[0], spin_ns=100_000)
-    peer = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
-    peer.bind((veth[1], 0))
+    with inside(bus):
+        transport = RawSocketTransport(bus.master, spin_ns=100_000)
+        peer = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x0003))
+        peer.bind((bus.emulator, 0))
     peer.settimeout(2.0)
     try:
         yield transport, peer
@@ -87,7 +88,7 @@ def test_recv_times_out_and_skips_frames_sent_by_itself(pair) -> None:
     assert time.monotonic() - t0 < 0.05
 
 
-def test_other_ethertypes_are_not_received(pair, veth) -> None:
+def test_other_ethertypes_are_not_received(pair) -> None:
     transport, peer = pair
     ip_like = bytes(6) + b"\x02\x00\x00\x00\x00\x01" + b"\x08\x00" + bytes(46)
     peer.send(ip_like)
@@ -95,6 +96,21 @@ def test_other_ethertypes_are_not_received(pair, veth) -> None:
     got = transport.recv(100_000_000)
     assert got is not None and got.frame[12:14] == b"\x88\xa4"
     assert transport.recv(10_000_000) is None
+
+
+def test_another_masters_frames_are_ignored(pair) -> None:
+    """Once we have sent, only frames with our source MAC (first octet with or without the
+    locally administered bit, as the first ESC leaves it) are ours."""
+    transport, peer = pair
+    transport.send(_frame(5))
+    _peer_recv(peer)
+    kickcat = bytearray(_frame(5, returned=True))
+    kickcat[6:12] = b"\xca\xde\xca\xde\xde\xff"  # KickCAT's master MAC
+    peer.send(bytes(kickcat))
+    peer.send(_frame(5, returned=True))
+    got = transport.recv(100_000_000)
+    assert got is not None and got.frame[6:12] == b"\x03\x01\x01\x01\x01\x01"
+    assert transport.foreign_frames == 1
 
 
 def test_taps_see_both_directions_in_order(pair) -> None:
@@ -127,13 +143,14 @@ def test_wait_until_never_returns_early_and_busy_waits_the_end(pair) -> None:
     transport.wait_until(time.monotonic_ns() - 1_000_000)  # in the past: returns at once
 
 
-def test_no_interface_and_a_downed_interface_are_one_line(veth) -> None:
+def test_no_interface_and_a_downed_interface_are_one_line(bus) -> None:
     with pytest.raises(TransportError, match=r"^no such interface: nosuchif0$"):
         RawSocketTransport("nosuchif0")
-    transport = RawSocketTransport(veth[0])
+    with inside(bus):
+        transport = RawSocketTransport(bus.master)
     try:
-        subprocess.run(["ip", "link", "set", veth[0], "down"], check=True)
-        with pytest.raises(TransportError, match=rf"^{veth[0]}: send failed: Network is down$"):
+        bus.ip("link", "set", bus.master, "down")
+        with pytest.raises(TransportError, match=rf"^{bus.master}: send failed: Network is down$"):
             transport.send(_frame(1))
     finally:
         transport.close()

@@ -10,16 +10,24 @@ from pathlib import Path
 import pytest
 
 from lolacli.files import load_eni
-from tests.master.live import LOLA, run, run_json, start_emulator, stop_emulator
+from tests.master.live import (
+    LOLA,
+    LiveBus,
+    inside,
+    run,
+    run_json,
+    start_emulator,
+    stop_emulator,
+)
 
 pytestmark = [pytest.mark.root, pytest.mark.slow]
 
 
-def test_finds_the_25_lola_slaves(veth) -> None:
+def test_finds_the_25_lola_slaves(bus) -> None:
     eni = load_eni(LOLA)
-    proc = start_emulator(veth[1])
+    proc = start_emulator(bus)
     try:
-        code, doc, err = run_json("bus", "scan", "--iface", veth[0], "--eni", str(LOLA))
+        code, doc, err = run_json("bus", "scan", "--iface", bus.master, "--eni", str(LOLA), bus=bus)
     finally:
         stop_emulator(proc)
     assert code == 0, err
@@ -35,12 +43,12 @@ def test_finds_the_25_lola_slaves(veth) -> None:
     assert doc["differences"] == doc["findings"] == []
 
 
-def test_link_down_names_the_slave_where_the_line_ends(veth) -> None:
-    proc = start_emulator(veth[1], "--link-down", "10@0.3")
+def test_link_down_names_the_slave_where_the_line_ends(bus) -> None:
+    proc = start_emulator(bus, "--link-down", "10@0.3")
     try:
         time.sleep(0.6)
-        code, doc, err = run_json("bus", "scan", "--iface", veth[0], "--eni", str(LOLA))
-        human = run("bus", "scan", "--iface", veth[0], "--eni", str(LOLA))
+        code, doc, err = run_json("bus", "scan", "--iface", bus.master, "--eni", str(LOLA), bus=bus)
+        human = run("bus", "scan", "--iface", bus.master, "--eni", str(LOLA), bus=bus)
     finally:
         stop_emulator(proc)
     assert human.returncode == 1
@@ -61,13 +69,13 @@ def test_link_down_names_the_slave_where_the_line_ends(veth) -> None:
     assert [(f["kind"], f["position"]) for f in doc["findings"]] == [("lost_link", 10)]
 
 
-def test_stuck_safeop_is_named_once_op_is_asked_for(veth) -> None:
-    proc = start_emulator(veth[1], "--stuck-safeop", "5")
+def test_stuck_safeop_is_named_once_op_is_asked_for(bus) -> None:
+    proc = start_emulator(bus, "--stuck-safeop", "5")
     try:
-        code, plain, err = run_json("bus", "scan", "--iface", veth[0])
+        code, plain, err = run_json("bus", "scan", "--iface", bus.master, bus=bus)
         assert code == 0, err
         code, doc, err = run_json(
-            "bus", "scan", "--iface", veth[0], "--eni", str(LOLA), "--state", "op"
+            "bus", "scan", "--iface", bus.master, "--eni", str(LOLA), "--state", "op", bus=bus
         )
     finally:
         stop_emulator(proc)
@@ -85,7 +93,7 @@ def test_stuck_safeop_is_named_once_op_is_asked_for(veth) -> None:
     assert doc["requested_state"] == "OP"
 
 
-def test_a_wrong_revision_in_the_eni_file_is_exit_1(veth, tmp_path: Path) -> None:
+def test_a_wrong_revision_in_the_eni_file_is_exit_1(bus, tmp_path: Path) -> None:
     text = LOLA.read_text()
     marker = "<Name>GPIO 8DI 8DO</Name>"
     head, tail = text.split(marker, 1)
@@ -93,9 +101,11 @@ def test_a_wrong_revision_in_the_eni_file_is_exit_1(veth, tmp_path: Path) -> Non
     end = tail.index("</RevisionNo>")
     edited = tmp_path / "lola-rev.xml"
     edited.write_text(head + marker + tail[:start] + "<RevisionNo>#x00100099" + tail[end:])
-    proc = start_emulator(veth[1])
+    proc = start_emulator(bus)
     try:
-        code, doc, err = run_json("bus", "scan", "--iface", veth[0], "--eni", str(edited))
+        code, doc, err = run_json(
+            "bus", "scan", "--iface", bus.master, "--eni", str(edited), bus=bus
+        )
     finally:
         stop_emulator(proc)
     assert code == 1, err
@@ -103,19 +113,19 @@ def test_a_wrong_revision_in_the_eni_file_is_exit_1(veth, tmp_path: Path) -> Non
     assert doc["differences"][0]["expected"]["revision"] == 0x00100099
 
 
-def test_pysoem_sees_the_same_bus(veth) -> None:
+def test_pysoem_sees_the_same_bus(bus) -> None:
     """pysoem's config_init (SOEM: addresses 0x1001…, SII identity and names, PREOP) and
     then our scan of the bus it left: the same slaves, names, identities, states, AL
     status codes; then pysoem asks for OP with slave 3 stuck, and our plain scan reads
     the codes pysoem reads."""
     pysoem = pytest.importorskip("pysoem")
-    proc = start_emulator(veth[1], "--stuck-safeop", "3")
+    proc = start_emulator(bus, "--stuck-safeop", "3")
     try:
-        theirs = _pysoem_view(pysoem, veth[0], try_op=False)
-        code, first, err = run_json("bus", "scan", "--iface", veth[0])
+        theirs = _pysoem_view(pysoem, bus, try_op=False)
+        code, first, err = run_json("bus", "scan", "--iface", bus.master, bus=bus)
         assert code == 0, err
-        after_op = _pysoem_view(pysoem, veth[0], try_op=True)
-        code, second, err = run_json("bus", "scan", "--iface", veth[0])
+        after_op = _pysoem_view(pysoem, bus, try_op=True)
+        code, second, err = run_json("bus", "scan", "--iface", bus.master, bus=bus)
         assert code == 0, err
     finally:
         stop_emulator(proc)
@@ -149,13 +159,14 @@ def test_pysoem_sees_the_same_bus(veth) -> None:
     assert all(code in (0x0000, 0x001B) for i, (_state, code) in enumerate(scanned) if i != 2)
 
 
-def _pysoem_view(pysoem, iface: str, *, try_op: bool) -> list[tuple]:
+def _pysoem_view(pysoem, bus: LiveBus, *, try_op: bool) -> list[tuple]:
     """(name, vendor, product, revision, AL state, AL status code) of every slave as
     pysoem sees it after config_init (and, with ``try_op``, after asking for OP)."""
     from lolacli.wire.registers import al_state_name
 
     master = pysoem.Master()
-    master.open(iface)
+    with inside(bus):  # SOEM's socket is opened in the bus's namespace
+        master.open(bus.master)
     try:
         assert master.config_init() == 25
         if try_op:
@@ -175,11 +186,11 @@ def _pysoem_view(pysoem, iface: str, *, try_op: bool) -> list[tuple]:
         master.close()
 
 
-def test_nothing_answering_and_no_interface_are_exit_4(veth) -> None:
+def test_nothing_answering_and_no_interface_are_exit_4(bus) -> None:
     started = time.monotonic()
-    done = run("bus", "scan", "--iface", veth[0], "--timeout", "10ms", "--retries", "1")
+    done = run("bus", "scan", "--iface", bus.master, "--timeout", "10ms", "--retries", "1", bus=bus)
     assert done.returncode == 4
-    assert done.stderr == f"lolacli: error: no slave answers on {veth[0]} (no frame came back)\n"
+    assert done.stderr == f"lolacli: error: no slave answers on {bus.master} (no frame came back)\n"
     assert time.monotonic() - started < 20
     done = run("bus", "scan", "--iface", "nosuchif0")
     assert (done.returncode, done.stderr) == (4, "lolacli: error: no such interface: nosuchif0\n")

@@ -13,21 +13,21 @@ import pytest
 
 from lolacli.files import load_eni
 from lolacli.master.simulate import SimulateOptions, simulate
-from tests.master.live import LOLA, run, run_json, start_emulator, stop_emulator
+from tests.master.live import LOLA, inside, run, run_json, start_emulator, stop_emulator
 
 pytestmark = [pytest.mark.root, pytest.mark.slow]
 CYCLE_US = 500.0
 
 
-def test_holds_2khz_against_bus_emulate(veth, tmp_path: Path) -> None:
+def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
     pcap = tmp_path / "live.pcapng"
-    proc = start_emulator(veth[1], "--realtime-priority", "50")
+    proc = start_emulator(bus, "--realtime-priority", "50")
     try:
         code, doc, err = run_json(
             "bus",
             "simulate",
             "--iface",
-            veth[0],
+            bus.master,
             "--rate",
             "2000",
             "--cycles",
@@ -38,11 +38,12 @@ def test_holds_2khz_against_bus_emulate(veth, tmp_path: Path) -> None:
             "200",
             "--pcap",
             str(pcap),
+            bus=bus,
         )
     finally:
         stop_emulator(proc)
     assert code == 0, err
-    assert (doc["mode"], doc["iface"], doc["cycles"]) == ("realtime", veth[0], 2000)
+    assert (doc["mode"], doc["iface"], doc["cycles"]) == ("realtime", bus.master, 2000)
     assert doc["kernel_timestamps"] is True
     period = doc["cycle_period_us"]
     assert period["count"] == doc["cyclic_frames_timed"] - 1 >= 1999
@@ -69,16 +70,17 @@ def test_holds_2khz_against_bus_emulate(veth, tmp_path: Path) -> None:
     assert analyzed["lost_frames"] <= doc["lost_frames"]
 
 
-def test_scheduling_and_gc_are_put_back_after_a_run(veth) -> None:
+def test_scheduling_and_gc_are_put_back_after_a_run(bus) -> None:
     """The library call in this very process: SCHED_FIFO and the disabled collector
     last only as long as the run."""
     before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, gc.isenabled())
-    proc = start_emulator(veth[1], "--realtime-priority", "50")
+    proc = start_emulator(bus, "--realtime-priority", "50")
     try:
-        result = simulate(
-            load_eni(LOLA),
-            SimulateOptions(iface=veth[0], cycles=200, realtime_priority=10, max_lost=200),
-        )
+        with inside(bus):
+            options = SimulateOptions(
+                iface=bus.master, cycles=200, realtime_priority=10, max_lost=200
+            )
+            result = simulate(load_eni(LOLA), options)
     finally:
         stop_emulator(proc)
     assert result.doc["scheduling"]["policy"] == "SCHED_FIFO"
@@ -99,8 +101,8 @@ def test_the_emulators_faults_are_refused_on_a_live_bus() -> None:
         assert message in done.stderr and done.stderr.count("\n") == 1
 
 
-def test_no_bus_behind_the_interface_is_exit_4(veth) -> None:
-    done = run("bus", "simulate", "--iface", veth[0], "--cycles", "10", timeout=120)
+def test_no_bus_behind_the_interface_is_exit_4(bus) -> None:
+    done = run("bus", "simulate", "--iface", bus.master, "--cycles", "10", bus=bus)
     assert done.returncode == 4
     assert done.stderr.startswith("lolacli: error: no answer to ")
     assert done.stderr.count("\n") == 1
