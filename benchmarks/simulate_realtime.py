@@ -132,9 +132,7 @@ def main() -> None:
     if os.geteuid() != 0:
         raise SystemExit("needs root (veth pair, raw sockets)")
     master, emulator = veth(args.prefix)
-    hogs = [
-        subprocess.Popen([sys.executable, "-c", "while 1: pass"]) for _ in range(args.hog)
-    ]
+    hogs = [subprocess.Popen([sys.executable, "-c", "while 1: pass"]) for _ in range(args.hog)]
     emu = None
     try:
         emu = start_emulator(emulator, args.emulator_priority)

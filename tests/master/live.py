@@ -109,8 +109,16 @@ def inside(bus: LiveBus) -> Iterator[None]:
         os.close(target)
 
 
-def start_emulator(bus: LiveBus, *extra: str, eni: Path = LOLA) -> subprocess.Popen[str]:
-    """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers)."""
+def start_emulator(
+    bus: LiveBus, *extra: str, eni: Path = LOLA, priority: int = 50
+) -> subprocess.Popen[str]:
+    """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers), at
+    SCHED_FIFO ``priority`` (0: none): it stands in for slave hardware, which does not
+    stall when the host is busy (with a CPU hog and a load of 8 on 2 cores, a plain
+    emulator process answered mailboxes too late for SOEM and tripped its own
+    process-data watchdogs)."""
+    if priority > 0:
+        extra = ("--realtime-priority", str(priority), *extra)
     proc = subprocess.Popen(
         bus.command(
             sys.executable,

@@ -258,4 +258,3 @@ def test_parents_of_a_tree() -> None:
 def test_error_counters_need_twenty_bytes() -> None:
     with pytest.raises(ValueError):
         decode_error_counters(struct.pack("<8B", *range(8)))
-

@@ -21,7 +21,7 @@ CYCLE_US = 500.0
 
 def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
     pcap = tmp_path / "live.pcapng"
-    proc = start_emulator(bus, "--realtime-priority", "50")
+    proc = start_emulator(bus)
     try:
         code, doc, err = run_json(
             "bus",
@@ -74,7 +74,7 @@ def test_scheduling_and_gc_are_put_back_after_a_run(bus) -> None:
     """The library call in this very process: SCHED_FIFO and the disabled collector
     last only as long as the run."""
     before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, gc.isenabled())
-    proc = start_emulator(bus, "--realtime-priority", "50")
+    proc = start_emulator(bus)
     try:
         with inside(bus):
             options = SimulateOptions(
