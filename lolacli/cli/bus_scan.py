@@ -129,6 +129,8 @@ def _render(doc: dict[str, Any]) -> None:
         )
     console.print(table)
     for r in doc["refusals"]:
+        if r["position"] > doc["slaves_counted"]:
+            continue  # a missing slave: named below
         console.print(
             f"refused: slave {r['position']} ({r['slave']}) {r['transition']}: {r['text']}"
         )

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from lolacli.errors import TransportError
+from lolacli.rawsocket import SO_TIMESTAMPNS
 from lolacli.timing.model import INTER_FRAME_GAP_BYTES, LINK_100_MBIT_S, PREAMBLE_SFD_BYTES
 from lolacli.wire.frame import FCS_BYTES, MIN_FRAME_BYTES
 
@@ -253,8 +254,6 @@ _ANCILLARY_BYTES = 64
 
 
 def _enable_timestamps(sock: socket.socket) -> bool:
-    from lolacli.rawsocket import SO_TIMESTAMPNS
-
     try:
         sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     except OSError:
@@ -264,8 +263,6 @@ def _enable_timestamps(sock: socket.socket) -> bool:
 
 def _stamp(ancillary: list[tuple[int, int, bytes]], realtime_offset: int) -> int | None:
     """The kernel's receive stamp in the monotonic clock, if the frame carries one."""
-    from lolacli.rawsocket import SO_TIMESTAMPNS
-
     for level, kind, data in ancillary:
         if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
             seconds, nanoseconds = _TIMESPEC.unpack_from(data)
