@@ -238,8 +238,8 @@ def _live(
             transport.wake_lateness_ns = None
             clock.active = False
             cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
+            states = _live_states(master)
             master.drain()
-        states = _final_states(master)
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
@@ -490,6 +490,20 @@ def _run(
             if ahead > 0:
                 time.sleep(ahead)
     return False
+
+
+def _live_states(master: Master) -> dict[str, str]:
+    """AL state of every slave at the end of a live run, read in one frame while the
+    master still cycles (read after the cycling stops, one frame per slave, a slow host
+    takes long enough for the slaves' process-data watchdogs to drop them to SAFEOP)."""
+    try:
+        got = master.al_states()
+    except TransportError:
+        return {s.name: "no answer" for s in master.eni.slaves}
+    return {
+        s.name: al_state_name(status) if status is not None else "no answer"
+        for s, (_position, status) in zip(master.eni.slaves, got, strict=True)
+    }
 
 
 def _final_states(master: Master) -> dict[str, str]:

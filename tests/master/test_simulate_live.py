@@ -51,7 +51,7 @@ def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
     assert abs(period["mean"] - CYCLE_US) < 0.05 * CYCLE_US
     assert doc["round_trip_us"]["median"] < CYCLE_US
     assert doc["lost_frames"] <= 200 and doc["wkc_mismatches"] <= 200
-    assert doc["refusals"] == [] and set(doc["states"].values()) == {"OP"}
+    assert doc["refusals"] == [] and set(doc["states"].values()) == {"OP"}, doc["states"]
     assert doc["drives"] == 21 and doc["drives_enabled"] >= 18
     sched = doc["scheduling"]
     assert sched["policy"] == "SCHED_FIFO" and sched["priority"] == 80, sched
