@@ -49,7 +49,7 @@ class SinglePort:
             master.last_sent_ns = self.transport.send(frame)
             stats.frames_sent += 1
             stats.acyclic_frames += 1
-            got = master._await(index, options.frame_timeout_ns)
+            got = master._await(index, options.frame_timeout_ns, master.last_sent_ns)
             if got is None:
                 stats.frames_lost += 1
                 continue
