@@ -110,14 +110,14 @@ def inside(bus: LiveBus) -> Iterator[None]:
 
 
 def start_emulator(
-    bus: LiveBus, *extra: str, eni: Path = LOLA, priority: int = 50
+    bus: LiveBus, *extra: str, eni: Path = LOLA, priority: int | None = None
 ) -> subprocess.Popen[str]:
-    """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers), at
-    SCHED_FIFO ``priority`` (0: none): it stands in for slave hardware, which does not
-    stall when the host is busy (with a CPU hog and a load of 8 on 2 cores, a plain
-    emulator process answered mailboxes too late for SOEM and tripped its own
-    process-data watchdogs)."""
-    if priority > 0:
+    """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers), with the
+    product's scheduling (SCHED_FIFO 10 as root) unless ``priority`` is given (0: normal
+    scheduling). Real time stands in for slave hardware, which does not stall when the
+    host is busy (with a CPU hog and a load of 8 on 2 cores, a plain emulator process
+    answered mailboxes too late for SOEM and tripped its own process-data watchdogs)."""
+    if priority is not None:
         extra = ("--realtime-priority", str(priority), *extra)
     proc = subprocess.Popen(
         bus.command(
