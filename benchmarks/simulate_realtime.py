@@ -1,7 +1,8 @@
 """`lolacli bus simulate --iface`: our master in real time against `bus emulate` over veth.
 
-Creates a veth pair, serves the LOLA chain on one end (`bus emulate`, its own process,
-SCHED_FIFO ``--emulator-priority`` as the stand-in for slave hardware; 0: none), then
+Creates a veth pair, serves the LOLA chain on one end (`bus emulate`, its own process, with its own
+scheduling: SCHED_FIFO 10 as root, the stand-in for slave hardware; ``--emulator-priority
+N`` sets another, 0 normal scheduling), then
 runs `bus simulate --iface` on the other for ``--cycles`` cycles at ``--rate`` in two
 set-ups, in the same run:
 
@@ -54,9 +55,9 @@ def cpu_ticks(pid: int) -> int:
     return int(fields[11]) + int(fields[12])  # utime + stime
 
 
-def start_emulator(iface: str, priority: int) -> subprocess.Popen[str]:
+def start_emulator(iface: str, priority: int | None) -> subprocess.Popen[str]:
     cmd = [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", iface, "--quiet"]
-    if priority > 0:
+    if priority is not None:
         cmd += ["--realtime-priority", str(priority)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     assert proc.stderr is not None
@@ -123,7 +124,7 @@ def main() -> None:
     p.add_argument("--rate", type=float, default=2000.0)
     p.add_argument("--priority", type=int, default=80, help="master SCHED_FIFO priority")
     p.add_argument("--busy-wait-us", type=float, default=200.0)
-    p.add_argument("--emulator-priority", type=int, default=50)
+    p.add_argument("--emulator-priority", type=int, default=None)
     p.add_argument("--hog", type=int, default=0, help="busy processes to start")
     p.add_argument("--prefix", default="lrt", help="veth name prefix")
     p.add_argument("--only-realtime", action="store_true")
@@ -160,7 +161,8 @@ def main() -> None:
     if args.json:
         print(json.dumps(report, indent=2))
         return
-    print(f"hogs: {args.hog}, emulator SCHED_FIFO {args.emulator_priority or 'off'}")
+    emu_sched = {None: "bus emulate's default", 0: "off"}.get(args.emulator_priority)
+    print(f"hogs: {args.hog}, emulator SCHED_FIFO {emu_sched or args.emulator_priority}")
     for r in results:
         s = r["scheduling"]
         print(
