@@ -69,6 +69,31 @@ def test_link_down_names_the_slave_where_the_line_ends(bus) -> None:
     assert [(f["kind"], f["position"]) for f in doc["findings"]] == [("lost_link", 10)]
 
 
+def test_pysoem_counts_the_same_cut_line(bus) -> None:
+    """pysoem's config_init on a line cut after slave 10 finds the 10 slaves our scan
+    names, the last of them the same one."""
+    pysoem = pytest.importorskip("pysoem")
+    proc = start_emulator(bus, "--link-down", "10@0.3")
+    try:
+        time.sleep(0.6)
+        code, doc, err = run_json("bus", "scan", "--iface", bus.master, "--eni", str(LOLA), bus=bus)
+        master = pysoem.Master()
+        with inside(bus):
+            master.open(bus.master)
+        try:
+            counted = master.config_init()
+            last = master.slaves[counted - 1] if counted > 0 else None
+            theirs = (counted, last.man, last.id, last.rev) if last is not None else (counted,)
+        finally:
+            master.close()
+    finally:
+        stop_emulator(proc)
+    assert code == 1, err
+    end = doc["slaves"][-1]
+    assert (doc["slaves_counted"], end["vendor_id"], end["product_code"], end["revision"]) == theirs
+    assert theirs[0] == 10 and doc["differences"][0]["position"] == 10
+
+
 def test_stuck_safeop_is_named_once_op_is_asked_for(bus) -> None:
     proc = start_emulator(bus, "--stuck-safeop", "5")
     try:
