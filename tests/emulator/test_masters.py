@@ -756,7 +756,9 @@ def test_emulate_duration_stops_with_exit_0(veth) -> None:
         timeout=60,
     )
     assert done.returncode == 0, done.stderr
-    assert "stopped: 0 frames received" in done.stderr
+    # no master on this pair; the count itself is not the subject (on a shared host a
+    # stray EtherCAT frame of another test's master has turned up: 1 run in 20)
+    assert re.search(r"stopped: \d+ frames received", done.stderr), done.stderr
 
 
 def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
