@@ -12,6 +12,7 @@ tell a master's time-out from a late answer (:meth:`CaptureReport.late_in`).
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import tempfile
@@ -123,14 +124,19 @@ class MasterCapture:
         self._folder = tempfile.TemporaryDirectory(prefix="lolacli-master-capture-")
         self.path = Path(self._folder.name) / "master.pcapng"
         self._proc: subprocess.Popen[bytes] | None = None
+        #: packets the capture itself lost (dumpcap's count at the end; None: not told)
+        self.dropped: int | None = None
 
     def __enter__(self) -> MasterCapture:
         if not self.available:
             return self
+        # counts at the end go to a file (-q would hide the drops; a pipe could fill);
+        # a 32 MiB kernel buffer so a starved dumpcap loses nothing
+        self._log = open(Path(self._folder.name) / "dumpcap.log", "wb")  # noqa: SIM115
         self._proc = subprocess.Popen(
-            ["dumpcap", "-q", "-i", self.iface, "-w", str(self.path)],
+            ["dumpcap", "-B", "32", "-i", self.iface, "-w", str(self.path)],
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
+            stderr=self._log,
         )
         deadline = time.monotonic() + 10
         # capturing once the file holds its section header and interface description
@@ -149,6 +155,10 @@ class MasterCapture:
             self._proc.terminate()
             self._proc.wait(timeout=20)
             self._proc = None
+            self._log.close()
+            text = (Path(self._folder.name) / "dumpcap.log").read_text(errors="replace")
+            found = re.search(r"received/dropped on interface '[^']*': (\d+)/(\d+)", text)
+            self.dropped = int(found.group(2)) if found else None
 
     def report(self) -> CaptureReport:
         if not self.available or not self.path.exists():
