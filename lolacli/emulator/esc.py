@@ -158,7 +158,16 @@ class PortTimes:
 
 
 class Esc:
-    """The ESC of one slave: 64 KiB of registers and process RAM plus behaviour."""
+    """The ESC of one slave: 64 KiB of registers and process RAM plus behaviour.
+
+    What the chain's frame plans and its C core use besides :meth:`process`: ``mem`` (the
+    memory, shared in place), ``clock``, ``counters``, ``epoch``, :meth:`configuration`
+    (decoded SMs and FMMUs), :meth:`logical`, :meth:`outputs_written` (an output SM buffer
+    completed), ``outputs_valid``/``pending_op``, ``now_ns`` (when the datagram being
+    processed reached this slave), ``last_outputs_ns`` and
+    :meth:`current_watchdog_timeout_ns` (the process-data watchdog),
+    :meth:`process_data_starts` and :meth:`dc_offset_minus_delay_ns`.
+    """
 
     def __init__(
         self,
@@ -182,11 +191,11 @@ class Esc:
         self.last_port = True
         self.frame_t_ns = 0  # when the current frame left the master
         self.port_offsets: PortTimes | None = None  # its arrival at port 0 / port 1, relative
-        self._cache: _Config | None = None
-        self._pd_starts: tuple[_Config, SiiLayout, int, int] | None = None
+        self._cache: Configuration | None = None
+        self._pd_starts: tuple[Configuration, SiiLayout, int, int] | None = None
         self._view = memoryview(self.mem)
-        self._now_ns = 0
-        self._last_outputs_ns = 0
+        self.now_ns = 0
+        self.last_outputs_ns = 0
         self._watchdog_ns: int | None = -1  # -1: to be computed from the registers
         self._last_mailbox_in: bytes | None = None
         # bumped whenever addressing or mapping may have changed (register writes, AL
@@ -292,7 +301,7 @@ class Esc:
         32-bit address is ``adp | ado << 16``).
         """
         self.counters.datagrams += 1
-        self._now_ns = t_ns
+        self.now_ns = t_ns
         kind = _KIND.get(cmd, _OTHER)
         if kind == _BROADCAST:
             return (adp + 1) & 0xFFFF, self._physical(cmd, ado, data, t_ns, addressed=True)
@@ -308,7 +317,7 @@ class Esc:
                 return adp, 0
             return adp, self._physical(cmd, ado, data, t_ns, addressed=hit)
         if kind == _LOGICAL_KIND:
-            return adp, self._logical(cmd, adp | (ado << 16), data, t_ns)
+            return adp, self.logical(cmd, adp | (ado << 16), data, t_ns)
         return adp, 0
 
     def read_addressed(self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int) -> int:
@@ -318,7 +327,7 @@ class Esc:
         end = ado + len(data)
         if end <= _SYSTEM_TIME or (_SYSTEM_TIME_END <= ado and end <= _PROCESS_RAM):
             self.counters.datagrams += 1
-            self._now_ns = t_ns
+            self.now_ns = t_ns
             data[:] = self.mem[ado:end]
             return 1
         return self.process(cmd, adp, ado, data, t_ns)[1]
@@ -407,9 +416,9 @@ class Esc:
         if plan.sync_managers:
             self._sm_registers_written(start, end)
         if plan.al_control:
-            self._firmware(self._al_control_written)
+            self.hand_to_firmware(self._al_control_written)
 
-    def _firmware(self, work: Callable[..., None], *args: Any) -> None:
+    def hand_to_firmware(self, work: Callable[..., None], *args: Any) -> None:
         """Hand ``work`` to the slave's firmware: at once, or queued in ``pdi``."""
         if self.pdi is None:
             work(*args)
@@ -484,10 +493,16 @@ class Esc:
         if self._cache is None and index < self.config.sync_managers:
             sm = self.sync_manager(index)  # that one SM, not the whole configuration
         else:
-            sm = self._config().sms[index]
+            sm = self.configuration().sms[index]
         if not time_ticks or not sm.length or not sm.control & r.SM_CONTROL_WATCHDOG:
             return None
         return (self.u16(r.WATCHDOG_DIVIDER) + 2) * 40 * time_ticks
+
+    def current_watchdog_timeout_ns(self) -> int | None:
+        """:meth:`watchdog_timeout_ns` as :meth:`check_watchdog` uses it: worked out again
+        only after a write to the registers it depends on."""
+        timeout = self._watchdog_ns
+        return self.watchdog_timeout_ns() if timeout == -1 else timeout
 
     def check_watchdog(self, t_ns: int) -> None:
         """In OP without new outputs for the watchdog time: back to SAFEOP, error 0x001B."""
@@ -496,7 +511,7 @@ class Esc:
         if self._watchdog_ns == -1:
             self._watchdog_ns = self.watchdog_timeout_ns()
         timeout = self._watchdog_ns
-        if timeout is None or t_ns - self._last_outputs_ns <= timeout:
+        if timeout is None or t_ns - self.last_outputs_ns <= timeout:
             return
         self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] &= ~0x01
         counter = r.WATCHDOG_COUNTER_PROCESS_DATA
@@ -506,7 +521,7 @@ class Esc:
 
     def _enter(self, state: int) -> None:
         if state == AlState.OP:
-            self._last_outputs_ns = self._now_ns
+            self.last_outputs_ns = self.now_ns
             self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] |= 0x01
         self.pending_op = False
         if state in (AlState.INIT, AlState.PREOP):
@@ -531,7 +546,7 @@ class Esc:
             self.mem[base + 7] = (self.mem[base + 7] & 0x02) | (0 if on else r.SM_PDI_DEACTIVATE)
         self._cache = None
         self.epoch[0] += 1
-        self._config()  # decoded now, in the firmware's time, not in the next frame's
+        self.configuration()  # decoded now, in the firmware's time, not in the next frame's
 
     def _check_mailbox_sms(self) -> int | None:
         layout = self.layout
@@ -582,16 +597,16 @@ class Esc:
         )
         return SmView(index, start, length, control, status, activate, pdi)
 
-    def _config(self) -> _Config:
+    def configuration(self) -> Configuration:
         """SM and FMMU configuration, decoded once per register change."""
         if self._cache is None:
             sms = [self.sync_manager(i) for i in range(self.config.sync_managers)]
             fmmus = [self.fmmu(i) for i in range(self.config.fmmus)]
-            self._cache = _Config.build(sms, fmmus)
+            self._cache = Configuration.build(sms, fmmus)
         return self._cache
 
     def _active_sms(self) -> list[SmView]:
-        return self._config().active
+        return self.configuration().active
 
     def _mailbox_sms(self, start: int, end: int, *, write: bool) -> list[int]:
         if end <= r.PROCESS_RAM:
@@ -654,7 +669,7 @@ class Esc:
             if sm.mode == r.SM_MODE_MAILBOX:
                 self._mailbox_written(sm)
             else:
-                self._outputs_written()
+                self.outputs_written()
 
     def _after_read(self, start: int, end: int) -> None:
         if end <= r.PROCESS_RAM:
@@ -666,13 +681,13 @@ class Esc:
                     self._set_sm_full(sm.index, False)
                     self._post_next_mailbox()
                     if self._mailbox_pending:
-                        self._firmware(self._take_mailbox)
+                        self.hand_to_firmware(self._take_mailbox)
 
-    def _outputs_written(self) -> None:
+    def outputs_written(self) -> None:
         self.outputs_valid = True
-        self._last_outputs_ns = self._now_ns
+        self.last_outputs_ns = self.now_ns
         if self.pending_op and self.al_state == AlState.SAFEOP:
-            self._firmware(self._enter_requested_op)  # the firmware sees valid outputs
+            self.hand_to_firmware(self._enter_requested_op)  # the firmware sees valid outputs
 
     def _enter_requested_op(self) -> None:
         """Firmware: OP, requested while the outputs were not yet valid, now that they are."""
@@ -685,7 +700,7 @@ class Esc:
         firmware reads it (a second write meanwhile gets WKC 0 and is lost)."""
         self._set_sm_full(sm.index, True)
         self._mailbox_pending = True
-        self._firmware(self._take_mailbox)
+        self.hand_to_firmware(self._take_mailbox)
 
     def _take_mailbox(self) -> None:
         """Firmware: read the write mailbox and serve it, once the read mailbox has room
@@ -731,12 +746,12 @@ class Esc:
     def fmmu(self, index: int) -> Fmmu:
         return decode_fmmu(self._view, fmmu_address(index))
 
-    def _logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
+    def logical(self, cmd: int, address: int, data: memoryview, t_ns: int) -> int:
         """LRD/LWR/LRW through the FMMUs (ETG.1000.4 §6.5): this slave's write FMMUs
         take from the datagram first, then its read FMMUs put into it; the WKC as
         :func:`~lolacli.wire.commands.wkc_increment` counts what it did."""
         end = address + len(data)
-        config = self._config()
+        config = self.configuration()
         wrote = read = False
         if cmd != Command.LRD:
             for f in config.write_fmmus:
@@ -754,7 +769,7 @@ class Esc:
         if f.physical_start < PLAN_FREE_REGISTERS:
             self.epoch[0] += 1  # a write into registers, bypassing their side effects
             self.addressing[0] += 1
-        if _byte_aligned(f):
+        if byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(incoming), f.logical_start + f.length_bytes)
             p = f.physical_start + (lo - f.logical_start)
@@ -768,7 +783,7 @@ class Esc:
         self._sm_written(f.physical_start, f.physical_start + f.length_bytes)
 
     def _fmmu_read(self, f: Fmmu, address: int, data: memoryview) -> None:
-        if _byte_aligned(f):
+        if byte_aligned(f):
             lo = max(address, f.logical_start)
             hi = min(address + len(data), f.logical_start + f.length_bytes)
             p = f.physical_start + (lo - f.logical_start)
@@ -789,7 +804,7 @@ class Esc:
             return
         self.counters.cycles += 1
         outputs_bytes, inputs_bytes = app.process_data_bytes()
-        outputs_start, inputs_start = self._process_data_starts()
+        outputs_start, inputs_start = self.process_data_starts()
         outputs = b""
         if outputs_bytes and state == _OP:
             outputs = bytes(self._view[outputs_start : outputs_start + outputs_bytes])
@@ -804,9 +819,9 @@ class Esc:
         if start < end:
             self.mem[start:end] = data[: end - start]
 
-    def _process_data_starts(self) -> tuple[int, int]:
+    def process_data_starts(self) -> tuple[int, int]:
         """Where the output and input SM buffers start (cached with the SM configuration)."""
-        config = self._cache or self._config()
+        config = self._cache or self.configuration()
         cached = self._pd_starts
         if cached is not None and cached[0] is config and cached[1] is self.layout:
             return cached[2], cached[3]
@@ -954,7 +969,7 @@ def broadcast_read(
     merged = int.from_bytes(data, "little")
     for esc, port in zip(escs, ports, strict=False):
         esc.counters.datagrams += 1
-        esc._now_ns = t_ns + port.port0_ns
+        esc.now_ns = t_ns + port.port0_ns
         merged |= int.from_bytes(esc.mem[ado:end], "little")
     data[:] = merged.to_bytes(end - ado, "little")
     return len(escs)
@@ -977,7 +992,7 @@ def broadcast_write(
     for esc, port in zip(escs, ports, strict=False):
         t = t_ns + port.port0_ns
         esc.counters.datagrams += 1
-        esc._now_ns = t
+        esc.now_ns = t
         esc.epoch[0] += 1
         mem = esc.mem
         for lo, hi, part in segments:
@@ -1019,7 +1034,7 @@ class SmView:
 
 
 @dataclass(frozen=True, slots=True)
-class _Config:
+class Configuration:
     """Decoded SM/FMMU registers: active SMs and the FMMUs whose buffers are open."""
 
     sms: list[SmView]
@@ -1028,12 +1043,12 @@ class _Config:
     read_fmmus: list[Fmmu]
 
     @staticmethod
-    def build(sms: list[SmView], fmmus: list[Fmmu]) -> _Config:
+    def build(sms: list[SmView], fmmus: list[Fmmu]) -> Configuration:
         active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
         usable = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
         write = [f for f in usable if f.type & r.FMMU_TYPE_WRITE]
         read = [f for f in usable if f.type & r.FMMU_TYPE_READ]
-        return _Config(sms, active, write, read)
+        return Configuration(sms, active, write, read)
 
 
 def _sm_open(f: Fmmu, sms: list[SmView]) -> bool:
@@ -1049,7 +1064,7 @@ def _overlaps(a0: int, a1: int, b0: int, b1: int) -> bool:
     return a0 < b1 and b0 < a1
 
 
-def _byte_aligned(f: Fmmu) -> bool:
+def byte_aligned(f: Fmmu) -> bool:
     return f.logical_start_bit == 0 and f.logical_stop_bit == 7 and f.physical_start_bit == 0
 
 
