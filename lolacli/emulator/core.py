@@ -4,7 +4,7 @@ The C kernel (``_ccore.c``, built at install time when a C compiler is present) 
 work of a planned frame (:class:`~lolacli.emulator.plan.FramePlan`: its answer and the
 work it defers), the process-data watchdog checks and the application cycles of the
 devices, on tables made here from the chain's Python objects. The Python code (plan.py,
-esc.py, the device classes) stays the reference: without the kernel, or for anything the
+the esc package, the device classes) stays the reference: without the kernel, or for anything the
 tables do not describe, the chain runs it; tests compare the two bit for bit.
 
 Who holds the state. ESC memory is shared: the kernel reads and writes each slave's

@@ -499,7 +499,7 @@ def _reads_dc(op: _Op) -> bool:
 
 
 # Register ranges every change of which bumps the epoch (DL status: topology; AL status
-# and status code: Esc._set_al); other writes to them go through register writes, which
+# and status code: the AL state machine); other writes to them go through register writes, which
 # bump it too.
 EPOCH_REGISTERS = ((r.DL_STATUS, r.DL_STATUS + 2), (r.AL_STATUS, r.AL_STATUS_CODE + 2))
 
@@ -522,7 +522,7 @@ def _copy_range(f: Fmmu, lo: int, hi: int) -> tuple[int, int, int, int]:
 
 def _sm_last_byte_in(active: list[SmView], p: int, q: int, direction: int) -> list[int]:
     """Modes of the SMs of ``direction`` whose last byte lies in [p, q): the buffer events
-    of the ESC's ``_sm_written`` (writes) and ``_after_read`` (reads, only past 0x1000)."""
+    of the ESC's sync managers (esc.sm: writes, and reads only past 0x1000)."""
     if direction == r.SM_DIRECTION_READ and q <= r.PROCESS_RAM:
         return []
     return [
