@@ -4,7 +4,7 @@ The C kernel (``_ccore.c``, built at install time when a C compiler is present) 
 work of a planned frame (:class:`~lolacli.emulator.plan.FramePlan`: its answer and the
 work it defers), the process-data watchdog checks and the application cycles of the
 devices, on tables made here from the chain's Python objects. The Python code (plan.py,
-esc.py, the device classes) stays the reference: without the kernel, or for anything the
+the esc package, the device classes) stays the reference: without the kernel, or for anything the
 tables do not describe, the chain runs it; tests compare the two bit for bit.
 
 Who holds the state. ESC memory is shared: the kernel reads and writes each slave's
@@ -291,8 +291,8 @@ class ChainCore:
             clock.start_ns,
             clock.drift_ppb,
             clock.correction_ns,
-            esc._last_outputs_ns,
-            esc._now_ns,
+            esc.last_outputs_ns,
+            esc.now_ns,
             self._watchdog(i),
         )
         for v in values:
@@ -314,8 +314,8 @@ class ChainCore:
         esc, w, b = self.escs[i], self._words, i * WORDS
         esc.clock.correction_ns = w[b + F_CLK_CORR]
         esc.outputs_valid = w[b + F_OUTPUTS_VALID] != 0
-        esc._last_outputs_ns = w[b + F_LAST_OUTPUTS]
-        esc._now_ns = w[b + F_NOW]
+        esc.last_outputs_ns = w[b + F_LAST_OUTPUTS]
+        esc.now_ns = w[b + F_NOW]
         w[b + F_OWNED] = 0
         self._flush_counters(i)
 
@@ -336,9 +336,7 @@ class ChainCore:
         known = self._watchdogs[i]
         if known is not None and known[0] == epoch:
             return known[1]
-        timeout = esc._watchdog_ns
-        if timeout == -1:
-            timeout = esc.watchdog_timeout_ns()
+        timeout = esc.current_watchdog_timeout_ns()
         value = -1 if timeout is None else timeout
         self._watchdogs[i] = (epoch, value)
         return value
@@ -367,7 +365,7 @@ class ChainCore:
                 self._unflat[i] = stamp
                 return False
         try:
-            out_start, in_start = esc._process_data_starts()
+            out_start, in_start = esc.process_data_starts()
         except (IndexError, AttributeError):
             return False
         pinned, keep = self._device_pins[i]
@@ -426,7 +424,7 @@ class ChainCore:
                 continue
             b = i * WORDS
             try:
-                w[b + F_OUT_START], w[b + F_IN_START] = self.escs[i]._process_data_starts()
+                w[b + F_OUT_START], w[b + F_IN_START] = self.escs[i].process_data_starts()
             except (IndexError, AttributeError):
                 self.release_device(i)
                 continue

@@ -37,7 +37,7 @@ from lolacli.emulator.esc import (
     Esc,
     PortTimes,
     SmView,
-    _byte_aligned,
+    byte_aligned,
     system_time_loop,
 )
 from lolacli.wire.commands import Command, wkc_increment
@@ -335,7 +335,7 @@ class _SlaveStep:
     port0_ns: int = 0  # when the frame reaches it, relative to the frame's start
     generic: bool = False
     writes: list[tuple[memoryview, memoryview, int, int]] | None = None  # target, source, a, b
-    events: int = 0  # output SM buffers completed: _outputs_written calls
+    events: int = 0  # output SM buffers completed: outputs_written calls
     reads: list[tuple[memoryview, memoryview, int, int]] | None = None
     read_memory: list[tuple[int, int]] = field(default_factory=list)  # ranges the reads copy
     write_memory: list[tuple[int, int]] = field(default_factory=list)  # and the writes
@@ -369,7 +369,7 @@ class _Logical(_Op):
         self.reads = [(t, src) for s in plain for t, src, _, _ in s.reads or ()]
 
     def _slave(self, esc: Esc, port0_ns: int, d: _Datagram) -> _SlaveStep:
-        config = esc._config()
+        config = esc.configuration()
         lo, hi = self.address, self.address + d.length
         mem = memoryview(esc.mem)
         step = _SlaveStep(esc, port0_ns, writes=[], reads=[])
@@ -382,7 +382,7 @@ class _Logical(_Op):
                     raise _NotPlannable  # writes into registers a plan depends on
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_WRITE)
-                if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
+                if r.SM_MODE_MAILBOX in kinds or not byte_aligned(f):
                     return _SlaveStep(esc, port0_ns, generic=True)
                 step.writes.append((mem[p:q], self.data[a:b], a, b))
                 step.write_memory.append((p, q))
@@ -393,7 +393,7 @@ class _Logical(_Op):
             for f in hits:
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_READ)
-                if r.SM_MODE_MAILBOX in kinds or not _byte_aligned(f):
+                if r.SM_MODE_MAILBOX in kinds or not byte_aligned(f):
                     return _SlaveStep(esc, port0_ns, generic=True)
                 step.reads.append((self.data[a:b], mem[p:q], a, b))
                 step.read_memory.append((p, q))
@@ -457,26 +457,26 @@ class _Logical(_Op):
 
     def _events(self, t_ns: int) -> None:
         for esc, port0_ns, n in self.events:
-            esc._now_ns = t_ns + port0_ns
+            esc.now_ns = t_ns + port0_ns
             if esc.pending_op:
                 for _ in range(n):
-                    esc._outputs_written()
-            else:  # what _outputs_written does for a slave not waiting for OP
+                    esc.outputs_written()
+            else:  # what outputs_written does for a slave not waiting for OP
                 esc.outputs_valid = True
-                esc._last_outputs_ns = t_ns + port0_ns
+                esc.last_outputs_ns = t_ns + port0_ns
 
     def _run_ordered(self, t_ns: int) -> int:
         added = 0
         for step in self.steps:
             esc = step.esc
-            esc._now_ns = t_ns + step.port0_ns
+            esc.now_ns = t_ns + step.port0_ns
             if step.generic:
-                added += esc._logical(self.cmd, self.address, self.data, esc._now_ns)
+                added += esc.logical(self.cmd, self.address, self.data, esc.now_ns)
                 continue
             for target, source, _, _ in step.writes or ():
                 target[:] = source
             for _ in range(step.events):
-                esc._outputs_written()
+                esc.outputs_written()
             for target, source, _, _ in step.reads or ():
                 target[:] = source
             added += step.wkc
@@ -499,7 +499,7 @@ def _reads_dc(op: _Op) -> bool:
 
 
 # Register ranges every change of which bumps the epoch (DL status: topology; AL status
-# and status code: Esc._set_al); other writes to them go through register writes, which
+# and status code: the AL state machine); other writes to them go through register writes, which
 # bump it too.
 EPOCH_REGISTERS = ((r.DL_STATUS, r.DL_STATUS + 2), (r.AL_STATUS, r.AL_STATUS_CODE + 2))
 
@@ -522,7 +522,7 @@ def _copy_range(f: Fmmu, lo: int, hi: int) -> tuple[int, int, int, int]:
 
 def _sm_last_byte_in(active: list[SmView], p: int, q: int, direction: int) -> list[int]:
     """Modes of the SMs of ``direction`` whose last byte lies in [p, q): the buffer events
-    of the ESC's ``_sm_written`` (writes) and ``_after_read`` (reads, only past 0x1000)."""
+    of the ESC's sync managers (esc.sm: writes, and reads only past 0x1000)."""
     if direction == r.SM_DIRECTION_READ and q <= r.PROCESS_RAM:
         return []
     return [

@@ -203,7 +203,7 @@ def assert_same_slave(a: Esc, b: Esc, where: str) -> None:
         raise AssertionError(f"{where}: memories differ at {differ[:8]}")
     assert a.clock == b.clock, where
     assert a.counters == b.counters, where
-    fields = ("outputs_valid", "pending_op", "_last_outputs_ns", "_now_ns", "al_state")
+    fields = ("outputs_valid", "pending_op", "last_outputs_ns", "now_ns", "al_state")
     fields += ("_mailbox_pending", "_mailbox_write_counter", "_last_mailbox_in")
     assert [getattr(a, f) for f in fields] == [getattr(b, f) for f in fields], where
     da, db = device_of(a), device_of(b)
@@ -714,9 +714,9 @@ def test_firmware_work_runs_on_the_state_the_core_gave_back() -> None:
         __self__ = esc
 
         def __call__(self) -> None:
-            seen.append((esc.outputs_valid, esc._last_outputs_ns))
+            seen.append((esc.outputs_valid, esc.last_outputs_ns))
 
-    esc._firmware(Firmware())
+    esc.hand_to_firmware(Firmware())
     chain.run_firmware()
     assert core.released == {3}
     assert seen == [(True, bus.t_ns - 50_000 + chain._port_offsets[3].port0_ns)]

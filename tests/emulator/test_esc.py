@@ -280,3 +280,30 @@ def test_mailbox_repeat_request_posts_the_last_message_again(drive_bus: Bus) -> 
     assert drive_bus.fprd(0x03E9, 0x080F, 1)[0] & 0x02 == (status ^ 0x0200) >> 8 & 0x02
     assert drive_bus.fprd(0x03E9, 0x080D, 1)[0] & 0x08  # full again
     assert drive_bus.fprd(0x03E9, 0x1900, 140)[6:11] == b"first"
+
+
+def test_nothing_outside_the_esc_package_reads_its_private_members() -> None:
+    """The frame plan, the C core's glue, the chain and the tests use the ESC through its
+    public interface: no ``x._name`` for a private member of an Esc (attribute or method)
+    except on ``self`` inside the esc package."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    esc = build_chain(load_eni(EXAMPLES / "single_drive.xml")).slaves[0]
+    assert isinstance(esc, Esc)
+    private = {n for n in [*vars(esc), *dir(Esc)] if n.startswith("_") and not n.endswith("__")}
+    assert {"_cache", "_mailbox_queue", "_register_side_effects"} <= private
+    package = root / "lolacli" / "emulator" / "esc"
+    found = []
+    for path in [*(root / "lolacli").rglob("*.py"), *(root / "tests").rglob("*.py")]:
+        if package in path.parents:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if (
+                isinstance(node, ast.Attribute)
+                and node.attr in private
+                and not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls"))
+            ):
+                found.append(f"{path.relative_to(root)}:{node.lineno} .{node.attr}")
+    assert found == []

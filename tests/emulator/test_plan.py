@@ -69,10 +69,10 @@ class Twin:
             assert a.mem == b.mem, f"slave {i}: memories differ"
             assert a.clock == b.clock, f"slave {i}"
             assert a.counters == b.counters, f"slave {i}"
-            assert (a.outputs_valid, a.pending_op, a._last_outputs_ns) == (
+            assert (a.outputs_valid, a.pending_op, a.last_outputs_ns) == (
                 b.outputs_valid,
                 b.pending_op,
-                b._last_outputs_ns,
+                b.last_outputs_ns,
             ), f"slave {i}"
         assert self.fast.stats.replies == self.slow.stats.replies
 

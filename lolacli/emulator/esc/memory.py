@@ -1,0 +1,216 @@
+"""Registers and process RAM: what a master's write stores and what it sets off, and the
+state every part of the ESC shares (memory, configuration, application, firmware side)."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Protocol
+
+from lolacli.emulator import registers as r
+from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS, EscCounters
+from lolacli.emulator.registers import AlState
+from lolacli.emulator.sii import SiiLayout
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+PLAN_FREE_REGISTERS = 0x0F00  # digital outputs and user RAM: no frame plan depends on them
+
+
+class EscApplication(Protocol):
+    """What sits behind the PDI: a device with mailbox server and process data."""
+
+    def mailbox_request(self, request: bytes) -> list[bytes]:
+        """A complete mailbox written by the master -> mailbox messages to send back."""
+        ...
+
+    def process_data_bytes(self) -> tuple[int, int]:
+        """(outputs, inputs) sizes the current PDO mapping needs, in bytes."""
+        ...
+
+    def state_changed(self, state: AlState) -> None: ...
+
+    def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        """Outputs from the master -> inputs for the master (one process-data cycle)."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class EscConfig:
+    """Identity of the ESC silicon (registers 0x0000–0x000F)."""
+
+    esc_type: int = 0x11  # ET1100-like
+    revision: int = 0x02
+    build: int = 0x0003
+    fmmus: int = 8
+    sync_managers: int = 8
+    ram_kib: int = 8
+    port_descriptor: int = 0x0F  # ports 0 and 1: MII; 2 and 3 not implemented
+    features: int = int(r.EscFeature.DISTRIBUTED_CLOCKS | r.EscFeature.DC_64_BIT)
+    eeprom_8_byte_reads: bool = True
+    pdi_control: int = 0x0005  # SPI
+    watchdog_divider: int = 0x09C2  # 100 µs at 25 MHz
+    watchdog_time_process_data: int = 1000  # 100 ms
+
+
+class EscMemory:
+    """64 KiB of registers and process RAM, and what the ESC's parts share."""
+
+    config: EscConfig
+    sii: bytearray
+    layout: SiiLayout
+    app: EscApplication | None
+    mem: bytearray
+    _view: memoryview
+    counters: EscCounters
+    now_ns: int  # when the datagram being processed reached this slave
+    last_port: bool
+    # bumped whenever addressing or mapping may have changed (register writes, AL
+    # states, topology): the chain's frame plans are valid for one value. A chain
+    # shares one cell between its slaves.
+    epoch: list[int]
+    # bumped when a station address, alias or alias enable may have changed: the
+    # chain's map of configured addresses is valid for one value (shared like epoch)
+    addressing: list[int]
+    # The slave's firmware side (the PDI): AL control requests and mailbox writes are
+    # taken by the ESC at once (the frame is answered) and handled by the firmware
+    # afterwards, as on hardware. ``None``: handled at once; a list (a chain's): work
+    # queued there as (function, arguments), run by the chain after the answer.
+    pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] | None
+
+    def set_topology(self, *, last: bool) -> None:
+        """DL status 0x0110: port 0 link+communication, port 1 too unless last in line."""
+        self.last_port = last
+        self.epoch[0] += 1
+        status = 0x0001 | 0x0010 | 0x0200  # PDI operational, link port 0, comm port 0
+        status |= 0x0400 if last else (0x0020 | 0x0800)  # port 1 closed loop, or open+comm
+        status |= 0x1000 | 0x4000  # ports 2 and 3: loop closed
+        _U16.pack_into(self.mem, r.DL_STATUS, status)
+
+    @property
+    def station_address(self) -> int:
+        return int(_U16.unpack_from(self.mem, r.STATION_ADDRESS)[0])
+
+    @property
+    def station_alias(self) -> int:
+        return int(_U16.unpack_from(self.mem, r.STATION_ALIAS)[0])
+
+    def u16(self, address: int) -> int:
+        return int(_U16.unpack_from(self.mem, address)[0])
+
+    def u32(self, address: int) -> int:
+        return int(_U32.unpack_from(self.mem, address)[0])
+
+    @property
+    def alias_enabled(self) -> bool:
+        return bool(self.mem[r.DL_CONTROL_ALIAS_ENABLE_BYTE] & 0x01)
+
+    def addressed_configured(self, adp: int) -> bool:
+        if adp == self.mem[r.STATION_ADDRESS] | self.mem[r.STATION_ADDRESS + 1] << 8:
+            return True
+        return self.alias_enabled and adp == self.station_alias
+
+    def hand_to_firmware(self, work: Callable[..., None], *args: Any) -> None:
+        """Hand ``work`` to the slave's firmware: at once, or queued in ``pdi``."""
+        if self.pdi is None:
+            work(*args)
+        else:
+            self.pdi.append((work, args))
+
+    def _store(self, start: int, data: bytes) -> None:
+        """``data`` into memory from ``start``, as far as the memory goes (a master may
+        place an SM buffer across its end; the memory never grows)."""
+        end = min(start + len(data), r.MEMORY_BYTES)
+        if start < end:
+            self.mem[start:end] = data[: end - start]
+
+
+def overlaps(a0: int, a1: int, b0: int, b1: int) -> bool:
+    return a0 < b1 and b0 < a1
+
+
+def _readonly_mask() -> bytearray:
+    """1 where the master cannot write a register byte (ETG.1000.4 register tables)."""
+    mask = bytearray(r.PROCESS_RAM)
+    ranges = [
+        (0x0000, 0x0010),
+        (r.STATION_ALIAS, r.STATION_ALIAS + 2),
+        (r.DL_STATUS, r.DL_STATUS + 2),
+        (r.AL_STATUS, r.AL_STATUS + 6),
+        (r.PDI_CONTROL, r.PDI_CONTROL + 2),
+        (r.EEPROM_PDI_ACCESS, r.EEPROM_PDI_ACCESS + 1),
+        (r.WATCHDOG_STATUS_PROCESS_DATA, r.WATCHDOG_STATUS_PROCESS_DATA + 2),
+        (r.DC_RECEIVE_TIME_PORT0, r.DC_SYSTEM_TIME),
+        (r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
+        (r.DC_RECEIVE_TIME_PROCESSING_UNIT, r.DC_SYSTEM_TIME_OFFSET),
+        (r.DC_SYSTEM_TIME_DIFFERENCE, r.DC_SYSTEM_TIME_DIFFERENCE + 4),
+    ]
+    for lo, hi in ranges:
+        mask[lo:hi] = b"\x01" * (hi - lo)
+    for sm in range(16):
+        base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * sm
+        mask[base + 5] = 1  # status
+        mask[base + 7] = 1  # PDI control
+    return mask
+
+
+_READONLY = _readonly_mask()
+_SM_REGISTERS_END = r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES
+
+
+@dataclass(frozen=True, slots=True)
+class RegisterWrite:
+    """What a master's write to ``[start, end)`` does beyond storing bytes: worked out once
+    per address range (:func:`register_write`), the same for every ESC."""
+
+    segments: tuple[tuple[int, int], ...]  # writable runs (read-only bytes keep their value)
+    clear_groups: tuple[tuple[int, int], ...]
+    configuration: bool  # FMMU or SM registers: decoded configuration stale
+    watchdog: bool
+    addressing: bool  # station address or alias enable
+    eeprom: bool
+    latch: bool
+    system_time: bool
+    sync_managers: bool
+    al_control: bool
+
+    effects: bool  # any of the above
+
+
+@lru_cache(maxsize=4096)
+def register_write(start: int, end: int) -> RegisterWrite:
+    segments: list[tuple[int, int]] = []
+    run: int | None = None
+    for a in range(start, min(end, r.PROCESS_RAM)):
+        if _READONLY[a]:
+            if run is not None:
+                segments.append((run, a))
+                run = None
+        elif run is None:
+            run = a
+    if run is not None:
+        segments.append((run, min(end, r.PROCESS_RAM)))
+    if end > r.PROCESS_RAM:
+        if segments and segments[-1][1] == r.PROCESS_RAM:
+            segments[-1] = (segments[-1][0], end)
+        else:
+            segments.append((r.PROCESS_RAM, end))
+
+    def hit(lo: int, hi: int) -> bool:
+        return overlaps(start, end, lo, hi)
+
+    clear_groups = tuple(g for g in COUNTER_CLEAR_GROUPS if hit(*g))
+    flags = (
+        hit(r.FMMU_BASE, _SM_REGISTERS_END),
+        hit(r.WATCHDOG_DIVIDER, r.WATCHDOG_TIME_PROCESS_DATA + 2),
+        hit(r.STATION_ADDRESS, r.STATION_ADDRESS + 2)
+        or hit(r.DL_CONTROL_ALIAS_ENABLE_BYTE, r.DL_CONTROL_ALIAS_ENABLE_BYTE + 1),
+        hit(r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2),
+        hit(r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4),
+        hit(r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
+        hit(r.SYNC_MANAGER_BASE, r.SYNC_MANAGER_BASE + 16 * 8),
+        hit(r.AL_CONTROL, r.AL_CONTROL + 1),
+    )
+    return RegisterWrite(tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags))
