@@ -159,7 +159,10 @@ def emulate_cmd(
         scratch=scratch,
     )
     status(stats)
-    console.print(f"stopped: {stats.received} frames received, {stats.answered} answered")
+    drops = "" if stats.socket_drops is None else f", {stats.socket_drops} dropped at the socket"
+    console.print(
+        f"stopped: {stats.received} frames received, {stats.answered} answered{drops}"
+    )
     if stats.answered:
         console.print(_latency_line(stats), highlight=False, soft_wrap=True)
 

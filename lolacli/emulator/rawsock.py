@@ -96,8 +96,24 @@ class ServerStats:
     lost: int = 0
     started_ns: int = 0
     max_service_ns: int = 0
+    #: frames the kernel dropped at this socket (PACKET_STATISTICS), None: not told
+    socket_drops: int | None = None
     wake: LatencyHistogram = field(default_factory=LatencyHistogram)  # kernel rx -> server
     service: LatencyHistogram = field(default_factory=LatencyHistogram)  # server -> sent
+
+
+_SOL_PACKET = 263
+_PACKET_STATISTICS = 6
+
+
+def _socket_drops(sock: socket.socket) -> int | None:
+    """Frames the kernel could not queue to this packet socket since it was opened
+    (``struct tpacket_stats``: packets, drops); None where the socket does not say."""
+    try:
+        raw = sock.getsockopt(_SOL_PACKET, _PACKET_STATISTICS, 8)
+    except OSError:
+        return None
+    return struct.unpack("=II", raw)[1] if len(raw) == 8 else None
 
 
 class RawSocketServer:
@@ -148,6 +164,7 @@ class RawSocketServer:
         if self._gc_was_enabled:
             gc.enable()
         if self._sock is not None:
+            self.stats.socket_drops = _socket_drops(self._sock)
             self._sock.close()
             self._sock = None
 

@@ -437,7 +437,22 @@ def _judge(
     # an answer missing from a capture that itself dropped packets is the capture's loss
     assert capture.dropped is not None, "dumpcap did not report its counts"
     if capture.dropped == 0:
-        assert report.unanswered() == [], report.unanswered()[:3]
+        missing = report.unanswered()
+        counts = re.search(r"stopped: (\d+) frames received, (\d+) answered(?:, (\d+) dropped "
+                           r"at the socket)?", emulator)
+        assert counts, emulator
+        received, answered = int(counts[1]), int(counts[2])
+        socket_drops = int(counts[3]) if counts[3] is not None else None
+        # a frame of the master that never reached the emulator's socket (the capture holds
+        # more requests than the emulator received, and its socket dropped none) is lost on
+        # the host's path, which no emulator can answer: seen 1 in ~8 runs, the mailbox poll's
+        # last FPRD; every frame the emulator did receive must be answered
+        never_arrived = len(report.exchanges) - received
+        assert answered == received, emulator
+        if missing and socket_drops == 0 and len(missing) <= never_arrived:
+            sys.stderr.write(f"{len(missing)} frames never reached the emulator: not judged\n")
+        else:
+            assert missing == [], (missing[:3], emulator)
     else:
         sys.stderr.write(f"dumpcap dropped {capture.dropped} packets: answers not judged\n")
     figures, late = [], []
