@@ -23,6 +23,12 @@ from enum import IntEnum, IntFlag
 from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import Direction, Pdo, Slave, SyncManager
+from lolacli.wire.sii import (  # the one definition
+    CATEGORY_END,
+    HEADER_WORDS,
+    MailboxProtocol,
+    SiiCategory,
+)
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -30,32 +36,6 @@ _SM_ENTRY = struct.Struct("<HHBBBB")
 _PDO_HEAD = struct.Struct("<HBBBBH")
 _PDO_ENTRY = struct.Struct("<HBBBBH")
 
-HEADER_WORDS = 0x40
-CATEGORY_END = 0xFFFF
-
-
-class SiiCategory(IntEnum):
-    """Category types (ETG.1000.6 Table 19)."""
-
-    STRINGS = 10
-    DATA_TYPES = 20
-    GENERAL = 30
-    FMMU = 40
-    SYNCM = 41
-    TXPDO = 50
-    RXPDO = 51
-    DC = 60
-
-
-class MailboxProtocol(IntFlag):
-    """Mailbox protocols word 0x1C (ETG.1000.6 Table 18)."""
-
-    AOE = 0x01
-    EOE = 0x02
-    COE = 0x04
-    FOE = 0x08
-    SOE = 0x10
-    VOE = 0x20
 
 
 class SmType(IntEnum):

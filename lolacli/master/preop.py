@@ -45,6 +45,7 @@ from lolacli.wire.registers import (
     encode_sync_manager,
     sync_manager_address,
 )
+from lolacli.wire.sii import SiiWords
 
 #: SOEM's station addresses: 0x1001, 0x1002, … in line order (ecx_config_init)
 FIRST_STATION = 0x1001
@@ -249,24 +250,13 @@ def preop_init_cmds(station: int, mailbox: Mailbox | None) -> tuple[InitCmd, ...
 _Walk = Generator[int, bytes, None]
 
 
-@dataclass
-class _Sii:
-    """One slave's SII as read so far: word address -> 2 bytes."""
+class _Sii(SiiWords):
+    """One slave's SII as read so far, and what went wrong reading it."""
 
-    station: int
-    words: dict[int, bytes]
-    error: str = ""
-
-    def take(self, address: int, data: bytes) -> None:
-        for i in range(len(data) // 2):
-            self.words[address + i] = data[2 * i : 2 * i + 2]
-
-    def read(self, address: int, count: int) -> Generator[int, bytes, bytes]:
-        """The bytes of ``count`` words from ``address``, asking for those missing."""
-        for a in range(address, address + count):
-            while a not in self.words:
-                self.take(a, (yield a))
-        return b"".join(self.words[a] for a in range(address, address + count))
+    def __init__(self, station: int) -> None:
+        super().__init__()
+        self.station = station
+        self.error = ""
 
 
 def _walk(sii: _Sii, out: dict[str, object]) -> _Walk:
@@ -315,7 +305,7 @@ def read_sii(master: Master, stations: Sequence[int]) -> list[SiiSlave]:
     _eeprom_owner(master, held, to_pdi=False)
     try:
         found: dict[int, dict[str, object]] = {s: {} for s in stations}
-        images = {s: _Sii(s, {}) for s in stations}
+        images = {s: _Sii(s) for s in stations}
         walks = {s: _walk(images[s], found[s]) for s in stations}
         pending = {s: next(walks[s]) for s in stations}
         while pending:

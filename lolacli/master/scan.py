@@ -58,6 +58,7 @@ from lolacli.wire.sii import (
     SiiCategory,
     SiiGeneral,
     SiiWord,
+    SiiWords,
     decode_sii_general,
     decode_sii_strings,
     protocol_names,
@@ -444,25 +445,7 @@ def _read_registers(master: Master, count: int) -> list[ScannedSlave]:
 _Walk = Generator[int, bytes, None]
 
 
-class _Words:
-    """The words one slave's walk has read so far."""
-
-    def __init__(self) -> None:
-        self.words: dict[int, bytes] = {}
-
-    def take(self, address: int, data: bytes) -> None:
-        for i in range(len(data) // 2):
-            self.words[address + i] = data[2 * i : 2 * i + 2]
-
-    def read(self, address: int, count: int) -> Generator[int, bytes, bytes]:
-        """The bytes of ``count`` words from ``address``, asking for what is missing."""
-        for a in range(address, address + count):
-            while a not in self.words:
-                self.take(a, (yield a))
-        return b"".join(self.words[a] for a in range(address, address + count))
-
-
-def _walk(slave: ScannedSlave, words: _Words) -> _Walk:
+def _walk(slave: ScannedSlave, words: SiiWords) -> _Walk:
     """Header words, then the categories up to STRINGS and GENERAL (or the end)."""
     head = yield from words.read(SiiWord.STATION_ALIAS, 1)
     slave.sii_alias = _U16.unpack(head)[0]
@@ -496,7 +479,7 @@ def read_sii(master: Master, slaves: Sequence[ScannedSlave]) -> None:
         walks: dict[int, _Walk] = {}
         pending: dict[int, int] = {}  # position -> word address its walk waits for
         for s in readers:
-            walks[s.position] = _walk(s, _Words())
+            walks[s.position] = _walk(s, SiiWords())
             pending[s.position] = next(walks[s.position])
         by_position = {s.position: s for s in readers}
         while pending:

@@ -20,6 +20,7 @@ Pure: bytes in, values out; a short or inconsistent image is a :class:`WireError
 from __future__ import annotations
 
 import struct
+from collections.abc import Generator
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
@@ -273,7 +274,28 @@ def decode_sii(image: bytes | memoryview) -> SiiInfo:
     return SiiInfo(header, strings, general, tuple(cats))
 
 
+class SiiWords:
+    """The SII words of one slave read so far (word address -> 2 bytes), for a reader
+    that asks for words one at a time: :meth:`read` is a generator that yields each
+    missing word address and is sent the bytes read there (one or more words)."""
+
+    def __init__(self) -> None:
+        self.words: dict[int, bytes] = {}
+
+    def take(self, address: int, data: bytes) -> None:
+        for i in range(len(data) // 2):
+            self.words[address + i] = data[2 * i : 2 * i + 2]
+
+    def read(self, address: int, count: int) -> Generator[int, bytes, bytes]:
+        """The bytes of ``count`` words from ``address``, asking for those missing."""
+        for a in range(address, address + count):
+            while a not in self.words:
+                self.take(a, (yield a))
+        return b"".join(self.words[a] for a in range(address, address + count))
+
+
 __all__ = [
+    "SiiWords",
     "CATEGORY_END",
     "HEADER_BYTES",
     "HEADER_WORDS",
