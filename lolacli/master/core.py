@@ -168,7 +168,7 @@ class Master:
         inputs_bytes, outputs_bytes = image_sizes(
             eni.cyclic_frames, eni.process_image.inputs_bytes, eni.process_image.outputs_bytes
         )
-        self.image = ProcessImage(eni.process_image, inputs_bytes, outputs_bytes)
+        self.image = ProcessImage(eni.process_image, inputs_bytes, outputs_bytes, eni.slaves)
         self.devices: list[BusSlave] = []
         self.control: list[Callable[[Master], None]] = []
         self.admin: list[Callable[[Master], None]] = []

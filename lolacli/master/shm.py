@@ -145,7 +145,7 @@ class ShmClient:
         self._in_at = HEADER_BYTES
         self._out_at = HEADER_BYTES + self.n_in
         self._mask_at = self._out_at + self.n_out
-        self.image = ProcessImage(eni.process_image, self.n_in, self.n_out)
+        self.image = ProcessImage(eni.process_image, self.n_in, self.n_out, eni.slaves)
         self._mask = bytearray(self.n_out)
         self._vars: dict[str, BusVariable] = {}
 

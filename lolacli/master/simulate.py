@@ -32,7 +32,7 @@ from typing import Any
 from lolacli.eni.model import Eni
 from lolacli.errors import EniError, LinkError, TransportError, UsageError
 from lolacli.master.core import SECTIONS, Master, MasterOptions
-from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu
+from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.transport import ChainTransport, Transport
 from lolacli.master.variables import BusVariable, variable_for
 from lolacli.motion.profile import back_and_forth
@@ -327,7 +327,6 @@ class _Application:
         self.homes: dict[int, int] = {}
         self.t_enable_ns = 0
         self.first_cycle = 0
-        self.max_tracking_counts = 0
         image = master.image
         for name in options.watch:
             self.watch[name] = image.link(name, variable_for(image.find(name)))
@@ -340,11 +339,11 @@ class _Application:
     def _devices(self) -> None:
         master = self.master
         for slave in master.eni.slaves:
-            if _has(master, slave.name, ("statusword", "status word")) and _has(
-                master, slave.name, ("target position",)
+            if has_field(master.image, slave.name, Cia402Drive.statusword) and has_field(
+                master.image, slave.name, Cia402Drive.target
             ):
                 self.drives.append(Cia402Drive(master, slave.name))
-            elif _has(master, slave.name, ("angular rate x",)):
+            elif has_field(master.image, slave.name, Imu.rate_x):
                 self.sensors.append(Imu(master, slave.name))
                 for side in ("left", "right"):
                     try:
@@ -427,14 +426,6 @@ class _Application:
         if stats.dc_errors_ns and stats.dc_errors_ns[-1][0] >= t - master.cycle_time_ns:
             at, worst = stats.dc_errors_ns[-1]
             self.mcap.write("/dc", at, {"t_ns": at, "max_error_ns": worst})
-
-
-def _has(master: Master, slave: str, lasts: tuple[str, ...]) -> bool:
-    prefix = slave + "."
-    return any(
-        name.startswith(prefix) and name.rsplit(".", 1)[-1].lower() in lasts
-        for name in master.image.variables
-    )
 
 
 def _parse_value(variable: BusVariable, text: str) -> Any:

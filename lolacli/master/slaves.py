@@ -18,7 +18,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from lolacli.devices.cia402 import MODE_CSP, Cia402State
+from lolacli.devices.cia402 import (
+    CONTROLWORD,
+    MODE_CSP,
+    MODES,
+    MODES_DISPLAY,
+    POSITION_ACTUAL,
+    STATUSWORD,
+    TARGET_POSITION,
+    Cia402State,
+)
 from lolacli.eni.model import Direction
 from lolacli.errors import LinkError
 from lolacli.master.variables import (
@@ -42,12 +51,20 @@ class BusField:
     direction: Direction
     names: tuple[str, ...]
     optional: bool = False
+    obj: tuple[int, int] | None = None  # the object (index, subindex) a PDO maps
 
 
 def bus_field(
-    kind: type[BusVariable], direction: Direction, *names: str, optional: bool = False
+    kind: type[BusVariable],
+    direction: Direction,
+    *names: str,
+    optional: bool = False,
+    obj: tuple[int, int] | None = None,
 ) -> Any:
-    return BusField(kind, direction, names, optional)
+    """A Bus Variable of a device class: found by one of ``names`` under the slave, else by
+    the last part of a name, else by the object ``obj`` its ENI PDO entry maps (ENIs name
+    entries as the vendor likes: "Actual motor position" is 0x6064:00)."""
+    return BusField(kind, direction, names, optional, obj)
 
 
 class BusSlave:
@@ -101,7 +118,16 @@ def _resolve(image: ProcessImage, slave: str, spec: BusField) -> str | None:
         ]
         if len(hits) == 1:
             return hits[0]
+    if spec.obj is not None:
+        mapped = image.objects.get((slave, *spec.obj))
+        if mapped is not None and image.variables[mapped].direction == spec.direction:
+            return mapped
     return None
+
+
+def has_field(image: ProcessImage, slave: str, spec: Any) -> bool:
+    """Whether ``slave`` has the Bus Variable a device class declares as ``spec``."""
+    return _resolve(image, slave, spec) is not None
 
 
 _IN, _OUT = Direction.INPUT, Direction.OUTPUT
@@ -152,12 +178,22 @@ class Cia402Drive(BusSlave):
     follows the actual position, so enabling never jumps.
     """
 
-    statusword = bus_field(BusUInt16, _IN, "Inputs.Statusword", "Inputs.Status word")
-    position_actual = bus_field(BusInt32, _IN, "Inputs.Position actual value")
-    mode_display = bus_field(BusInt8, _IN, "Inputs.Modes of operation display", optional=True)
-    controlword = bus_field(BusUInt16, _OUT, "Outputs.Controlword", "Outputs.Control word")
-    target = bus_field(BusInt32, _OUT, "Outputs.Target position", optional=True)
-    mode = bus_field(BusInt8, _OUT, "Outputs.Modes of operation", optional=True)
+    statusword = bus_field(
+        BusUInt16, _IN, "Inputs.Statusword", "Inputs.Status word", obj=(STATUSWORD, 0)
+    )
+    position_actual = bus_field(
+        BusInt32, _IN, "Inputs.Position actual value", obj=(POSITION_ACTUAL, 0)
+    )
+    mode_display = bus_field(
+        BusInt8, _IN, "Inputs.Modes of operation display", optional=True, obj=(MODES_DISPLAY, 0)
+    )
+    controlword = bus_field(
+        BusUInt16, _OUT, "Outputs.Controlword", "Outputs.Control word", obj=(CONTROLWORD, 0)
+    )
+    target = bus_field(
+        BusInt32, _OUT, "Outputs.Target position", optional=True, obj=(TARGET_POSITION, 0)
+    )
+    mode = bus_field(BusInt8, _OUT, "Outputs.Modes of operation", optional=True, obj=(MODES, 0))
 
     def __init__(self, image: ProcessImage | Master, slave: str) -> None:
         super().__init__(image, slave)
@@ -253,4 +289,3 @@ class ForceTorqueSensor(BusSlave):
     def torque(self) -> tuple[float, float, float]:
         snap = self.image.snapshot
         return tuple(snap[self.axes[f"Torque {a}"]] for a in "XYZ")
-

@@ -22,10 +22,11 @@ from __future__ import annotations
 import difflib
 import struct
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from lolacli.eni.model import Direction, Variable
+from lolacli.eni.model import Direction, Slave, Variable
 from lolacli.eni.model import ProcessImage as EniProcessImage
 from lolacli.errors import LinkError, UsageError
 
@@ -319,13 +320,30 @@ class ProcessImage:
     """The inputs and outputs images of one master and the Bus Variables linked to them
     (see the module docstring)."""
 
-    def __init__(self, eni_image: EniProcessImage, inputs_bytes: int, outputs_bytes: int) -> None:
+    def __init__(
+        self,
+        eni_image: EniProcessImage,
+        inputs_bytes: int,
+        outputs_bytes: int,
+        slaves: Sequence[Slave] = (),
+    ) -> None:
         self.inputs = bytearray(inputs_bytes)
         self.outputs = bytearray(outputs_bytes)
         self.lock = threading.Lock()
         self.snapshot = Snapshot(-1, bytes(inputs_bytes))
         self.variables = {v.name: v for v in eni_image.variables}
         self.linked: list[BusVariable] = []
+        #: (slave name, object index, subindex) -> the variable an assigned PDO maps it to
+        #: (ENI variables are named "<slave>.<PDO name>.<entry name>", ETG.2100)
+        self.objects: dict[tuple[str, int, int], str] = {}
+        for slave in slaves:
+            for pdo in slave.pdos:
+                if pdo.sync_manager is None:
+                    continue  # not assigned: not in the process image
+                for e in pdo.entries:
+                    name = f"{slave.name}.{pdo.name}.{e.name}"
+                    if e.index and name in self.variables:
+                        self.objects.setdefault((slave.name, e.index, e.subindex), name)
 
     def publish(self, cycle: int) -> None:
         """copyRXData: the inputs as they are now become the snapshot of ``cycle``."""

@@ -245,3 +245,42 @@ def test_transport_keeps_time_order_and_the_chain_delay() -> None:
 
 def test_direction_of_bus_variables() -> None:
     assert BusInt32.input().direction is Direction.INPUT
+
+
+def _cia402_positions(eni) -> list[str]:  # type: ignore[no-untyped-def]
+    """Per slave whose assigned PDOs map the CiA 402 statusword (0x6041) in and target
+    position (0x607A) out: its position-actual (0x6064) variable, by object index alone."""
+    names = {v.name for v in eni.process_image.variables}
+    out = []
+    for slave in eni.slaves:
+        mapped = {
+            (e.index, pdo.direction): f"{slave.name}.{pdo.name}.{e.name}"
+            for pdo in slave.pdos
+            if pdo.sync_manager is not None
+            for e in pdo.entries
+        }
+        if (0x6041, Direction.INPUT) in mapped and (0x607A, Direction.OUTPUT) in mapped:
+            position = mapped.get((0x6064, Direction.INPUT))
+            if position in names:
+                out.append(position)
+    return out
+
+
+DRIVE_ENIS = [p for p in CORPUS_ENI if p.name not in REFUSED] + [EXAMPLES / "lola.xml"]
+
+
+@pytest.mark.parametrize("path", DRIVE_ENIS, ids=corpus_ids(DRIVE_ENIS))
+def test_simulate_enables_and_moves_every_cia402_drive_found_by_object_index(path) -> None:
+    """Drives are found by the objects their PDOs map, whatever the ENI calls the entries
+    (rocos eni_tech6: "Status word", "Profile target position", "Actual motor position")."""
+    from lolacli.master.simulate import SimulateOptions, simulate
+
+    eni = load_eni(path)
+    positions = _cia402_positions(eni)
+    if not positions:
+        pytest.skip("no CiA 402 drive in this ENI's process image")
+    # 1.5 s at 2 kHz: three quarters of the 2 s back-and-forth, 20,000 counts away from home
+    result = simulate(eni, SimulateOptions(cycles=3000, watch=tuple(positions)))
+    doc = result.doc
+    assert doc["drives"] == doc["drives_enabled"] == len(positions), doc
+    assert all(abs(doc["watch"][name]) > 1000 for name in positions), doc["watch"]
