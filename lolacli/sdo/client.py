@@ -17,7 +17,13 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from lolacli.errors import SdoAbortError, UsageError
-from lolacli.sdo.dictionary import Dictionary, OdObject, standard_object, standard_type
+from lolacli.sdo.dictionary import (
+    Dictionary,
+    OdObject,
+    standard_name,
+    standard_object,
+    standard_type,
+)
 from lolacli.wire.datatypes import (
     DataType,
     Value,
@@ -76,7 +82,7 @@ def choose_type(
     """Where the type of an entry comes from: ``--type``, the dictionary, the standard
     communication objects; ``data_type`` None when none of them knows."""
     entry = None if dictionary is None else dictionary.entry(index, subindex)
-    name = entry.name if entry is not None else ""
+    name = entry.name if entry is not None and entry.name else standard_name(index, subindex)
     if explicit is not None:
         return TypeChoice(explicit, "option", name)
     if entry is not None and entry.data_type is not None and dictionary is not None:

@@ -138,6 +138,83 @@ def standard_type(index: int, subindex: int) -> DataType | None:
     return None
 
 
+#: CiA 301 / ETG.1000.6 names of the communication objects (ranges: the first index)
+_NAMES: dict[int, str] = {
+    0x1000: "Device type",
+    0x1001: "Error register",
+    0x1002: "Manufacturer status register",
+    0x1003: "Pre-defined error field",
+    0x1005: "COB-ID SYNC",
+    0x1006: "Communication cycle period",
+    0x1007: "Synchronous window length",
+    0x1008: "Manufacturer device name",
+    0x1009: "Manufacturer hardware version",
+    0x100A: "Manufacturer software version",
+    0x100C: "Guard time",
+    0x100D: "Life time factor",
+    0x1010: "Store parameters",
+    0x1011: "Restore default parameters",
+    0x1014: "COB-ID EMCY",
+    0x1015: "Inhibit time EMCY",
+    0x1016: "Consumer heartbeat time",
+    0x1017: "Producer heartbeat time",
+    0x1018: "Identity object",
+    0x1200: "SDO server parameter",
+    0x1280: "SDO client parameter",
+    0x1400: "RPDO communication parameter",
+    0x1600: "RPDO mapping parameter",
+    0x1800: "TPDO communication parameter",
+    0x1A00: "TPDO mapping parameter",
+    0x1C00: "Sync manager communication type",
+    0x1C10: "Sync manager PDO assignment",
+}
+_PDO_COMM = {1: "COB-ID", 2: "Transmission type", 3: "Inhibit time", 5: "Event timer"}
+#: entry names by the first index of the object's range; a str is a pattern for every sub
+_SUB_NAMES: dict[int, dict[int, str] | str] = {
+    0x1003: "Standard error field {sub}",
+    0x1010: {1: "Save all parameters"},
+    0x1011: {1: "Restore all default parameters"},
+    0x1016: "Consumer heartbeat time {sub}",
+    0x1018: {1: "Vendor ID", 2: "Product code", 3: "Revision number", 4: "Serial number"},
+    0x1200: {1: "COB-ID client to server", 2: "COB-ID server to client", 3: "Node-ID"},
+    0x1400: _PDO_COMM,
+    0x1600: "Mapped object {sub}",
+    0x1800: _PDO_COMM | {6: "SYNC start value"},
+    0x1A00: "Mapped object {sub}",
+    0x1C00: "Communication type sync manager {sm}",
+    0x1C10: "Assigned PDO {sub}",
+}
+
+
+def _object_name(index: int) -> tuple[int, str] | None:
+    first = max((k for k in _NAMES if k <= index), default=None)
+    if first is None:
+        return None
+    if 0x1C10 <= index <= 0x1C2F:
+        return first, f"Sync manager {index - 0x1C10} PDO assignment"
+    if first in (0x1400, 0x1600, 0x1800, 0x1A00):  # RPDO/TPDO n: CiA 301 counts from 1
+        return first, f"{_NAMES[first]} {index - first + 1}" if index != first else _NAMES[first]
+    return first, _NAMES[first]
+
+
+def standard_name(index: int, subindex: int) -> str:
+    """The CiA 301 / ETG.1000.6 name of a communication object entry ("" if none): the
+    object's name for a variable, "Number of entries" for sub 0 of an array/record, the
+    entry's own name for the others."""
+    found = _object_name(index) if standard_type(index, subindex) is not None else None
+    if found is None:
+        return ""
+    first, name = found
+    if index in _VARS:
+        return name
+    if subindex == 0:
+        return "Number of entries"
+    subs = _SUB_NAMES.get(first)
+    if isinstance(subs, str):
+        return subs.format(sub=subindex, sm=subindex - 1)
+    return (subs or {}).get(subindex, f"{name}, sub {subindex}")
+
+
 def standard_object(index: int, count: int) -> OdObject | None:
     """A CiA 301 array/record with ``count`` entries after sub 0, if ``index`` is one."""
     if standard_type(index, 0) is None or index in _VARS:
@@ -147,8 +224,11 @@ def standard_object(index: int, count: int) -> OdObject | None:
         kind = standard_type(index, sub)
         if kind is None:
             return None
-        entries.append(OdEntry(index, sub, f"Sub {sub}", kind, "ro", bit_size(kind)))
-    return OdObject(index, "", RECORD, tuple(entries))
+        entries.append(
+            OdEntry(index, sub, standard_name(index, sub), kind, "ro", bit_size(kind))
+        )
+    found = _object_name(index)
+    return OdObject(index, found[1] if found else "", RECORD, tuple(entries))
 
 
 # --- adapters ----------------------------------------------------------------------------------
@@ -271,6 +351,7 @@ __all__ = [
     "from_canopen",
     "from_esi",
     "from_sdo_info",
+    "standard_name",
     "standard_object",
     "standard_type",
 ]

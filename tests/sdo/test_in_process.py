@@ -45,8 +45,12 @@ def test_reads_of_the_acceptance(cli) -> None:
     code, doc = _json(cli, "read", "5", "0x1000")
     assert code == 0 and doc["value"] == 0x00020192 and doc["type_source"] == "standard"
     assert doc["schema"] == "lolacli.sdo/1" and doc["raw_hex"] == "92010200"
+    assert doc["name"] == "Device type"  # CiA 301's name where no dictionary is asked
     code, doc = _json(cli, "read", "5", "0x1018:01")
     assert code == 0 and doc["value"] == eni.slaves[4].identity.vendor_id
+    assert doc["name"] == "Vendor ID"
+    code, doc = _json(cli, "read", "5", "0x1C13:01")  # SM3's first assigned TxPDO
+    assert code == 0 and doc["name"] == "Assigned PDO 1" and doc["value"] == 0x1A00
     code, doc = _json(cli, "read", "5", "0x1008")  # segmented upload
     assert code == 0 and doc["value"] == Cia402Drive.LONG_NAME
     room = eni.slaves[4].mailbox.in_length_bytes - 6 - 2 - 8  # mailbox, CoE, SDO initiate
@@ -222,7 +226,7 @@ def test_a_whole_process_and_its_cache(tmp_path) -> None:
             timeout=120,
         )
         assert done.returncode == 0, done.stderr
-        assert done.stdout == "5 0x1000:00  UNSIGNED32 = 131474 (0x20192)\n"
+        assert done.stdout == "5 0x1000:00  Device type  UNSIGNED32 = 131474 (0x20192)\n"
     assert len(list((tmp_path / "cache").glob("*.eni.pickle"))) == 1
 
 
