@@ -53,7 +53,7 @@ def scan_cmd(
     from lolacli.timing.model import parse_duration_ns
 
     target = parse_state(state) if state is not None else None
-    timeout_ns = parse_duration_ns(timeout)
+    timeout_ns = parse_duration_ns(timeout, None, "--timeout")
     if timeout_ns <= 0:
         raise typer.BadParameter(f"{timeout!r} is not a positive duration", param_hint="--timeout")
     model = load_eni(eni) if eni is not None else None

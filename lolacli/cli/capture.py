@@ -72,7 +72,7 @@ def analyze_cmd(
     if timeout is not None:
         from lolacli.timing.model import parse_duration_ns
 
-        timeout_ns = parse_duration_ns(timeout)
+        timeout_ns = parse_duration_ns(timeout, None, "--timeout")
         if timeout_ns <= 0:
             raise UsageError(f"--timeout {timeout}: must be longer than 0")
     if plot is not None:

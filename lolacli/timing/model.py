@@ -332,24 +332,32 @@ _UNITS_NS = {
 }
 
 
-def parse_duration_ns(text: str, default_unit: str = "us") -> int:
-    """ "124.1us", "124.1µs", "0.1241ms", "124100ns", "124.1" (bare: µs) → 124100.
+def parse_duration_ns(text: str, default_unit: str | None = "us", what: str = "") -> int:
+    """ "124.1us", "124.1µs", "0.1241ms", "124100ns", "124.1" (bare: ``default_unit``,
+    µs unless given) → 124100.
 
-    Raises :class:`UsageError` for anything else (negative, empty, unknown unit).
+    Raises :class:`UsageError` for anything else (negative, empty, unknown unit), and for
+    a bare number when ``default_unit`` is None (where a bare number could mean anything);
+    ``what`` (an option's name) starts the message.
     """
+    lead = f"{what} " if what else ""
     s = text.strip().replace(" ", "")
     unit = next((u for u in sorted(_UNITS_NS, key=len, reverse=True) if s.endswith(u)), "")
     number = s[: len(s) - len(unit)] if unit else s
+    if not unit:
+        if default_unit is None:
+            raise UsageError(f"{lead}{text!r} has no unit: give one (e.g. 5ms, 800us, 2s)")
+        unit = default_unit
     try:
-        value = Decimal(number) * _UNITS_NS[unit or default_unit]
+        value = Decimal(number) * _UNITS_NS[unit]
     except (InvalidOperation, KeyError):
         raise UsageError(
-            f"not a duration: {text!r} (use e.g. 124.1us, 0.1241ms, 124100ns)"
+            f"{lead}not a duration: {text!r} (use e.g. 124.1us, 0.1241ms, 124100ns)"
         ) from None
     if not value.is_finite() or value < 0:
-        raise UsageError(f"not a duration: {text!r} (must be a finite time >= 0)")
+        raise UsageError(f"{lead}not a duration: {text!r} (must be a finite time >= 0)")
     if value > MAX_INT64:
-        raise UsageError(f"not a duration: {text!r} (longer than {MAX_INT64} ns)")
+        raise UsageError(f"{lead}not a duration: {text!r} (longer than {MAX_INT64} ns)")
     return int(value.to_integral_value())
 
 

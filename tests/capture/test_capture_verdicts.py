@@ -184,6 +184,9 @@ def test_late_answers_are_late_not_lost(cli, tmp_path):
     # with a longer --timeout it is an ordinary pair
     code, rep = _analyze(cli, tmp_path / "late.pcap", "--timeout", "30ms")
     assert (rep["late_frames"], rep["timeout_source"]) == (0, "--timeout")
+    # a bare number could be µs, ms or s: refused, naming the option
+    code, _out, err = cli("capture", "analyze", str(tmp_path / "late.pcap"), "--timeout", "30")
+    assert code == 2 and "--timeout '30' has no unit" in err and err.count("\n") == 1
 
 
 def test_a_bus_that_never_answers(cli, tmp_path):

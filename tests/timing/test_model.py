@@ -152,6 +152,12 @@ def test_parse_duration_rejects(text):
         parse_duration_ns(text)
 
 
+def test_parse_duration_without_a_default_unit_wants_one():
+    assert parse_duration_ns("30ms", None) == 30_000_000
+    with pytest.raises(UsageError, match="^--timeout '30' has no unit"):
+        parse_duration_ns("30", None, "--timeout")
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     n_bytes=st.integers(64, 1514),
