@@ -481,7 +481,14 @@ def _judge(
     assert len(errors) <= max(1, MASTER_TIMEOUTS_PER_CYCLE * cycles), errors[:5]
     note = f"at the master: {report.summary()}; p50/p99 per phase {figures}; "
     note += f"late {len(late)} in {stalls} stalls; "
-    note += f"master time-outs {len(errors)} {[e.message for e in errors[:2]]}; emulator {times}"
+    # the slowest answer in each time-out's window: within the deadline, the master did
+    # not look at its socket in time
+    slowest = [
+        max((x.latency_ns or 0 for x in report.between(e.start_ns, e.end_ns)), default=0) // 1000
+        for e in errors
+    ]
+    note += f"master time-outs {len(errors)} {[e.message for e in errors[:2]]}, slowest "
+    note += f"answer in their windows {sorted(slowest)[-5:]} µs; emulator {times}"
     sys.stderr.write(note + "\n")
     log = os.environ.get("LOLACLI_MASTER_LOG")  # one JSON line per run, for repeat runs
     if log:
