@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT))
 from lolacli.wire.commands import wkc_increment  # noqa: E402
 from lolacli.wire.registers import (  # noqa: E402
     Fmmu,
+    FmmuType,
     SyncManager,
     encode_fmmu,
     encode_sync_manager,
@@ -54,8 +55,6 @@ APRD, APWR, FPRD, FPWR, BRD, BWR, LRW, ARMW = 1, 2, 4, 5, 7, 8, 12, 13
 
 # Frame arithmetic (DESIGN.md "Definitions").
 ETH_HEADER, ECAT_HEADER, DATAGRAM_OVERHEAD, FCS, MIN_FRAME = 14, 2, 12, 4, 64
-
-FMMU_READ, FMMU_WRITE = 1, 2
 
 LOGICAL_BASE = 0x0001_0000  # logical address of the first process-data byte
 
@@ -805,7 +804,7 @@ def write_slave_init_cmds(slave: ET.Element, chain: ChainSpec, p: Placed) -> Non
         fmmu = Fmmu(LOGICAL_BASE + p.logical_offset, size, physical_start=sm.start, type=kind,
                     activate=1)
         data = encode_fmmu(fmmu)
-        label = "outputs (write)" if kind == FMMU_WRITE else "inputs (read)"
+        label = "outputs (write)" if kind == FmmuType.WRITE else "inputs (read)"
         init_cmd(cmds, ("PS",), f"FMMU{n} {label}", FPWR, s, fmmu_address(n), data, cnt=1)
     if d.dc_sync:
         cycle_ns = chain.cycle_time_us * 1000
@@ -881,9 +880,9 @@ def _fmmus(d: DeviceClass) -> list[tuple[int, SmSpec, int]]:
     """(type, sync manager, length): FMMU0 outputs then FMMU1 inputs, as TwinCAT orders them."""
     out: list[tuple[int, SmSpec, int]] = []
     if d.sm_out is not None and d.out_bytes:
-        out.append((FMMU_WRITE, d.sm_out, d.out_bytes))
+        out.append((FmmuType.WRITE, d.sm_out, d.out_bytes))
     if d.sm_in is not None and d.in_bytes:
-        out.append((FMMU_READ, d.sm_in, d.in_bytes))
+        out.append((FmmuType.READ, d.sm_in, d.in_bytes))
     return out
 
 

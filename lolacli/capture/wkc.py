@@ -37,6 +37,7 @@ from lolacli.wire.commands import (
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni, Slave
+    from lolacli.wire.registers import Fmmu
 
 LOGICAL = (Command.LRD, Command.LWR, Command.LRW)
 _ONE_SLAVE = frozenset({Command.APRD, Command.APWR, Command.APRW,
@@ -191,7 +192,7 @@ def verdict(rows: Iterable[tuple[int, ...]], layout: MasterLayout, eni: Eni | No
 # --- references ---------------------------------------------------------------------------
 
 
-def _from_fmmus(d: DatagramVerdict, fmmus: dict[Target, list[Any]],
+def _from_fmmus(d: DatagramVerdict, fmmus: dict[Target, list[Fmmu]],
                 weight: Any = None) -> tuple[int, int, int]:
     """(expected, slaves with outputs covered, slaves with inputs covered)."""
     total = outs = ins = 0
@@ -214,7 +215,7 @@ def _coverage_note(cmd: int, outs: int, ins: int, where: str) -> str:
     return " + ".join(parts) + f" ({where})"
 
 
-def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Any]]) -> None:
+def _inferred(d: DatagramVerdict, capture_fmmus: dict[Target, list[Fmmu]]) -> None:
     if d.logical and capture_fmmus:
         total, outs, ins = _from_fmmus(d, capture_fmmus)
         if outs or ins:
@@ -270,7 +271,7 @@ def eni_slave(eni: Eni, layout: MasterLayout, slave: Target) -> Slave | None:
 
 
 def _from_eni(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
-              capture_fmmus: dict[Target, list[Any]]) -> None:
+              capture_fmmus: dict[Target, list[Fmmu]]) -> None:
     found = _eni_command(d, eni)
     if found is not None:
         d.expected, d.note = found
@@ -292,7 +293,7 @@ def _from_eni(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
 
 
 def _eni_logical(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
-                 capture_fmmus: dict[Target, list[Any]]) -> None:
+                 capture_fmmus: dict[Target, list[Fmmu]]) -> None:
     if capture_fmmus:
         def weight(slave: Target, reads: bool, writes: bool) -> tuple[bool, bool]:
             s = eni_slave(eni, layout, slave)
@@ -306,7 +307,7 @@ def _eni_logical(d: DatagramVerdict, eni: Eni, layout: MasterLayout,
             d.note = _coverage_note(d.cmd, outs, ins, "the master's FMMU writes in the capture, "
                                     "slaves' data from the ENI")
             return
-    eni_fmmus = {Target("position", s.position - 1): [f for f in s.fmmus if f.enable]
+    eni_fmmus = {Target("position", s.position - 1): [c.fmmu for c in s.fmmus if c.fmmu.enabled]
                  for s in eni.slaves}
     total, outs, ins = _from_fmmus(d, eni_fmmus)
     if outs or ins:

@@ -22,7 +22,7 @@ from enum import IntEnum, IntFlag
 
 from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
-from lolacli.eni.model import Direction, Pdo, Slave, SyncManager
+from lolacli.eni.model import ConfiguredSyncManager, Direction, Pdo, Slave
 from lolacli.wire.sii import (  # the one definition
     CATEGORY_END,
     HEADER_WORDS,
@@ -287,7 +287,7 @@ def _pdo_bytes(pdos: tuple[Pdo, ...], direction: Direction) -> int:
     return (bits + 7) // 8
 
 
-def _eni_sm_type(sm: SyncManager) -> SmType | None:
+def _eni_sm_type(sm: ConfiguredSyncManager) -> SmType | None:
     kind = sm.kind.lower()
     return {
         "mboxout": SmType.MAILBOX_OUT,
@@ -307,13 +307,11 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
             if i not in by_index:
                 out.append(SiiSyncManager(0, 0, 0, 0, SmType.UNUSED))
                 continue
-            sm, kind = by_index[i]
+            configured, kind = by_index[i]
+            sm = configured.sync_manager
             control = sm.control  # as the ENI states it: 0 stays 0 (buffered, ECAT reads)
-            out.append(
-                SiiSyncManager(
-                    sm.start_address, sm.length_bytes, control, 1 if sm.enable else 0, kind
-                )
-            )
+            enable = 1 if sm.enabled else 0
+            out.append(SiiSyncManager(sm.physical_start, sm.length_bytes, control, enable, kind))
         return tuple(out)
     if slave.mailbox is None and not slave.pdos and not slave.outputs and not slave.inputs:
         return ()

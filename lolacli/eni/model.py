@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from lolacli.wire import registers
+
 
 class Direction(StrEnum):
     """Process-data direction, seen from the master."""
@@ -55,31 +57,23 @@ class Pdo:
 
 
 @dataclass(frozen=True, slots=True)
-class SyncManager:
-    """A sync manager as configured (``<Sm>`` of the slave's ``<ProcessData>`` /
-    ``<Mailbox>``, or register 0x0800 + 8·n written by an InitCmd)."""
+class ConfiguredSyncManager:
+    """A sync manager as the ENI configures it: which one (``index``), its register content
+    (written to 0x0800 + 8·n by an InitCmd, or as ``<Sm>`` of the slave's ``<ProcessData>`` /
+    ``<Mailbox>`` says) and, where the ENI names it, its ``kind``."""
 
     index: int
-    start_address: int
-    length_bytes: int
-    control: int
-    enable: bool
+    sync_manager: registers.SyncManager
     kind: str = ""  # "MBoxOut", "MBoxIn", "Outputs", "Inputs" where the ENI says
 
 
 @dataclass(frozen=True, slots=True)
-class Fmmu:
-    """An FMMU mapping (register 0x0600 + 16·n, ETG.1000.4 Table 56)."""
+class ConfiguredFmmu:
+    """An FMMU as the ENI configures it: which one (``index``) and its register content
+    (0x0600 + 16·n, ETG.1000.4 Table 56)."""
 
     index: int
-    logical_start: int
-    length_bytes: int
-    logical_start_bit: int
-    logical_end_bit: int
-    physical_start: int
-    physical_start_bit: int
-    type: int  # 1 read (inputs), 2 write (outputs), 3 both
-    enable: bool
+    fmmu: registers.Fmmu
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,8 +150,8 @@ class Slave:
     previous_port: str | None = None
     previous_station_address: int | None = None
     mailbox: Mailbox | None = None
-    sync_managers: tuple[SyncManager, ...] = ()
-    fmmus: tuple[Fmmu, ...] = ()
+    sync_managers: tuple[ConfiguredSyncManager, ...] = ()
+    fmmus: tuple[ConfiguredFmmu, ...] = ()
     pdos: tuple[Pdo, ...] = ()
     init_cmds: tuple[InitCmd, ...] = ()
     dc: DistributedClock | None = None
@@ -266,13 +260,14 @@ class Eni:
 
 __all__ = [
     "CoeInitCmd",
+    "ConfiguredFmmu",
+    "ConfiguredSyncManager",
     "Cyclic",
     "CyclicCommand",
     "CyclicFrame",
     "Direction",
     "DistributedClock",
     "Eni",
-    "Fmmu",
     "Identity",
     "InitCmd",
     "Mailbox",
@@ -282,7 +277,6 @@ __all__ = [
     "ProcessDataArea",
     "ProcessImage",
     "Slave",
-    "SyncManager",
     "Variable",
     "field",
 ]

@@ -27,13 +27,14 @@ from xml.etree.ElementTree import ParseError
 
 from lolacli.eni.model import (
     CoeInitCmd,
+    ConfiguredFmmu,
+    ConfiguredSyncManager,
     Cyclic,
     CyclicCommand,
     CyclicFrame,
     Direction,
     DistributedClock,
     Eni,
-    Fmmu,
     Identity,
     InitCmd,
     Mailbox,
@@ -43,7 +44,6 @@ from lolacli.eni.model import (
     ProcessDataArea,
     ProcessImage,
     Slave,
-    SyncManager,
     Variable,
 )
 from lolacli.errors import EniError
@@ -461,7 +461,7 @@ class _Reader:
 
     def sync_managers(
         self, process_data: _El | None, init_cmds: tuple[InitCmd, ...], mailbox: Mailbox | None
-    ) -> tuple[SyncManager, ...]:
+    ) -> tuple[ConfiguredSyncManager, ...]:
         """Sync managers as written by the InitCmds (0x0800 + 8·n), else as ``<SmN>`` says."""
         declared = self.sm_elements(process_data)
         written = sync_managers_from_init_cmds(init_cmds)
@@ -477,23 +477,25 @@ class _Reader:
             )
             for n, start, length, control in mbx:
                 if n not in result and n not in declared and length:
-                    result[n] = SyncManager(n, start, length, control, True)
+                    result[n] = ConfiguredSyncManager(
+                        n, reg.SyncManager(start, length, control, activate=1)
+                    )
         for n, el in declared.items():
             if n not in result:
                 result[n] = self.declared_sm(n, el)
         return tuple(_with_kind(result[n], kinds.get(n, "")) for n in sorted(result))
 
-    def declared_sm(self, index: int, el: _El) -> SyncManager:
+    def declared_sm(self, index: int, el: _El) -> ConfiguredSyncManager:
         size = self.number(el, "DefaultSize")
         if size is None:
             size = self.number(el, "MaxSize", 0) or 0
-        return SyncManager(
-            index=index,
-            start_address=self.number(el, "StartAddress", 0) or 0,
+        sm = reg.SyncManager(
+            physical_start=self.number(el, "StartAddress", 0) or 0,
             length_bytes=size,
             control=self.number(el, "ControlByte", 0) or 0,
-            enable=self.flag(el, "Enable"),
+            activate=int(self.flag(el, "Enable")),
         )
+        return ConfiguredSyncManager(index, sm)
 
     def pdos(self, process_data: _El | None) -> tuple[Pdo, ...]:
         if process_data is None:
@@ -646,38 +648,27 @@ def _register_writes(
                 yield first + k, ic.data[k * size : (k + 1) * size], ic
 
 
-def decode_fmmu(index: int, block: bytes) -> Fmmu:
-    """One FMMU register block (16 bytes, ETG.1000.4 Table 56)."""
-    f = reg.decode_fmmu(block)
-    return Fmmu(index, f.logical_start, f.length_bytes, f.logical_start_bit, f.logical_stop_bit,
-                f.physical_start, f.physical_start_bit, f.type, f.enabled)
-
-
-def decode_sync_manager(index: int, block: bytes) -> SyncManager:
-    """One sync manager register block (8 bytes, ETG.1000.4 Table 58)."""
-    sm = reg.decode_sync_manager(block)
-    return SyncManager(index, sm.physical_start, sm.length_bytes, sm.control, sm.enabled)
-
-
-def fmmus_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[Fmmu, ...]:
+def fmmus_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[ConfiguredFmmu, ...]:
     """The FMMUs the InitCmds configure (the last non-zero write of each wins)."""
-    found: dict[int, Fmmu] = {}
+    found: dict[int, ConfiguredFmmu] = {}
     for index, block, _ic in _register_writes(
         init_cmds, Register.FMMU, FMMU_BYTES, FMMU_COUNT_MAX
     ):
         if any(block):
-            found[index] = decode_fmmu(index, block)
+            found[index] = ConfiguredFmmu(index, reg.decode_fmmu(block))
     return tuple(found[i] for i in sorted(found))
 
 
-def sync_managers_from_init_cmds(init_cmds: Iterable[InitCmd]) -> tuple[SyncManager, ...]:
+def sync_managers_from_init_cmds(
+    init_cmds: Iterable[InitCmd],
+) -> tuple[ConfiguredSyncManager, ...]:
     """The sync managers the InitCmds configure; bootstrap-only (``IB``) writes are skipped."""
-    found: dict[int, SyncManager] = {}
+    found: dict[int, ConfiguredSyncManager] = {}
     for index, block, ic in _register_writes(
         init_cmds, Register.SM, SYNC_MANAGER_BYTES, SYNC_MANAGER_COUNT_MAX
     ):
         if any(block) and set(ic.transitions) != {"IB"}:
-            found[index] = decode_sync_manager(index, block)
+            found[index] = ConfiguredSyncManager(index, reg.decode_sync_manager(block))
     return tuple(found[i] for i in sorted(found))
 
 
@@ -705,7 +696,9 @@ def _frame_layout(frames: tuple[CyclicFrame, ...]) -> bool:
     return False
 
 
-def fmmus_from_process_data(slave: Slave, frames: tuple[CyclicFrame, ...]) -> tuple[Fmmu, ...]:
+def fmmus_from_process_data(
+    slave: Slave, frames: tuple[CyclicFrame, ...]
+) -> tuple[ConfiguredFmmu, ...]:
     """FMMUs implied by ``<ProcessData><Send|Recv>`` and the logical cyclic commands.
 
     For ENIs without FMMU InitCmds: an area's image bits are placed at the logical address
@@ -713,7 +706,7 @@ def fmmus_from_process_data(slave: Slave, frames: tuple[CyclicFrame, ...]) -> tu
     sync manager (SM2 / SM3 when the ENI names none).
     """
     header = DATAGRAM_HEADER_BYTES if _frame_layout(frames) else 0
-    found: list[Fmmu] = []
+    found: list[ConfiguredFmmu] = []
     for areas, kind, default_sm, fmmu_type in (
         (slave.outputs, "Outputs", 2, 2),
         (slave.inputs, "Inputs", 3, 1),
@@ -727,19 +720,16 @@ def fmmus_from_process_data(slave: Slave, frames: tuple[CyclicFrame, ...]) -> tu
             start_bit = logical_bit % 8
             length = (start_bit + area.bit_length + 7) // 8
             end_bit = (start_bit + area.bit_length - 1) % 8
-            found.append(
-                Fmmu(
-                    len(found),
-                    logical_bit // 8,
-                    length,
-                    start_bit,
-                    end_bit,
-                    sm.start_address,
-                    0,
-                    fmmu_type,
-                    True,
-                )
+            fmmu = reg.Fmmu(
+                logical_bit // 8,
+                length,
+                logical_start_bit=start_bit,
+                logical_stop_bit=end_bit,
+                physical_start=sm.sync_manager.physical_start,
+                type=fmmu_type,
+                activate=1,
             )
+            found.append(ConfiguredFmmu(len(found), fmmu))
     return tuple(found)
 
 
@@ -771,7 +761,7 @@ def _with_process_data_fmmus(slave: Slave, frames: tuple[CyclicFrame, ...]) -> S
     return replace(slave, fmmus=fmmus_from_process_data(slave, frames))
 
 
-def _with_kind(sm: SyncManager, kind: str) -> SyncManager:
+def _with_kind(sm: ConfiguredSyncManager, kind: str) -> ConfiguredSyncManager:
     from dataclasses import replace
 
     return replace(sm, kind=kind) if kind and not sm.kind else sm
@@ -779,8 +769,6 @@ def _with_kind(sm: SyncManager, kind: str) -> SyncManager:
 
 __all__ = [
     "ENI_ROOTS",
-    "decode_fmmu",
-    "decode_sync_manager",
     "fmmus_from_init_cmds",
     "fmmus_from_process_data",
     "parse_eni",

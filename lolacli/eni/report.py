@@ -11,7 +11,15 @@ from __future__ import annotations
 import fnmatch
 from typing import Any
 
-from lolacli.eni.model import CyclicCommand, CyclicFrame, Eni, Slave, Variable
+from lolacli.eni.model import (
+    ConfiguredFmmu,
+    ConfiguredSyncManager,
+    CyclicCommand,
+    CyclicFrame,
+    Eni,
+    Slave,
+    Variable,
+)
 from lolacli.wire.commands import mnemonic
 
 INSPECT_SCHEMA = "lolacli.eni/1"
@@ -79,35 +87,41 @@ def slave_dict(s: Slave) -> dict[str, Any]:
         "coe_init_cmds": len(mailbox.coe_init_cmds) if mailbox else 0,
         "init_cmds": len(s.init_cmds),
         "dc": _dc_dict(s),
-        "sync_managers": [
-            {
-                "index": m.index,
-                "start_address": m.start_address,
-                "length_bytes": m.length_bytes,
-                "control": m.control,
-                "enable": m.enable,
-                "kind": m.kind,
-            }
-            for m in s.sync_managers
-        ],
-        "fmmus": [
-            {
-                "index": f.index,
-                "logical_start": f.logical_start,
-                "length_bytes": f.length_bytes,
-                "logical_start_bit": f.logical_start_bit,
-                "logical_end_bit": f.logical_end_bit,
-                "physical_start": f.physical_start,
-                "type": f.type,
-                "enable": f.enable,
-            }
-            for f in s.fmmus
-        ],
+        "sync_managers": [_sync_manager_dict(m) for m in s.sync_managers],
+        "fmmus": [_fmmu_dict(f) for f in s.fmmus],
         "pdos_assigned": [
             {"index": p.index, "name": p.name, "sync_manager": p.sync_manager, "bits": p.bit_size}
             for p in s.pdos
             if p.sync_manager is not None
         ],
+    }
+
+
+def _sync_manager_dict(m: ConfiguredSyncManager) -> dict[str, Any]:
+    sm = m.sync_manager
+    return {
+        "index": m.index,
+        "start_address": sm.physical_start,
+        "length_bytes": sm.length_bytes,
+        "control": sm.control,
+        "enable": sm.enabled,
+        "kind": m.kind,
+    }
+
+
+def _fmmu_dict(m: ConfiguredFmmu) -> dict[str, Any]:
+    """The ``lolacli.eni-inspect`` keys: ``logical_end_bit`` is the register's stop bit,
+    ``enable`` its activate bit 0."""
+    f = m.fmmu
+    return {
+        "index": m.index,
+        "logical_start": f.logical_start,
+        "length_bytes": f.length_bytes,
+        "logical_start_bit": f.logical_start_bit,
+        "logical_end_bit": f.logical_stop_bit,
+        "physical_start": f.physical_start,
+        "type": f.type,
+        "enable": f.enabled,
     }
 
 

@@ -15,16 +15,21 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from lolacli.eni.model import CyclicCommand, Direction, Eni, Fmmu, InitCmd, Mailbox, Slave
+from lolacli.eni.model import (
+    ConfiguredFmmu,
+    CyclicCommand,
+    Direction,
+    Eni,
+    InitCmd,
+    Mailbox,
+    Slave,
+)
 from lolacli.wire.commands import LOGICAL, Command, addressed_wkc, mnemonic, wkc_increment
-from lolacli.wire.frame import MAX_DATAGRAM_DATA
+from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, MAX_DATAGRAM_DATA
+from lolacli.wire.registers import Fmmu, FmmuType
 
 VALIDATE_SCHEMA = "lolacli.eni-validate/1"
 
-FMMU_READ = 1
-FMMU_WRITE = 2
-FMMU_READ_WRITE = 3
-DATAGRAM_HEADER_BYTES = 10
 
 
 class Severity(StrEnum):
@@ -61,27 +66,32 @@ def _warning(code: str, message: str, slave: int | None = None) -> Finding:
 
 def fmmu_valid(f: Fmmu) -> bool:
     """An FMMU we can reason about: a known type and bits within a byte."""
-    return f.type in (1, 2, 3) and f.logical_start_bit < 8 and f.logical_end_bit < 8
+    return f.type in (1, 2, 3) and f.logical_start_bit < 8 and f.logical_stop_bit < 8
 
 
 def fmmu_bits(f: Fmmu) -> tuple[int, int]:
     """The logical bit range ``[first, last]`` an FMMU maps (ETG.1000.4 Table 56)."""
     first = f.logical_start * 8 + f.logical_start_bit
-    last = (f.logical_start + f.length_bytes - 1) * 8 + f.logical_end_bit
+    last = (f.logical_start + f.length_bytes - 1) * 8 + f.logical_stop_bit
     return first, last
 
 
-def active_fmmus(s: Slave) -> list[Fmmu]:
-    return [f for f in s.fmmus if f.enable and f.length_bytes > 0 and fmmu_valid(f)]
+def _undecodable(f: Fmmu) -> bool:
+    return bool(f.length_bytes) and not fmmu_valid(f)
+
+
+def active_fmmus(s: Slave) -> list[ConfiguredFmmu]:
+    return [c for c in s.fmmus if c.fmmu.enabled and c.fmmu.length_bytes > 0 and fmmu_valid(c.fmmu)]
 
 
 def _overlaps(a: tuple[int, int], b: tuple[int, int]) -> bool:
     return a[0] <= b[1] and b[0] <= a[1]
 
 
-def _fmmu_label(f: Fmmu) -> str:
+def _fmmu_label(c: ConfiguredFmmu) -> str:
+    f = c.fmmu
     kind = {1: "read", 2: "write", 3: "read-write"}.get(f.type, f"type {f.type}")
-    return f"FMMU{f.index} ({kind} 0x{f.logical_start:08X}+{f.length_bytes})"
+    return f"FMMU{c.index} ({kind} 0x{f.logical_start:08X}+{f.length_bytes})"
 
 
 # --------------------------------------------------------------------------- checks
@@ -130,7 +140,7 @@ def check_chain(eni: Eni) -> Iterator[Finding]:
 
 def check_fmmu_types(eni: Eni) -> Iterator[Finding]:
     for s in eni.slaves:
-        bad = [f for f in s.fmmus if f.length_bytes and not fmmu_valid(f)]
+        bad = [c.fmmu for c in s.fmmus if _undecodable(c.fmmu)]
         if bad:
             hint = (
                 " (the file is an EncryptedEtherCATConfig: InitCmd data may be encrypted)"
@@ -147,12 +157,12 @@ def check_fmmu_types(eni: Eni) -> Iterator[Finding]:
 
 def check_fmmu_overlaps(eni: Eni) -> Iterator[Finding]:
     """Logical bits mapped by two different slaves (any direction) collide in the frame."""
-    mapped = [(s, f, fmmu_bits(f)) for s in eni.slaves for f in active_fmmus(s)]
+    mapped = [(s, c, fmmu_bits(c.fmmu)) for s in eni.slaves for c in active_fmmus(s)]
     for i, (sa, fa, ra) in enumerate(mapped):
         for sb, fb, rb in mapped[i + 1 :]:
             if sa is sb or not _overlaps(ra, rb):
                 continue
-            both_write = fa.type & FMMU_WRITE and fb.type & FMMU_WRITE
+            both_write = fa.fmmu.type & FmmuType.WRITE and fb.fmmu.type & FmmuType.WRITE
             code = "fmmu-write-overlap" if both_write else "fmmu-overlap"
             yield _error(
                 code,
@@ -174,7 +184,8 @@ def check_fmmu_mapping(eni: Eni) -> Iterator[Finding]:
         if (r := _logical_range(c)) is not None
     ]
     for s in eni.slaves:
-        for f in active_fmmus(s):
+        for c in active_fmmus(s):
+            f = c.fmmu
             bits = fmmu_bits(f)
             wanted = _carriers(f.type)
             if ranges and not any(
@@ -182,23 +193,23 @@ def check_fmmu_mapping(eni: Eni) -> Iterator[Finding]:
             ):
                 yield _warning(
                     "fmmu-not-in-cyclic",
-                    f"slave {s.position}: {_fmmu_label(f)} is not carried by any "
+                    f"slave {s.position}: {_fmmu_label(c)} is not carried by any "
                     "cyclic logical command",
                     s.position,
                 )
             if s.sync_managers and not _in_sync_manager(s, f):
                 yield _warning(
                     "fmmu-sm-mismatch",
-                    f"slave {s.position}: {_fmmu_label(f)} maps physical "
+                    f"slave {s.position}: {_fmmu_label(c)} maps physical "
                     f"0x{f.physical_start:04X}, inside no sync manager",
                     s.position,
                 )
 
 
 def _carriers(fmmu_type: int) -> set[int]:
-    if fmmu_type == FMMU_READ:
+    if fmmu_type == FmmuType.READ:
         return {Command.LRD, Command.LRW}
-    if fmmu_type == FMMU_WRITE:
+    if fmmu_type == FmmuType.WRITE:
         return {Command.LWR, Command.LRW}
     return {Command.LRW}
 
@@ -207,8 +218,8 @@ def _in_sync_manager(s: Slave, f: Fmmu) -> bool:
     if f.physical_start == MAILBOX_STATUS_REGISTER:
         return True
     return any(
-        m.start_address <= f.physical_start < m.start_address + max(m.length_bytes, 1)
-        for m in s.sync_managers
+        m.physical_start <= f.physical_start < m.physical_start + max(m.length_bytes, 1)
+        for m in (c.sync_manager for c in s.sync_managers)
     )
 
 
@@ -248,11 +259,11 @@ def _image_window(c: CyclicCommand, direction: Direction) -> tuple[int, int] | N
 def _slave_touches(s: Slave, c: CyclicCommand) -> tuple[bool, bool]:
     """(reads, writes): does the logical command move this slave's inputs / outputs?"""
     window = _logical_range(c)
-    fmmus = active_fmmus(s)
-    scrambled = any(f.length_bytes and not fmmu_valid(f) for f in s.fmmus)
+    fmmus = [c.fmmu for c in active_fmmus(s)]
+    scrambled = any(_undecodable(c.fmmu) for c in s.fmmus)
     if fmmus and window is not None and not scrambled:
-        reads = any(f.type & FMMU_READ and _overlaps(fmmu_bits(f), window) for f in fmmus)
-        writes = any(f.type & FMMU_WRITE and _overlaps(fmmu_bits(f), window) for f in fmmus)
+        reads = any(f.type & FmmuType.READ and _overlaps(fmmu_bits(f), window) for f in fmmus)
+        writes = any(f.type & FmmuType.WRITE and _overlaps(fmmu_bits(f), window) for f in fmmus)
         return reads, writes
     iw, ow = _image_window(c, Direction.INPUT), _image_window(c, Direction.OUTPUT)
     reads = iw is not None and any(
@@ -296,7 +307,7 @@ def check_wkc(eni: Eni) -> Iterator[Finding]:
 
 
 def _has_undecodable_fmmu(eni: Eni) -> bool:
-    return any(f.length_bytes and not fmmu_valid(f) for s in eni.slaves for f in s.fmmus)
+    return any(_undecodable(c.fmmu) for s in eni.slaves for c in s.fmmus)
 
 
 def _any_areas(eni: Eni) -> bool:
@@ -307,11 +318,12 @@ def check_pdo_sizes(eni: Eni) -> Iterator[Finding]:
     for s in eni.slaves:
         for sm in s.sync_managers:
             bits = sum(p.bit_size for p in s.pdos if p.sync_manager == sm.index)
-            if bits and (bits + 7) // 8 > sm.length_bytes:
+            length_bytes = sm.sync_manager.length_bytes
+            if bits and (bits + 7) // 8 > length_bytes:
                 yield _error(
                     "pdo-overruns-sm",
                     f"slave {s.position}: PDOs assigned to SM{sm.index} need {(bits + 7) // 8}"
-                    f" bytes, the sync manager is {sm.length_bytes} bytes",
+                    f" bytes, the sync manager is {length_bytes} bytes",
                     s.position,
                 )
 
@@ -438,15 +450,17 @@ def _mailbox_fields(m: Mailbox | None) -> Iterator[_Field]:
 
 
 def _sm_fmmu_fields(s: Slave) -> Iterator[_Field]:
-    for sm in s.sync_managers:
-        yield f"SM{sm.index} index", sm.index, SM_INDEX
-        yield f"SM{sm.index} start address", sm.start_address, U16
-        yield f"SM{sm.index} length", sm.length_bytes, U16
-        yield f"SM{sm.index} control byte", sm.control, U8
-    for f in s.fmmus:
-        yield f"FMMU{f.index} logical start", f.logical_start, U32
-        yield f"FMMU{f.index} length", f.length_bytes, U16
-        yield f"FMMU{f.index} physical start", f.physical_start, U16
+    for c in s.sync_managers:
+        sm = c.sync_manager
+        yield f"SM{c.index} index", c.index, SM_INDEX
+        yield f"SM{c.index} start address", sm.physical_start, U16
+        yield f"SM{c.index} length", sm.length_bytes, U16
+        yield f"SM{c.index} control byte", sm.control, U8
+    for cf in s.fmmus:
+        f = cf.fmmu
+        yield f"FMMU{cf.index} logical start", f.logical_start, U32
+        yield f"FMMU{cf.index} length", f.length_bytes, U16
+        yield f"FMMU{cf.index} physical start", f.physical_start, U16
 
 
 def _pdo_fields(s: Slave) -> Iterator[_Field]:

@@ -104,7 +104,7 @@ def test_a_slave_without_pdos_in_its_eni_maps_the_enis_sizes(corpus: Path) -> No
 def test_sm_control_bytes_stay_as_the_eni_gives_them(eni_name: str, position: int, sm: int) -> None:
     slave = load_eni(EXAMPLES / eni_name).slaves[position - 1]
     declared = next(m for m in slave.sync_managers if m.index == sm)
-    assert declared.control == 0x00  # an inputs SM: buffered, ECAT reads, no interrupt
+    assert declared.sync_manager.control == 0x00  # an inputs SM: buffered, ECAT reads, no interrupt
     assert sync_managers_for(slave)[sm].control == 0x00
     layout = sii_layout(sii_from_slave(slave))
     assert layout.sync_managers[sm].control == 0x00

@@ -86,7 +86,7 @@ def test_every_lola_slave_has_a_consistent_image() -> None:
         assert layout.outputs_bytes * 8 >= slave.outputs_bits
         assert layout.inputs_bytes * 8 >= slave.inputs_bits
         for sm in slave.sync_managers:  # SM index = position in the SYNCM category
-            assert layout.sync_managers[sm.index].start == sm.start_address
+            assert layout.sync_managers[sm.index].start == sm.sync_manager.physical_start
 
 
 # ---------------------------------------------------------------- transcripts

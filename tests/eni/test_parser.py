@@ -8,10 +8,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lolacli.eni.model import Direction, Fmmu, SyncManager
-from lolacli.eni.parser import decode_fmmu, decode_sync_manager, parse_eni, parse_number
+from lolacli.eni.model import ConfiguredFmmu, ConfiguredSyncManager, Direction, InitCmd
+from lolacli.eni.parser import (
+    fmmus_from_init_cmds,
+    parse_eni,
+    parse_number,
+    sync_managers_from_init_cmds,
+)
 from lolacli.errors import EniError
 from lolacli.files import load_eni
+from lolacli.wire.registers import Fmmu, SyncManager
 from tests.conftest import CORPUS
 
 FIXTURES = Path(__file__).resolve().parent.parent / "fixtures" / "eni"
@@ -61,13 +67,15 @@ def test_parse_number_round_trip(value, form):
 def test_fmmu_pinned_from_twincat_export():
     """kpierczy-ethercat-lib__test_eni.xml, slave WheelRearLeft, InitCmd 'set fmmu 0 (outputs)'."""
     block = bytes.fromhex("00080001060000070011000201000000")
-    assert decode_fmmu(0, block) == Fmmu(0, 0x01000800, 6, 0, 7, 0x1100, 0, 2, True)
+    (fmmu,) = fmmus_from_init_cmds([InitCmd(("PS",), 5, 0x1001, 0x0600, block, 1)])
+    assert fmmu == ConfiguredFmmu(0, Fmmu(0x01000800, 6, 0, 7, 0x1100, 0, 2, 1))
 
 
 def test_sync_manager_pinned_from_twincat_export():
     """Same slave, InitCmd 'set sm 3 (inputs)'."""
     block = bytes.fromhex("80110e0020000100")
-    assert decode_sync_manager(3, block) == SyncManager(3, 0x1180, 14, 0x20, True)
+    (sm,) = sync_managers_from_init_cmds([InitCmd(("PS",), 5, 0x1001, 0x0818, block, 1)])
+    assert sm == ConfiguredSyncManager(3, SyncManager(0x1180, 14, 0x20, 0, 1))
 
 
 def test_small_fixture_model():
@@ -83,11 +91,14 @@ def test_small_fixture_model():
     assert drive.identity.vendor_id == 0x9A and drive.identity.product_code == 0x30924
     assert (drive.station_address, drive.auto_inc_address) == (1002, 0xFFFF)
     assert (drive.previous_port, drive.previous_station_address) == ("B", 1001)
-    assert [(f.index, f.logical_start, f.length_bytes, f.type) for f in drive.fmmus] == [
+    fmmus = [(f.index, f.fmmu.logical_start, f.fmmu.length_bytes, f.fmmu.type) for f in drive.fmmus]
+    assert fmmus == [
         (0, 0x10000, 6, 2),
         (1, 0x10000, 8, 1),
     ]
-    assert [(m.index, m.start_address, m.length_bytes, m.kind) for m in drive.sync_managers] == [
+    sms = [(m.index, m.sync_manager.physical_start, m.sync_manager.length_bytes, m.kind)
+           for m in drive.sync_managers]
+    assert sms == [
         (0, 0x1800, 140, "MBoxOut"),
         (1, 0x1900, 140, "MBoxIn"),
         (2, 0x1100, 6, "Outputs"),
@@ -140,7 +151,7 @@ def test_twincat_export_details():
     assert wheel.name == "WheelRearLeft"
     assert wheel.mailbox is not None and wheel.mailbox.protocols == ("EoE", "CoE", "FoE")
     assert wheel.mailbox.coe_init_cmds[0].index == 0x1C12
-    assert wheel.fmmus[0] == Fmmu(0, 0x01000800, 6, 0, 7, 0x1100, 0, 2, True)
+    assert wheel.fmmus[0] == ConfiguredFmmu(0, Fmmu(0x01000800, 6, 0, 7, 0x1100, 0, 2, 1))
     assert wheel.dc is not None and wheel.dc.cycle_time0_ns == 10_000_000
     assert [p.index for p in wheel.pdos if p.sync_manager is not None] == [
         0x1601,
@@ -211,11 +222,11 @@ def _process_fmmus(slave) -> list[tuple]:
             f.logical_start,
             f.length_bytes,
             f.logical_start_bit,
-            f.logical_end_bit,
+            f.logical_stop_bit,
             f.physical_start,
             f.type,
         )
-        for f in slave.fmmus
+        for f in (c.fmmu for c in slave.fmmus)
         if f.length_bytes and f.type in (1, 2) and f.physical_start != 0x080D  # not mailbox state
     ]
 

@@ -247,6 +247,17 @@ def _first(items: tuple, **changes: object) -> tuple:
     return (replace(items[0], **changes), *items[1:])
 
 
+def _first_fmmu(eni: Eni, **changes: object) -> Eni:
+    fmmus = eni.slaves[0].fmmus
+    return _slave(eni, fmmus=_first(fmmus, fmmu=replace(fmmus[0].fmmu, **changes)))
+
+
+def _first_sm(eni: Eni, **changes: object) -> Eni:
+    sms = eni.slaves[0].sync_managers
+    sm = replace(sms[0].sync_manager, **changes)
+    return _slave(eni, sync_managers=_first(sms, sync_manager=sm))
+
+
 def _cyclic_cmd(eni: Eni, n: int, **changes: object) -> Eni:
     task = eni.cyclic[0]
     frame = task.frames[0]
@@ -275,16 +286,16 @@ MODEL_CASES: list[tuple[str, Mutate, int, int, str, int | None]] = [
      "<Info><RevisionNo>", DRIVE),
     ("serial", lambda e, v: _identity(e, serial=v), -1, 0, "<Info><SerialNo>", DRIVE),
     ("fmmu-logical-start",
-     lambda e, v: _slave(e, fmmus=_first(e.slaves[0].fmmus, logical_start=v)),
+     lambda e, v: _first_fmmu(e, logical_start=v),
      2**32, 2**32 - 1, "FMMU0 logical start", DRIVE),
     ("fmmu-physical-start",
-     lambda e, v: _slave(e, fmmus=_first(e.slaves[0].fmmus, physical_start=v)),
+     lambda e, v: _first_fmmu(e, physical_start=v),
      0x10000, 0xFFFF, "FMMU0 physical start", DRIVE),
     ("fmmu-length",
-     lambda e, v: _slave(e, fmmus=_first(e.slaves[0].fmmus, length_bytes=v)),
+     lambda e, v: _first_fmmu(e, length_bytes=v),
      0x10000, 0xFFFF, "FMMU0 length", DRIVE),
     ("sm-start-from-initcmd",
-     lambda e, v: _slave(e, sync_managers=_first(e.slaves[0].sync_managers, start_address=v)),
+     lambda e, v: _first_sm(e, physical_start=v),
      0x10000, 0xFFFF, "SM0 start address", DRIVE),
     ("initcmd-adp", lambda e, v: _slave(e, init_cmds=_init_cmd(e.slaves[0], adp=v)),
      0x10000, 0xFFFF, "(request INIT (acknowledge errors)) <Adp>", DRIVE),
