@@ -39,8 +39,12 @@ from lolacli.master.transport import Transport
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
+    SII_COMMAND_SHIFT,
     AlState,
     Register,
+    SiiCommand,
+    SiiConfig,
+    SiiStatus,
     SyncManager,
     encode_sync_manager,
     sync_manager_address,
@@ -69,13 +73,8 @@ PROTOCOLS = (
     (0x20, "VoE"),
 )
 
-# EEPROM interface (ETG.1000.4 Tables 47–50)
-EEPROM_PDI_OFFERED = 0x01  # 0x0500 bit 0: the EEPROM is offered to the PDI
-EEPROM_FORCE_ECAT = 0x02  # 0x0500 bit 1: take it back for EtherCAT
-EEPROM_READ_8_BYTES = 0x0040
-EEPROM_COMMAND_READ = 0x0100
-EEPROM_ERROR = 0x2000 | 0x0800  # command error, missing acknowledge
-EEPROM_BUSY = 0x8000
+#: EEPROM status bits that fail a read (0x0502; a checksum error too, as SOEM's error mask)
+EEPROM_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.CHECKSUM_ERROR
 EEPROM_POLLS = 100
 
 # mailbox sync managers: control byte (mailbox mode, direction, interrupt), activate
@@ -300,7 +299,7 @@ def read_sii(master: Master, stations: Sequence[int]) -> list[SiiSlave]:
     held = [
         s
         for s, d in zip(stations, configs, strict=True)
-        if d.wkc == 1 and d.data[0] & EEPROM_PDI_OFFERED
+        if d.wkc == 1 and d.data[0] & SiiConfig.PDI_OFFERED
     ]
     _eeprom_owner(master, held, to_pdi=False)
     try:
@@ -344,7 +343,7 @@ def _eeprom_owner(master: Master, stations: Sequence[int], *, to_pdi: bool) -> N
     """Take the EEPROM from the PDI (force, then release the force bit), or give it back."""
     if not stations:
         return
-    for value in [EEPROM_PDI_OFFERED] if to_pdi else [EEPROM_FORCE_ECAT, 0]:
+    for value in [SiiConfig.PDI_OFFERED] if to_pdi else [SiiConfig.FORCE_ECAT, 0]:
         master.exchange_many(
             [
                 Datagram.physical(Command.FPWR, s, Register.SII_CONFIG, bytes([value]))
@@ -361,7 +360,7 @@ def _read_words(master: Master, asks: Sequence[tuple[int, int]]) -> dict[int, by
                 Command.FPWR,
                 station,
                 Register.SII_CONTROL_STATUS,
-                _U16.pack(EEPROM_COMMAND_READ) + _U32.pack(address),
+                _U16.pack(SiiCommand.READ << SII_COMMAND_SHIFT) + _U32.pack(address),
             )
             for station, address in asks
         ]
@@ -379,8 +378,8 @@ def _read_words(master: Master, asks: Sequence[tuple[int, int]]) -> dict[int, by
         ]
         still = []
         for (station, address), d in zip(waiting, master.exchange_many(reads), strict=True):
-            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else EEPROM_BUSY
-            if status & EEPROM_BUSY:
+            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else SiiStatus.BUSY
+            if status & SiiStatus.BUSY:
                 still.append((station, address))
             elif status & EEPROM_ERROR:
                 raise TransportError(
@@ -388,7 +387,7 @@ def _read_words(master: Master, asks: Sequence[tuple[int, int]]) -> dict[int, by
                     f"(EEPROM status 0x{status:04X})"
                 )
             else:
-                n = 8 if status & EEPROM_READ_8_BYTES else 4
+                n = 8 if status & SiiStatus.READ_8_BYTES else 4
                 out[station] = bytes(d.data[6 : 6 + n])
         waiting = still
         if not waiting:

@@ -47,8 +47,12 @@ from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
     AL_ERROR_INDICATOR,
+    SII_COMMAND_SHIFT,
     AlState,
     Register,
+    SiiCommand,
+    SiiConfig,
+    SiiStatus,
     al_state_name,
     al_status_text,
 )
@@ -69,13 +73,6 @@ SCHEMA = "lolacli.scan/1"
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 
-# SII interface (ET1100 datasheet, registers 0x0500-0x050F; ETG.1000.4 Table 47)
-EEPROM_PDI_OFFERED = 0x01  # 0x0500 bit 0: EEPROM control offered to the PDI
-EEPROM_FORCE_ECAT = 0x02  # 0x0500 bit 1: take the EEPROM back from the PDI
-EEPROM_READ_8_BYTES = 0x0040
-EEPROM_COMMAND_READ = 0x0100
-EEPROM_COMMAND_ERROR = 0x2000  # bit 13: the read was not acknowledged
-EEPROM_BUSY = 0x8000
 SII_POLLS = 50  # reads of a busy EEPROM before it counts as not answering
 SII_MAX_WORDS = 0x4000  # stop walking categories here (32 KiB: beyond any real SII)
 
@@ -473,7 +470,7 @@ def read_sii(master: Master, slaves: Sequence[ScannedSlave]) -> None:
     """Read every answering slave's SII in parallel rounds (see the module docstring);
     a slave whose EEPROM does not read gets ``sii_error``."""
     readers = [s for s in slaves if s.answered]
-    taken = [s for s in readers if s.eeprom_config & EEPROM_PDI_OFFERED]
+    taken = [s for s in readers if s.eeprom_config & SiiConfig.PDI_OFFERED]
     _eeprom_owner(master, taken, to_pdi=False)
     try:
         walks: dict[int, _Walk] = {}
@@ -505,7 +502,7 @@ def _eeprom_owner(master: Master, slaves: Sequence[ScannedSlave], *, to_pdi: boo
     """Take the EEPROM from the PDI (force, then release the force bit), or give it back."""
     if not slaves:
         return
-    steps = [EEPROM_PDI_OFFERED] if to_pdi else [EEPROM_FORCE_ECAT, 0]
+    steps = [SiiConfig.PDI_OFFERED] if to_pdi else [SiiConfig.FORCE_ECAT, 0]
     for value in steps:
         master.exchange_many(
             [
@@ -524,7 +521,7 @@ def _read_words(master: Master, asks: Sequence[tuple[ScannedSlave, int]]) -> dic
             Command.APWR,
             s.auto_inc_address,
             Register.SII_CONTROL_STATUS,
-            _U16.pack(EEPROM_COMMAND_READ) + _U32.pack(address),
+            _U16.pack(SiiCommand.READ << SII_COMMAND_SHIFT) + _U32.pack(address),
         )
         for s, address in asks
     ]
@@ -539,13 +536,13 @@ def _read_words(master: Master, asks: Sequence[tuple[ScannedSlave, int]]) -> dic
         reads = [_aprd(s.position, Register.SII_CONTROL_STATUS, 14) for s, _address in waiting]
         still = []
         for (s, address), d in zip(waiting, master.exchange_many(reads), strict=True):
-            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else EEPROM_BUSY
-            if status & EEPROM_BUSY:
+            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else SiiStatus.BUSY
+            if status & SiiStatus.BUSY:
                 still.append((s, address))
-            elif status & EEPROM_COMMAND_ERROR:
+            elif status & SiiStatus.COMMAND_ERROR:
                 out[s.position] = f"SII read at word 0x{address:X}: EEPROM error 0x{status:04X}"
             else:
-                n = 8 if status & EEPROM_READ_8_BYTES else 4
+                n = 8 if status & SiiStatus.READ_8_BYTES else 4
                 out[s.position] = bytes(d.data[6 : 6 + n])
         waiting = still
     for s, address in waiting:

@@ -396,6 +396,13 @@ def encode_system_time_difference(difference_ns: int) -> bytes:
 # --- SII EEPROM interface -----------------------------------------------------------------
 
 
+class SiiConfig(IntFlag):
+    """SII EEPROM configuration, register 0x0500 (ET1100 datasheet; ETG.1000.4 Table 47)."""
+
+    PDI_OFFERED = 0x01  # bit 0: EEPROM control is offered to the PDI
+    FORCE_ECAT = 0x02  # bit 1: take it back for EtherCAT (resets 0x0501 bit 0)
+
+
 class SiiCommand(IntEnum):
     """SII control/status bits 8–10: the command (ET1100 datasheet, register 0x0502)."""
 
@@ -403,6 +410,25 @@ class SiiCommand(IntEnum):
     READ = 1
     WRITE = 2
     RELOAD = 4
+
+
+#: The command field of 0x0502 (bits 8–10, :class:`SiiCommand` shifted left by 8).
+SII_COMMAND_SHIFT = 8
+SII_COMMAND_MASK = 0x0700
+
+
+class SiiStatus(IntFlag):
+    """SII control/status bits at 0x0502 but the command field (ETG.1000.4 Table 47)."""
+
+    WRITE_ENABLE = 0x0001
+    EMULATION = 0x0020
+    READ_8_BYTES = 0x0040  # a read returns 8 bytes at 0x0508 (else 4)
+    TWO_ADDRESS_BYTES = 0x0080
+    CHECKSUM_ERROR = 0x0800  # ESC configuration area checksum
+    DEVICE_INFO_ERROR = 0x1000
+    COMMAND_ERROR = 0x2000  # missing EEPROM acknowledge or invalid command
+    WRITE_ERROR = 0x4000
+    BUSY = 0x8000
 
 
 @dataclass(frozen=True, slots=True)
@@ -427,29 +453,19 @@ class SiiControlStatus:
         return 8 if self.read_8_bytes else 4
 
 
-_SII_FLAGS = (
-    ("write_enable", 0),
-    ("emulation", 5),
-    ("read_8_bytes", 6),
-    ("two_address_bytes", 7),
-    ("checksum_error", 11),
-    ("device_info_error", 12),
-    ("command_error", 13),
-    ("write_error", 14),
-    ("busy", 15),
-)
+_SII_FLAGS = tuple((str(flag.name).lower(), int(flag)) for flag in SiiStatus)
 _SII_RESERVED_MASK = 0x001E
 
 
 def decode_sii_control_status(word: int) -> SiiControlStatus:
-    flags = {name: bool(word >> bit & 1) for name, bit in _SII_FLAGS}
-    command = enum_or_int(SiiCommand, (word >> 8) & 0x7)
+    flags = {name: bool(word & mask) for name, mask in _SII_FLAGS}
+    command = enum_or_int(SiiCommand, (word & SII_COMMAND_MASK) >> SII_COMMAND_SHIFT)
     return SiiControlStatus(command=command, reserved=word & _SII_RESERVED_MASK, **flags)
 
 
 def encode_sii_control_status(s: SiiControlStatus) -> int:
-    word = ((s.command & 0x7) << 8) | (s.reserved & _SII_RESERVED_MASK)
-    for name, bit in _SII_FLAGS:
+    word = ((s.command << SII_COMMAND_SHIFT) & SII_COMMAND_MASK) | (s.reserved & _SII_RESERVED_MASK)
+    for name, mask in _SII_FLAGS:
         if getattr(s, name):
-            word |= 1 << bit
+            word |= mask
     return word

@@ -140,6 +140,21 @@ def test_sii_read_through_the_eeprom_interface(eight_bytes: bool) -> None:
     assert struct.unpack_from("<I", data)[0] == slave.identity.vendor_id
 
 
+def test_sii_reload_command_is_0x0400() -> None:
+    """ET1100 datasheet, 0x0502 bits 8-10: 001 read, 010 write, 100 reload; others are
+    invalid commands (the emulated ESC took 0x0300 for reload until the codes came from wire)."""
+    slave = load_eni(EXAMPLES / "single_drive.xml").slaves[0]
+    sii = bytearray(sii_from_slave(slave))
+    sii[8:10] = (0x4321).to_bytes(2, "little")  # word 4: configured station alias
+    bus = Bus(Chain([Esc(bytes(sii))]))
+    bus.one(C.APWR, 0, r.STATION_ALIAS, b"\x00\x00")
+    assert bus.one(C.APWR, 0, r.EEPROM_CONTROL, struct.pack("<HHH", 0x0300, 0, 0)).wkc == 1
+    assert bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data[1] & 0x20  # command error
+    assert bus.one(C.APWR, 0, r.EEPROM_CONTROL, struct.pack("<HHH", 0x0400, 0, 0)).wkc == 1
+    assert not bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data[1] & 0x20
+    assert bus.one(C.APRD, 0, r.STATION_ALIAS, 2).data == b"\x21\x43"
+
+
 def test_mailbox_handshake_full_bit_blocks_and_read_empties(drive_bus: Bus) -> None:
     _configure_mailbox(drive_bus)
     drive_bus.fpwr(0x03E9, r.AL_CONTROL, b"\x02\x00")

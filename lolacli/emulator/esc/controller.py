@@ -26,7 +26,7 @@ from lolacli.wire.commands import (
     Command,
     wkc_increment,
 )
-from lolacli.wire.registers import AlStatusCode
+from lolacli.wire.registers import AlStatusCode, SiiStatus
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -123,7 +123,7 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         )
         _U16.pack_into(m, r.WATCHDOG_DIVIDER, cfg.watchdog_divider)
         _U16.pack_into(m, r.WATCHDOG_TIME_PROCESS_DATA, cfg.watchdog_time_process_data)
-        status = r.EEPROM_STATUS_READ_8_BYTES if cfg.eeprom_8_byte_reads else 0
+        status = int(SiiStatus.READ_8_BYTES) if cfg.eeprom_8_byte_reads else 0
         _U16.pack_into(m, r.EEPROM_CONTROL, status)
         self._forget_mailbox()
         self._cache = None

@@ -8,8 +8,16 @@ import struct
 from lolacli.emulator import registers as r
 from lolacli.emulator.esc.memory import EscMemory
 from lolacli.emulator.sii import sii_layout
+from lolacli.wire.registers import SII_COMMAND_MASK, SII_COMMAND_SHIFT, SiiCommand, SiiStatus
 
 _U16 = struct.Struct("<H")
+# wire's codes as plain ints (module constants are cheaper than enum members per access)
+_READ = SiiCommand.READ << SII_COMMAND_SHIFT
+_WRITE = SiiCommand.WRITE << SII_COMMAND_SHIFT
+_RELOAD = SiiCommand.RELOAD << SII_COMMAND_SHIFT
+_READ_8_BYTES = int(SiiStatus.READ_8_BYTES)
+_COMMAND_ERROR = int(SiiStatus.COMMAND_ERROR)
+_CLEARED = int(SII_COMMAND_MASK | SiiStatus.BUSY | SiiStatus.COMMAND_ERROR)
 
 
 class SiiInterface(EscMemory):
@@ -17,23 +25,23 @@ class SiiInterface(EscMemory):
 
     def _eeprom_command(self) -> None:
         control = self.u16(r.EEPROM_CONTROL)
-        command = control & r.EEPROM_COMMAND_MASK
+        command = control & SII_COMMAND_MASK
         word = self.u32(r.EEPROM_ADDRESS)
-        status = control & ~(r.EEPROM_COMMAND_MASK | r.EEPROM_STATUS_BUSY | r.EEPROM_ERROR_COMMAND)
+        status = control & ~_CLEARED
         if self.config.eeprom_8_byte_reads:
-            status |= r.EEPROM_STATUS_READ_8_BYTES
-        if command == r.EEPROM_COMMAND_READ:
+            status |= _READ_8_BYTES
+        if command == _READ:
             chunk = 8 if self.config.eeprom_8_byte_reads else 4
             raw = bytes(self.sii[2 * word : 2 * word + chunk])
             self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 8] = (raw + b"\xff" * 8)[:8]
-        elif command == r.EEPROM_COMMAND_WRITE:
+        elif command == _WRITE:
             if 2 * word + 2 <= len(self.sii):
                 self.sii[2 * word : 2 * word + 2] = self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 2]
             else:
-                status |= r.EEPROM_ERROR_COMMAND
-        elif command == r.EEPROM_COMMAND_RELOAD:
+                status |= _COMMAND_ERROR
+        elif command == _RELOAD:
             self.layout = sii_layout(bytes(self.sii))
             _U16.pack_into(self.mem, r.STATION_ALIAS, self.layout.station_alias)
         elif command:
-            status |= r.EEPROM_ERROR_COMMAND
+            status |= _COMMAND_ERROR
         _U16.pack_into(self.mem, r.EEPROM_CONTROL, status & 0xFFFF)
