@@ -45,9 +45,9 @@ from lolacli.emulator.plan import (
 )
 from lolacli.emulator.registers import (
     AL_STATUS,
-    FMMU_BASE,
+    FMMU,
     PROCESS_RAM,
-    SYNC_MANAGER_BASE,
+    SM,
     SYNC_MANAGER_BYTES,
     AlState,
 )
@@ -190,7 +190,7 @@ class _Slot:
 _AL_STATUS = AL_STATUS
 _OP = int(AlState.OP)
 # FMMU and SM registers: where a device cycle's data go
-_SM_AND_FMMU = (FMMU_BASE, SYNC_MANAGER_BASE + 16 * SYNC_MANAGER_BYTES)
+_SM_AND_FMMU = (FMMU, SM + 16 * SYNC_MANAGER_BYTES)
 
 
 def _touches_process_data(slots: list[_Slot]) -> bool:

@@ -1,27 +1,43 @@
 """ESC register addresses and codes the emulator uses (ETG.1000.4 §6, ET1100 datasheet §2).
 
-Addresses, AL states and AL status codes are :mod:`lolacli.wire.registers`'s; here they are
-plain ints under the emulator's names (module constants, cheap in the hot path), with the
-bit masks only the emulated ESC needs.
+Addresses are :mod:`lolacli.wire.registers`'s ``Register`` values under the same names, as
+plain ints: a module constant costs a third of an ``IntEnum`` member in the ESC's hot path
+(``benchmarks/register_constants.py``). Sync-manager bits, AL states and masks are wire's,
+re-exported; only range ends and what wire has no use for are defined here.
 """
 
 from __future__ import annotations
 
 from enum import IntFlag
 
-from lolacli.wire import registers as wire
-from lolacli.wire.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
+from lolacli.wire.registers import (
+    AL_ERROR_INDICATOR,
+    AL_STATE_MASK,
+    FMMU_BYTES,
+    SM_ACTIVATE_ENABLE,
+    SM_CONTROL_DIRECTION_MASK,
+    SM_CONTROL_MODE_MASK,
+    SM_CONTROL_WATCHDOG,
+    SM_DIRECTION_READ,
+    SM_DIRECTION_WRITE,
+    SM_MODE_BUFFERED,
+    SM_MODE_MAILBOX,
+    SM_PDI_DEACTIVATE,
+    SM_STATUS_MAILBOX_FULL,
+    SYNC_MANAGER_BYTES,
+    AlState,
+)
 from lolacli.wire.registers import Register as _R
 
 # --- ESC information (ETG.1000.4 Table 31) --------------------------------------------
 TYPE = int(_R.TYPE)
 REVISION = int(_R.REVISION)
 BUILD = int(_R.BUILD)
-FMMUS_SUPPORTED = int(_R.FMMU_COUNT)
-SYNC_MANAGERS_SUPPORTED = int(_R.SM_COUNT)
-RAM_SIZE_KIB = int(_R.RAM_SIZE)
+FMMU_COUNT = int(_R.FMMU_COUNT)
+SM_COUNT = int(_R.SM_COUNT)
+RAM_SIZE = int(_R.RAM_SIZE)
 PORT_DESCRIPTOR = int(_R.PORT_DESCRIPTOR)
-FEATURES = int(_R.ESC_FEATURES)
+ESC_FEATURES = int(_R.ESC_FEATURES)
 
 # --- station address, data link layer --------------------------------------------------
 STATION_ADDRESS = int(_R.STATION_ADDRESS)
@@ -38,63 +54,47 @@ PDI_CONTROL = int(_R.PDI_CONTROL)
 
 # --- error counters (ETG.1000.4 Table 45..48) -------------------------------------------
 RX_ERROR_COUNTER = int(_R.RX_ERROR_COUNTER)  # 2 bytes per port: invalid frame, RX error
-FORWARDED_RX_ERROR = int(_R.FORWARDED_RX_ERROR_COUNTER)
-PROCESSING_UNIT_ERROR = int(_R.PROCESSING_UNIT_ERROR_COUNTER)
-PDI_ERROR = int(_R.PDI_ERROR_COUNTER)
+FORWARDED_RX_ERROR_COUNTER = int(_R.FORWARDED_RX_ERROR_COUNTER)
+PROCESSING_UNIT_ERROR_COUNTER = int(_R.PROCESSING_UNIT_ERROR_COUNTER)
+PDI_ERROR_COUNTER = int(_R.PDI_ERROR_COUNTER)
 LOST_LINK_COUNTER = int(_R.LOST_LINK_COUNTER)
 ERROR_COUNTERS_END = 0x0314
 
 # --- watchdogs -------------------------------------------------------------------------
 WATCHDOG_DIVIDER = int(_R.WATCHDOG_DIVIDER)
-WATCHDOG_TIME_PDI = int(_R.WD_TIME_PDI)
-WATCHDOG_TIME_PROCESS_DATA = int(_R.WD_TIME_PD)
-WATCHDOG_STATUS_PROCESS_DATA = int(_R.WD_STATUS_PD)  # bit 0: 1 = OK, 0 = expired
-WATCHDOG_COUNTER_PROCESS_DATA = int(_R.WD_COUNTER_PD)
+WD_TIME_PDI = int(_R.WD_TIME_PDI)
+WD_TIME_PD = int(_R.WD_TIME_PD)
+WD_STATUS_PD = int(_R.WD_STATUS_PD)  # bit 0: 1 = OK, 0 = expired
+WD_COUNTER_PD = int(_R.WD_COUNTER_PD)
 
 # --- SII EEPROM interface (ETG.1000.4 Table 49..52) --------------------------------------
-EEPROM_CONFIG = int(_R.SII_CONFIG)
-EEPROM_PDI_ACCESS = int(_R.SII_PDI_ACCESS)
-EEPROM_CONTROL = int(_R.SII_CONTROL_STATUS)
-EEPROM_ADDRESS = int(_R.SII_ADDRESS)
-EEPROM_DATA = int(_R.SII_DATA)
-EEPROM_END = int(_R.MII_CONTROL_STATUS)  # the SII interface ends where MII begins
+SII_CONFIG = int(_R.SII_CONFIG)
+SII_PDI_ACCESS = int(_R.SII_PDI_ACCESS)
+SII_CONTROL_STATUS = int(_R.SII_CONTROL_STATUS)
+SII_ADDRESS = int(_R.SII_ADDRESS)
+SII_DATA = int(_R.SII_DATA)
+SII_END = int(_R.MII_CONTROL_STATUS)  # the SII interface ends where MII begins
 
 # --- FMMU and sync managers (ETG.1000.4 Tables 56 and 58) -------------------------------
-FMMU_BASE = int(_R.FMMU)
-FMMU_BYTES = wire.FMMU_BYTES
-SYNC_MANAGER_BASE = int(_R.SM)
-SYNC_MANAGER_BYTES = wire.SYNC_MANAGER_BYTES
-
-SM_CONTROL_MODE_MASK = 0x03
-SM_MODE_BUFFERED = 0x00
-SM_MODE_MAILBOX = 0x02
-SM_CONTROL_DIRECTION_MASK = 0x0C
-SM_DIRECTION_READ = 0x00  # ECAT reads, PDI writes (inputs, mailbox in)
-SM_DIRECTION_WRITE = 0x04  # ECAT writes, PDI reads (outputs, mailbox out)
-SM_CONTROL_WATCHDOG = 0x40
-SM_STATUS_MAILBOX_FULL = 0x08
-SM_ACTIVATE_ENABLE = 0x01
-SM_PDI_DEACTIVATE = 0x01
-
-FMMU_TYPE_READ = 0x01
-FMMU_TYPE_WRITE = 0x02
+FMMU = int(_R.FMMU)
+SM = int(_R.SM)
 
 # --- distributed clocks (ETG.1000.4 Table 60, ET1100 §2.45) ------------------------------
 DC_RECEIVE_TIME_PORT0 = int(_R.DC_RECEIVE_TIME_PORT0)  # 4 bytes per port; a write latches all ports
 DC_SYSTEM_TIME = int(_R.DC_SYSTEM_TIME)  # 8 bytes
-DC_RECEIVE_TIME_PROCESSING_UNIT = int(_R.DC_RECEIVE_TIME_PU)  # 8 bytes
+DC_RECEIVE_TIME_PU = int(_R.DC_RECEIVE_TIME_PU)  # 8 bytes
 DC_SYSTEM_TIME_OFFSET = int(_R.DC_SYSTEM_TIME_OFFSET)  # 8 bytes
 DC_SYSTEM_TIME_DELAY = int(_R.DC_SYSTEM_TIME_DELAY)  # 4 bytes
 # 4 bytes, bit 31 sign: 1 = local copy smaller
 DC_SYSTEM_TIME_DIFFERENCE = int(_R.DC_SYSTEM_TIME_DIFFERENCE)
 DC_SPEED_COUNTER_START = int(_R.DC_SPEED_COUNTER_START)
 DC_SPEED_COUNTER_DIFF = int(_R.DC_SPEED_COUNTER_DIFF)
-DC_FILTER_DEPTH = int(_R.DC_FILTER_DEPTH_SYSTEM_TIME)
+DC_FILTER_DEPTH_SYSTEM_TIME = int(_R.DC_FILTER_DEPTH_SYSTEM_TIME)
 DC_CYCLIC_UNIT_CONTROL = int(_R.DC_CYCLIC_UNIT_CONTROL)
 DC_ACTIVATION = int(_R.DC_ACTIVATION)
-DC_SYNC0_START_TIME = int(_R.DC_START_TIME_CYCLIC)
-DC_SYNC0_CYCLE_TIME = int(_R.DC_SYNC0_CYCLE)
-DC_SYNC1_CYCLE_TIME = int(_R.DC_SYNC1_CYCLE)
+DC_START_TIME_CYCLIC = int(_R.DC_START_TIME_CYCLIC)
+DC_SYNC0_CYCLE = int(_R.DC_SYNC0_CYCLE)
+DC_SYNC1_CYCLE = int(_R.DC_SYNC1_CYCLE)
 DC_END = int(_R.DC_LATCH0_CONTROL)  # the DC registers the emulator serves end here
 
 PROCESS_RAM = int(_R.PROCESS_RAM)
@@ -113,4 +113,21 @@ class EscFeature(IntFlag):
     SEPARATE_FCS_ERRORS = 0x0080
 
 
-__all__ = ["AL_ERROR_INDICATOR", "AL_STATE_MASK", "AlState", "EscFeature"]
+__all__ = [
+    "AL_ERROR_INDICATOR",
+    "AL_STATE_MASK",
+    "FMMU_BYTES",
+    "SM_ACTIVATE_ENABLE",
+    "SM_CONTROL_DIRECTION_MASK",
+    "SM_CONTROL_MODE_MASK",
+    "SM_CONTROL_WATCHDOG",
+    "SM_DIRECTION_READ",
+    "SM_DIRECTION_WRITE",
+    "SM_MODE_BUFFERED",
+    "SM_MODE_MAILBOX",
+    "SM_PDI_DEACTIVATE",
+    "SM_STATUS_MAILBOX_FULL",
+    "SYNC_MANAGER_BYTES",
+    "AlState",
+    "EscFeature",
+]

@@ -312,6 +312,20 @@ def encode_fmmu(f: Fmmu) -> bytes:
     )
 
 
+#: Sync-manager bits (ETG.1000.4 Table 59): control byte mode (bits 0–1) and direction
+#: (bits 2–3), watchdog trigger; status byte mailbox full; activate; PDI control.
+SM_CONTROL_MODE_MASK = 0x03
+SM_MODE_BUFFERED = 0x00
+SM_MODE_MAILBOX = 0x02
+SM_CONTROL_DIRECTION_MASK = 0x0C
+SM_DIRECTION_READ = 0x00  # ECAT reads, PDI writes (inputs, mailbox in)
+SM_DIRECTION_WRITE = 0x04  # ECAT writes, PDI reads (outputs, mailbox out)
+SM_CONTROL_WATCHDOG = 0x40
+SM_STATUS_MAILBOX_FULL = 0x08
+SM_ACTIVATE_ENABLE = 0x01
+SM_PDI_DEACTIVATE = 0x01
+
+
 @dataclass(frozen=True, slots=True)
 class SyncManager:
     """One sync manager channel (8 bytes at 0x0800 + 8 n; ETG.1000.4 Table 59).
@@ -330,15 +344,15 @@ class SyncManager:
 
     @property
     def enabled(self) -> bool:
-        return bool(self.activate & 1)
+        return bool(self.activate & SM_ACTIVATE_ENABLE)
 
     @property
     def mailbox(self) -> bool:
-        return (self.control & 0x03) == 0x02
+        return (self.control & SM_CONTROL_MODE_MASK) == SM_MODE_MAILBOX
 
     @property
     def master_writes(self) -> bool:
-        return (self.control & 0x0C) == 0x04
+        return (self.control & SM_CONTROL_DIRECTION_MASK) == SM_DIRECTION_WRITE
 
 
 def decode_sync_manager(buf: bytes | memoryview, offset: int = 0) -> SyncManager:

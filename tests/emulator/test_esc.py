@@ -129,12 +129,12 @@ def test_sii_read_through_the_eeprom_interface(eight_bytes: bool) -> None:
     slave = load_eni(EXAMPLES / "single_drive.xml").slaves[0]
     sii = sii_from_slave(slave)
     bus = Bus(Chain([Esc(sii, config=EscConfig(eeprom_8_byte_reads=eight_bytes))]))
-    status = bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data
+    status = bus.one(C.APRD, 0, r.SII_CONTROL_STATUS, 2).data
     assert bool(status[0] & 0x40) == eight_bytes  # ESC advertises 4- or 8-byte reads
     # SOEM style: control word + address in one 6-byte write, then read the data register
-    assert bus.one(C.APWR, 0, r.EEPROM_CONTROL, struct.pack("<HHH", 0x0100, 0x0008, 0)).wkc == 1
-    assert not bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data[1] & 0x80  # not busy
-    data = bus.one(C.APRD, 0, r.EEPROM_DATA, 8).data
+    assert bus.one(C.APWR, 0, r.SII_CONTROL_STATUS, struct.pack("<HHH", 0x0100, 0x0008, 0)).wkc == 1
+    assert not bus.one(C.APRD, 0, r.SII_CONTROL_STATUS, 2).data[1] & 0x80  # not busy
+    data = bus.one(C.APRD, 0, r.SII_DATA, 8).data
     n = 8 if eight_bytes else 4
     assert data[:n] == sii[16 : 16 + n]
     assert struct.unpack_from("<I", data)[0] == slave.identity.vendor_id
@@ -148,10 +148,10 @@ def test_sii_reload_command_is_0x0400() -> None:
     sii[8:10] = (0x4321).to_bytes(2, "little")  # word 4: configured station alias
     bus = Bus(Chain([Esc(bytes(sii))]))
     bus.one(C.APWR, 0, r.STATION_ALIAS, b"\x00\x00")
-    assert bus.one(C.APWR, 0, r.EEPROM_CONTROL, struct.pack("<HHH", 0x0300, 0, 0)).wkc == 1
-    assert bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data[1] & 0x20  # command error
-    assert bus.one(C.APWR, 0, r.EEPROM_CONTROL, struct.pack("<HHH", 0x0400, 0, 0)).wkc == 1
-    assert not bus.one(C.APRD, 0, r.EEPROM_CONTROL, 2).data[1] & 0x20
+    assert bus.one(C.APWR, 0, r.SII_CONTROL_STATUS, struct.pack("<HHH", 0x0300, 0, 0)).wkc == 1
+    assert bus.one(C.APRD, 0, r.SII_CONTROL_STATUS, 2).data[1] & 0x20  # command error
+    assert bus.one(C.APWR, 0, r.SII_CONTROL_STATUS, struct.pack("<HHH", 0x0400, 0, 0)).wkc == 1
+    assert not bus.one(C.APRD, 0, r.SII_CONTROL_STATUS, 2).data[1] & 0x20
     assert bus.one(C.APRD, 0, r.STATION_ALIAS, 2).data == b"\x21\x43"
 
 
@@ -278,7 +278,7 @@ def test_process_data_watchdog_drops_to_safeop_without_outputs(drive_bus: Bus) -
     drive_bus.one(C.BRD, 0, r.AL_STATUS, 2)
     assert esc.al_state == AlState.SAFEOP and esc.al_error
     assert esc.al_status_code == AlStatusCode.SYNC_MANAGER_WATCHDOG
-    assert drive_bus.fprd(0x03E9, r.WATCHDOG_STATUS_PROCESS_DATA, 4) == b"\x00\x00\x01\x00"
+    assert drive_bus.fprd(0x03E9, r.WD_STATUS_PD, 4) == b"\x00\x00\x01\x00"
 
 
 def test_mailbox_repeat_request_posts_the_last_message_again(drive_bus: Bus) -> None:

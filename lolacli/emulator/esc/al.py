@@ -103,7 +103,7 @@ class AlStateMachine(Mailbox):
     def _enter(self, state: int) -> None:
         if state == AlState.OP:
             self.last_outputs_ns = self.now_ns
-            self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] |= 0x01
+            self.mem[r.WD_STATUS_PD] |= 0x01
         self.pending_op = False
         if state in (AlState.INIT, AlState.PREOP):
             self.outputs_valid = False

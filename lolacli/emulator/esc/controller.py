@@ -110,9 +110,9 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         m = self.mem
         m[r.TYPE], m[r.REVISION] = cfg.esc_type, cfg.revision
         _U16.pack_into(m, r.BUILD, cfg.build)
-        m[r.FMMUS_SUPPORTED], m[r.SYNC_MANAGERS_SUPPORTED] = cfg.fmmus, cfg.sync_managers
-        m[r.RAM_SIZE_KIB], m[r.PORT_DESCRIPTOR] = cfg.ram_kib, cfg.port_descriptor
-        _U16.pack_into(m, r.FEATURES, cfg.features)
+        m[r.FMMU_COUNT], m[r.SM_COUNT] = cfg.fmmus, cfg.sync_managers
+        m[r.RAM_SIZE], m[r.PORT_DESCRIPTOR] = cfg.ram_kib, cfg.port_descriptor
+        _U16.pack_into(m, r.ESC_FEATURES, cfg.features)
         _U16.pack_into(m, r.STATION_ALIAS, self.layout.station_alias)
         _U32.pack_into(m, r.DL_CONTROL, 0x00000001)
         # PDI control (0x0140) and ESC configuration (0x0141) come from SII word 0 at
@@ -122,9 +122,9 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             m, r.PDI_CONTROL, int.from_bytes(sii_pdi, "little") if sii_pdi else cfg.pdi_control
         )
         _U16.pack_into(m, r.WATCHDOG_DIVIDER, cfg.watchdog_divider)
-        _U16.pack_into(m, r.WATCHDOG_TIME_PROCESS_DATA, cfg.watchdog_time_process_data)
+        _U16.pack_into(m, r.WD_TIME_PD, cfg.watchdog_time_process_data)
         status = int(SiiStatus.READ_8_BYTES) if cfg.eeprom_8_byte_reads else 0
-        _U16.pack_into(m, r.EEPROM_CONTROL, status)
+        _U16.pack_into(m, r.SII_CONTROL_STATUS, status)
         self._forget_mailbox()
         self._cache = None
         self.epoch[0] += 1

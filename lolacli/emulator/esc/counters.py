@@ -21,9 +21,9 @@ class EscCounters:
 # Error counters cleared together by a write to any of them (ESC datasheet section II,
 # 0x0300-0x0313): RX and forwarded RX errors, processing unit, PDI, lost links.
 COUNTER_CLEAR_GROUPS = (
-    (r.RX_ERROR_COUNTER, r.PROCESSING_UNIT_ERROR),
-    (r.PROCESSING_UNIT_ERROR, r.PDI_ERROR),
-    (r.PDI_ERROR, r.PDI_ERROR + 1),
+    (r.RX_ERROR_COUNTER, r.PROCESSING_UNIT_ERROR_COUNTER),
+    (r.PROCESSING_UNIT_ERROR_COUNTER, r.PDI_ERROR_COUNTER),
+    (r.PDI_ERROR_COUNTER, r.PDI_ERROR_COUNTER + 1),
     (r.LOST_LINK_COUNTER, r.ERROR_COUNTERS_END),
 )
 
@@ -44,7 +44,7 @@ class ErrorCounters:
 
     def count_forwarded_error(self, port: int = 0) -> None:
         """0x0308 + port: a frame arrived on ``port`` marked bad by an earlier ESC."""
-        address = r.FORWARDED_RX_ERROR + port
+        address = r.FORWARDED_RX_ERROR_COUNTER + port
         self.mem[address] = min(0xFF, self.mem[address] + 1)
 
     def count_lost_link(self, port: int) -> None:

@@ -63,7 +63,7 @@ class DistributedClock(EscMemory):
         if offsets.port1_ns is not None:
             local1 = self.clock.local_ns(self.frame_t_ns + offsets.port1_ns)
             _U32.pack_into(self.mem, r.DC_RECEIVE_TIME_PORT0 + 4, local1 & 0xFFFFFFFF)
-        _U64.pack_into(self.mem, r.DC_RECEIVE_TIME_PROCESSING_UNIT, local0 & (2**64 - 1))
+        _U64.pack_into(self.mem, r.DC_RECEIVE_TIME_PU, local0 & (2**64 - 1))
 
     def _system_time_written(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
         """A write to 0x0910 feeds the time control loop (ETG.1000.4 §6.8, ET1100 §9.2)."""

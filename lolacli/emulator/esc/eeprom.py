@@ -24,19 +24,19 @@ class SiiInterface(EscMemory):
     """EEPROM commands written by the master to 0x0502, run at once."""
 
     def _eeprom_command(self) -> None:
-        control = self.u16(r.EEPROM_CONTROL)
+        control = self.u16(r.SII_CONTROL_STATUS)
         command = control & SII_COMMAND_MASK
-        word = self.u32(r.EEPROM_ADDRESS)
+        word = self.u32(r.SII_ADDRESS)
         status = control & ~_CLEARED
         if self.config.eeprom_8_byte_reads:
             status |= _READ_8_BYTES
         if command == _READ:
             chunk = 8 if self.config.eeprom_8_byte_reads else 4
             raw = bytes(self.sii[2 * word : 2 * word + chunk])
-            self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 8] = (raw + b"\xff" * 8)[:8]
+            self.mem[r.SII_DATA : r.SII_DATA + 8] = (raw + b"\xff" * 8)[:8]
         elif command == _WRITE:
             if 2 * word + 2 <= len(self.sii):
-                self.sii[2 * word : 2 * word + 2] = self.mem[r.EEPROM_DATA : r.EEPROM_DATA + 2]
+                self.sii[2 * word : 2 * word + 2] = self.mem[r.SII_DATA : r.SII_DATA + 2]
             else:
                 status |= _COMMAND_ERROR
         elif command == _RELOAD:
@@ -44,4 +44,4 @@ class SiiInterface(EscMemory):
             _U16.pack_into(self.mem, r.STATION_ALIAS, self.layout.station_alias)
         elif command:
             status |= _COMMAND_ERROR
-        _U16.pack_into(self.mem, r.EEPROM_CONTROL, status & 0xFFFF)
+        _U16.pack_into(self.mem, r.SII_CONTROL_STATUS, status & 0xFFFF)

@@ -140,24 +140,24 @@ def _readonly_mask() -> bytearray:
         (r.DL_STATUS, r.DL_STATUS + 2),
         (r.AL_STATUS, r.AL_STATUS + 6),
         (r.PDI_CONTROL, r.PDI_CONTROL + 2),
-        (r.EEPROM_PDI_ACCESS, r.EEPROM_PDI_ACCESS + 1),
-        (r.WATCHDOG_STATUS_PROCESS_DATA, r.WATCHDOG_STATUS_PROCESS_DATA + 2),
+        (r.SII_PDI_ACCESS, r.SII_PDI_ACCESS + 1),
+        (r.WD_STATUS_PD, r.WD_STATUS_PD + 2),
         (r.DC_RECEIVE_TIME_PORT0, r.DC_SYSTEM_TIME),
         (r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
-        (r.DC_RECEIVE_TIME_PROCESSING_UNIT, r.DC_SYSTEM_TIME_OFFSET),
+        (r.DC_RECEIVE_TIME_PU, r.DC_SYSTEM_TIME_OFFSET),
         (r.DC_SYSTEM_TIME_DIFFERENCE, r.DC_SYSTEM_TIME_DIFFERENCE + 4),
     ]
     for lo, hi in ranges:
         mask[lo:hi] = b"\x01" * (hi - lo)
     for sm in range(16):
-        base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * sm
+        base = r.SM + r.SYNC_MANAGER_BYTES * sm
         mask[base + 5] = 1  # status
         mask[base + 7] = 1  # PDI control
     return mask
 
 
 _READONLY = _readonly_mask()
-_SM_REGISTERS_END = r.SYNC_MANAGER_BASE + 16 * r.SYNC_MANAGER_BYTES
+_SM_REGISTERS_END = r.SM + 16 * r.SYNC_MANAGER_BYTES
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,14 +203,14 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
     clear_groups = tuple(g for g in COUNTER_CLEAR_GROUPS if hit(*g))
     flags = (
-        hit(r.FMMU_BASE, _SM_REGISTERS_END),
-        hit(r.WATCHDOG_DIVIDER, r.WATCHDOG_TIME_PROCESS_DATA + 2),
+        hit(r.FMMU, _SM_REGISTERS_END),
+        hit(r.WATCHDOG_DIVIDER, r.WD_TIME_PD + 2),
         hit(r.STATION_ADDRESS, r.STATION_ADDRESS + 2)
         or hit(r.DL_CONTROL_ALIAS_ENABLE_BYTE, r.DL_CONTROL_ALIAS_ENABLE_BYTE + 1),
-        hit(r.EEPROM_CONTROL, r.EEPROM_CONTROL + 2),
+        hit(r.SII_CONTROL_STATUS, r.SII_CONTROL_STATUS + 2),
         hit(r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4),
         hit(r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
-        hit(r.SYNC_MANAGER_BASE, r.SYNC_MANAGER_BASE + 16 * 8),
+        hit(r.SM, r.SM + 16 * 8),
         hit(r.AL_CONTROL, r.AL_CONTROL + 1),
     )
     return RegisterWrite(tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags))

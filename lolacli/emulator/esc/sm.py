@@ -8,7 +8,13 @@ from dataclasses import dataclass
 from lolacli.emulator import registers as r
 from lolacli.emulator.esc.memory import EscMemory, overlaps
 from lolacli.emulator.sii import SiiLayout
-from lolacli.wire.registers import SYNC_MANAGER_LAYOUT, Fmmu, decode_fmmu, fmmu_address
+from lolacli.wire.registers import (
+    SYNC_MANAGER_LAYOUT,
+    Fmmu,
+    FmmuType,
+    decode_fmmu,
+    fmmu_address,
+)
 
 _SM = SYNC_MANAGER_LAYOUT
 
@@ -55,8 +61,8 @@ class Configuration:
     def build(sms: list[SmView], fmmus: list[Fmmu]) -> Configuration:
         active = [sm for sm in sms if sm.enabled and sm.length and not sm.pdi_deactivated]
         usable = [f for f in fmmus if f.enabled and f.length_bytes and _sm_open(f, sms)]
-        write = [f for f in usable if f.type & r.FMMU_TYPE_WRITE]
-        read = [f for f in usable if f.type & r.FMMU_TYPE_READ]
+        write = [f for f in usable if f.type & FmmuType.WRITE]
+        read = [f for f in usable if f.type & FmmuType.READ]
         return Configuration(sms, active, write, read)
 
 
@@ -78,7 +84,7 @@ class SyncManagers(EscMemory):
 
     @staticmethod
     def _sm_address(index: int) -> int:
-        return r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * index
+        return r.SM + r.SYNC_MANAGER_BYTES * index
 
     def sync_manager(self, index: int) -> SmView:
         start, length, control, status, activate, pdi = _SM.unpack_from(
@@ -120,13 +126,13 @@ class SyncManagers(EscMemory):
             self.mem[addr] &= ~r.SM_STATUS_MAILBOX_FULL
 
     def _sm_registers_written(self, start: int, end: int) -> None:
-        first = max(0, (start - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES)
+        first = max(0, (start - r.SM) // r.SYNC_MANAGER_BYTES)
         last = min(
-            self.config.sync_managers, (end - 1 - r.SYNC_MANAGER_BASE) // r.SYNC_MANAGER_BYTES + 1
+            self.config.sync_managers, (end - 1 - r.SM) // r.SYNC_MANAGER_BYTES + 1
         )
         mem = self.mem
         for i in range(first, last):
-            base = r.SYNC_MANAGER_BASE + r.SYNC_MANAGER_BYTES * i
+            base = r.SM + r.SYNC_MANAGER_BYTES * i
             if not mem[base + 6] & 1:
                 mem[base + 5] &= ~r.SM_STATUS_MAILBOX_FULL  # a disabled SM forgets its buffer
                 if i == self.layout.mailbox_out_sm:

@@ -18,7 +18,7 @@ class ProcessDataWatchdog(AlStateMachine):
     def watchdog_timeout_ns(self) -> int | None:
         """Process-data watchdog: (divider + 2) × 40 ns × 0x0420, when the output SM
         enables it (control bit 6) and the time is not 0 (ET1100 datasheet §2.31)."""
-        time_ticks = self.u16(r.WATCHDOG_TIME_PROCESS_DATA)
+        time_ticks = self.u16(r.WD_TIME_PD)
         index = self.layout.outputs_sm
         if self._cache is None and index < self.config.sync_managers:
             sm = self.sync_manager(index)  # that one SM, not the whole configuration
@@ -43,8 +43,8 @@ class ProcessDataWatchdog(AlStateMachine):
         timeout = self._watchdog_ns
         if timeout is None or t_ns - self.last_outputs_ns <= timeout:
             return
-        self.mem[r.WATCHDOG_STATUS_PROCESS_DATA] &= ~0x01
-        counter = r.WATCHDOG_COUNTER_PROCESS_DATA
+        self.mem[r.WD_STATUS_PD] &= ~0x01
+        counter = r.WD_COUNTER_PD
         self.mem[counter] = min(0xFF, self.mem[counter] + 1)
         self._enter(AlState.SAFEOP)
         self._set_al(AlState.SAFEOP, AlStatusCode.SYNC_MANAGER_WATCHDOG, error=True)
