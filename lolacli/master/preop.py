@@ -12,8 +12,8 @@ process data, no distributed clocks, no other slave. Two ways there:
 * :func:`configure_from_sii`, for a bus without an ENI (SOEM's ``config_init``): counts the
   slaves (BRD of register 0x0000), gives them station addresses 0x1001, 0x1002, … in line
   order (SOEM's, so ``@0x1005`` names the same slave through either master), reads from
-  each SII EEPROM the identity (words 0x08–0x0F), the standard mailbox (0x18–0x1B), the
-  mailbox protocols (0x1C) and the name (STRINGS and GENERAL categories), and returns
+  each SII EEPROM the header (identity, standard mailbox and its protocols: words
+  ``wire.sii.MASTER_HEADER_WORDS``) and the name (STRINGS and GENERAL categories), returns
   this as an ENI model whose slaves carry INIT → PREOP InitCmds built from the SII: request
   INIT (acknowledging an error), check it, SM0 mailbox out and SM1 mailbox in at the SII's
   offsets and sizes, request PREOP, check it. :class:`PreopBus` then runs them.
@@ -27,15 +27,16 @@ A slave whose EEPROM its PDI holds is taken over first (0x0500) and handed back 
 from __future__ import annotations
 
 import struct
-from collections.abc import Generator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from lolacli.eni.model import Eni, Identity, InitCmd, Mailbox, Slave
 from lolacli.eni.model import Master as EniMaster
 from lolacli.eni.model import ProcessImage as EniProcessImage
-from lolacli.errors import TransportError
+from lolacli.errors import TransportError, WireError
 from lolacli.master.core import Master, MasterOptions
 from lolacli.master.transport import Transport
+from lolacli.wire import sii
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
@@ -49,29 +50,10 @@ from lolacli.wire.registers import (
     encode_sync_manager,
     sync_manager_address,
 )
-from lolacli.wire.sii import SiiWords
+from lolacli.wire.sii import SiiInfo, SiiWords, protocol_names
 
 #: SOEM's station addresses: 0x1001, 0x1002, … in line order (ecx_config_init)
 FIRST_STATION = 0x1001
-
-# SII header words (ETG.1000.6 Table 16)
-SII_VENDOR_ID = 0x08
-SII_RX_MAILBOX = 0x18  # offset, size; then the send mailbox's offset, size (0x1A, 0x1B)
-SII_MAILBOX_PROTOCOL = 0x1C
-SII_FIRST_CATEGORY = 0x40
-SII_STRINGS = 10
-SII_GENERAL = 30
-SII_END = 0xFFFF
-SII_MAX_WORDS = 0x4000  # stop walking categories here (32 KiB, beyond any real EEPROM)
-#: mailbox protocol bits of SII word 0x1C (ETG.1000.6 Table 18), as the ENI names them
-PROTOCOLS = (
-    (0x01, "AoE"),
-    (0x02, "EoE"),
-    (0x04, "CoE"),
-    (0x08, "FoE"),
-    (0x10, "SoE"),
-    (0x20, "VoE"),
-)
 
 #: EEPROM status bits that fail a read (0x0502; a checksum error too, as SOEM's error mask)
 EEPROM_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.CHECKSUM_ERROR
@@ -88,15 +70,11 @@ _AL_MASK = b"\x1f\x00"  # state and error indicator
 
 @dataclass(frozen=True, slots=True)
 class SiiSlave:
-    """What the SII of one slave says (``name`` empty when it has none)."""
+    """A slave found on the bus: where it is and what its SII says."""
 
     position: int
     station_address: int
-    identity: Identity
-    name: str
-    rx_mailbox: tuple[int, int]  # master -> slave: offset, bytes
-    tx_mailbox: tuple[int, int]  # slave -> master
-    protocols: int
+    sii: SiiInfo
 
 
 def _bare(eni: Eni) -> Eni:
@@ -186,15 +164,17 @@ def configure_from_sii(
 
 def _slave(info: SiiSlave) -> Slave:
     mailbox = None
-    rx_start, rx_bytes = info.rx_mailbox
-    tx_start, tx_bytes = info.tx_mailbox
-    if rx_bytes and tx_bytes:
-        names = tuple(name for bit, name in PROTOCOLS if info.protocols & bit)
-        mailbox = Mailbox(rx_start, rx_bytes, tx_start, tx_bytes, protocols=names)
+    h = info.sii.header
+    if h.rx_mailbox_bytes and h.tx_mailbox_bytes:
+        names = protocol_names(h.mailbox_protocols)
+        mailbox = Mailbox(
+            h.rx_mailbox_offset, h.rx_mailbox_bytes, h.tx_mailbox_offset, h.tx_mailbox_bytes,
+            protocols=names,
+        )
     return Slave(
         position=info.position,
-        name=info.name,
-        identity=info.identity,
+        name=info.sii.name or "",
+        identity=Identity(h.vendor_id, h.product_code, h.revision, h.serial),
         station_address=info.station_address,
         auto_inc_address=(-(info.position - 1)) & 0xFFFF,
         mailbox=mailbox,
@@ -246,48 +226,6 @@ def preop_init_cmds(station: int, mailbox: Mailbox | None) -> tuple[InitCmd, ...
 
 
 # ------------------------------------------------------------------------------ SII
-_Walk = Generator[int, bytes, None]
-
-
-class _Sii(SiiWords):
-    """One slave's SII as read so far, and what went wrong reading it."""
-
-    def __init__(self, station: int) -> None:
-        super().__init__()
-        self.station = station
-        self.error = ""
-
-
-def _walk(sii: _Sii, out: dict[str, object]) -> _Walk:
-    """Header words, then the categories up to STRINGS and GENERAL (or the end)."""
-    out["identity"] = yield from sii.read(SII_VENDOR_ID, 8)
-    out["mailbox"] = yield from sii.read(SII_RX_MAILBOX, 5)
-    address = SII_FIRST_CATEGORY
-    strings: bytes | None = None
-    general: bytes | None = None
-    while address < SII_MAX_WORDS and (strings is None or general is None):
-        kind, length = struct.unpack("<HH", (yield from sii.read(address, 2)))
-        if kind == SII_END or length == 0xFFFF:
-            break
-        if kind == SII_STRINGS and strings is None:
-            strings = yield from sii.read(address + 2, length)
-        elif kind == SII_GENERAL and general is None:
-            general = yield from sii.read(address + 2, min(length, 2))
-        address += 2 + length
-    out["strings"], out["general"] = strings, general
-
-
-def _strings(data: bytes | None) -> list[str]:
-    if not data:
-        return []
-    out, pos = [], 1
-    for _ in range(data[0]):
-        if pos >= len(data):
-            break
-        n = data[pos]
-        out.append(data[pos + 1 : pos + 1 + n].decode("latin-1"))
-        pos += 1 + n
-    return out
 
 
 def read_sii(master: Master, stations: Sequence[int]) -> list[SiiSlave]:
@@ -303,40 +241,22 @@ def read_sii(master: Master, stations: Sequence[int]) -> list[SiiSlave]:
     ]
     _eeprom_owner(master, held, to_pdi=False)
     try:
-        found: dict[int, dict[str, object]] = {s: {} for s in stations}
-        images = {s: _Sii(s) for s in stations}
-        walks = {s: _walk(images[s], found[s]) for s in stations}
+        found: dict[int, SiiInfo] = {}
+        walks = {s: sii.read_sii(SiiWords()) for s in stations}
         pending = {s: next(walks[s]) for s in stations}
         while pending:
             for station, data in _read_words(master, list(pending.items())).items():
                 try:
                     pending[station] = walks[station].send(data)
-                except StopIteration:
+                except StopIteration as done:
+                    found[station] = done.value
                     del pending[station]
+                except WireError as exc:
+                    where = f"station 0x{station:04X}"
+                    raise TransportError(f"{where}: SII not readable: {exc}") from exc
     finally:
         _eeprom_owner(master, held, to_pdi=True)
-    out = []
-    for position, station in enumerate(stations, start=1):
-        f = found[station]
-        vendor, product, revision, serial = struct.unpack("<4I", f["identity"])  # type: ignore[arg-type]
-        rx_off, rx_len, tx_off, tx_len, protocols = struct.unpack("<5H", f["mailbox"])  # type: ignore[arg-type]
-        strings = _strings(f.get("strings"))  # type: ignore[arg-type]
-        general = f.get("general")
-        name = ""
-        if isinstance(general, bytes) and len(general) >= 4 and 0 < general[3] <= len(strings):
-            name = strings[general[3] - 1]
-        out.append(
-            SiiSlave(
-                position,
-                station,
-                Identity(vendor, product, revision, serial),
-                name,
-                (rx_off, rx_len),
-                (tx_off, tx_len),
-                protocols,
-            )
-        )
-    return out
+    return [SiiSlave(k, s, found[s]) for k, s in enumerate(stations, start=1)]
 
 
 def _eeprom_owner(master: Master, stations: Sequence[int], *, to_pdi: bool) -> None:

@@ -57,16 +57,11 @@ from lolacli.wire.registers import (
     al_status_text,
 )
 from lolacli.wire.sii import (
-    CATEGORY_END,
-    HEADER_WORDS,
-    SiiCategory,
-    SiiGeneral,
-    SiiWord,
+    SiiInfo,
     SiiWords,
-    decode_sii_general,
-    decode_sii_strings,
     protocol_names,
-    sii_string,
+    read_sii_header,
+    read_sii_names,
 )
 
 SCHEMA = "lolacli.scan/1"
@@ -74,7 +69,6 @@ _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 
 SII_POLLS = 50  # reads of a busy EEPROM before it counts as not answering
-SII_MAX_WORDS = 0x4000  # stop walking categories here (32 KiB: beyond any real SII)
 
 # DL status 0x0110 (ETG.1000.4 Table 32)
 DL_PDI_OPERATIONAL = 0x0001
@@ -199,11 +193,7 @@ class ScannedSlave:
     counters: ErrorCounters | None = None
     eeprom_control: int = 0
     eeprom_config: int = 0
-    identity: Identity | None = None
-    sii_alias: int = 0
-    mailbox_protocols: int = 0
-    strings: tuple[str, ...] = ()
-    general: SiiGeneral | None = None
+    sii: SiiInfo | None = None  # what its SII says, as far as it was read
     sii_error: str | None = None
     parent: int = 0  # position of the slave it hangs off (0: the master)
 
@@ -224,14 +214,16 @@ class ScannedSlave:
         return bool(self.al_status & AL_ERROR_INDICATOR)
 
     @property
-    def name(self) -> str | None:
-        g = self.general
-        return sii_string(self.strings, g.name_index) if g is not None else None
+    def identity(self) -> Identity | None:
+        """The identity its SII header gives (None: not read)."""
+        if self.sii is None:
+            return None
+        h = self.sii.header
+        return Identity(h.vendor_id, h.product_code, h.revision, h.serial)
 
     @property
-    def order(self) -> str | None:
-        g = self.general
-        return sii_string(self.strings, g.order_index) if g is not None else None
+    def name(self) -> str | None:
+        return self.sii.name if self.sii is not None else None
 
     def label(self) -> str:
         return f"slave {self.position}" + (f" ({self.name})" if self.name else "")
@@ -239,6 +231,7 @@ class ScannedSlave:
     def to_dict(self) -> dict[str, Any]:
         ident = self.identity
         counters = self.counters
+        protocols = self.sii.header.mailbox_protocols if self.sii is not None else 0
         return {
             "position": self.position,
             "auto_inc_address": self.auto_inc_address,
@@ -246,14 +239,14 @@ class ScannedSlave:
             "station_address": self.station_address,
             "station_alias": self.station_alias,
             "name": self.name,
-            "order": self.order,
+            "order": self.sii.order if self.sii is not None else None,
             "vendor_id": ident.vendor_id if ident else None,
             "product_code": ident.product_code if ident else None,
             "revision": ident.revision if ident else None,
             "serial": ident.serial if ident else None,
             "identity_source": "sii" if ident else None,
             "sii_error": self.sii_error,
-            "mailbox_protocols": list(protocol_names(self.mailbox_protocols)),
+            "mailbox_protocols": list(protocol_names(protocols)),
             "al_state": self.al_state,
             "al_error": self.al_error,
             "al_status_code": f"0x{self.al_status_code:04X}",
@@ -443,27 +436,11 @@ _Walk = Generator[int, bytes, None]
 
 
 def _walk(slave: ScannedSlave, words: SiiWords) -> _Walk:
-    """Header words, then the categories up to STRINGS and GENERAL (or the end)."""
-    head = yield from words.read(SiiWord.STATION_ALIAS, 1)
-    slave.sii_alias = _U16.unpack(head)[0]
-    ident = yield from words.read(SiiWord.VENDOR_ID, 8)
-    slave.identity = Identity(*struct.unpack("<4I", ident))
-    protocols = yield from words.read(SiiWord.MAILBOX_PROTOCOL, 1)
-    slave.mailbox_protocols = _U16.unpack(protocols)[0]
-    address = HEADER_WORDS
-    while address < SII_MAX_WORDS:
-        kind, length = struct.unpack("<HH", (yield from words.read(address, 2)))
-        if kind == CATEGORY_END or length == 0xFFFF:
-            return
-        if kind == SiiCategory.STRINGS and not slave.strings:
-            data = yield from words.read(address + 2, length)
-            slave.strings = decode_sii_strings(data)
-        elif kind == SiiCategory.GENERAL and slave.general is None:
-            data = yield from words.read(address + 2, min(length, 16))
-            slave.general = decode_sii_general(data)
-        if slave.strings and slave.general is not None:
-            return
-        address += 2 + length
+    """The header, then the categories up to STRINGS and GENERAL (or the end); the header
+    stays known when the categories do not read."""
+    slave.sii = SiiInfo((yield from read_sii_header(words)))
+    strings, general, categories = yield from read_sii_names(words)
+    slave.sii = SiiInfo(slave.sii.header, strings, general, categories)
 
 
 def read_sii(master: Master, slaves: Sequence[ScannedSlave]) -> None:

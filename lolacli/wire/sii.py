@@ -32,6 +32,7 @@ HEADER_BYTES = 2 * HEADER_WORDS
 CATEGORY_HEADER_BYTES = 4
 CATEGORY_END = 0xFFFF
 GENERAL_BYTES = 32  # ETG.2010 Table 8; older images may carry fewer
+MAX_WORDS = 0x4000  # a category walk stops here (32 KiB: beyond any real SII)
 
 _HEADER = struct.Struct("<64H")
 _CATEGORY = struct.Struct("<HH")
@@ -294,7 +295,58 @@ class SiiWords:
         return b"".join(self.words[a] for a in range(address, address + count))
 
 
+#: The header words a master reads of a slave, (first word, count): the checksummed area
+#: with the station alias and the identity, the standard mailbox with its protocols, the
+#: EEPROM size and version: every field of :class:`SiiHeader`.
+MASTER_HEADER_WORDS = ((SiiWord.PDI_CONTROL, 16), (SiiWord.RX_MAILBOX_OFFSET, 5), (SiiWord.SIZE, 2))
+
+
+def read_sii_header(words: SiiWords) -> Generator[int, bytes, SiiHeader]:
+    """The header fields a master needs (:data:`MASTER_HEADER_WORDS`), read word by word
+    through ``words`` (words it does not read count as zero)."""
+    for address, count in MASTER_HEADER_WORDS:
+        yield from words.read(address, count)
+    head = b"".join(words.words.get(a, b"\x00\x00") for a in range(HEADER_WORDS))
+    return decode_sii_header(head)
+
+
+SiiNames = tuple[tuple[str, ...], "SiiGeneral | None", tuple[tuple[int, int, int], ...]]
+
+
+def read_sii_names(words: SiiWords) -> Generator[int, bytes, SiiNames]:
+    """(strings, general, categories so far): the categories from word 0x40 up to STRINGS
+    and GENERAL (or the end), read word by word through ``words``."""
+    strings: tuple[str, ...] = ()
+    general: SiiGeneral | None = None
+    cats: list[tuple[int, int, int]] = []
+    address = HEADER_WORDS
+    while address < MAX_WORDS:
+        kind, length = decode_category_header((yield from words.read(address, 2)))
+        if kind == CATEGORY_END or length == 0xFFFF:
+            break
+        cats.append((kind, address, length))
+        if kind == SiiCategory.STRINGS and not strings:
+            strings = decode_sii_strings((yield from words.read(address + 2, length)))
+        elif kind == SiiCategory.GENERAL and general is None:
+            data = yield from words.read(address + 2, min(length, GENERAL_BYTES // 2))
+            general = decode_sii_general(data)
+        if strings and general is not None:
+            break
+        address += 2 + length
+    return strings, general, tuple(cats)
+
+
+def read_sii(words: SiiWords) -> Generator[int, bytes, SiiInfo]:
+    """What a master reads of a slave's SII (header fields, STRINGS, GENERAL), word by word:
+    yields each word address it needs and is sent the bytes read there (4 or 8)."""
+    header = yield from read_sii_header(words)
+    strings, general, cats = yield from read_sii_names(words)
+    return SiiInfo(header, strings, general, cats)
+
+
 __all__ = [
+    "MASTER_HEADER_WORDS",
+    "MAX_WORDS",
     "SiiWords",
     "CATEGORY_END",
     "HEADER_BYTES",
@@ -304,6 +356,7 @@ __all__ = [
     "SiiGeneral",
     "SiiHeader",
     "SiiInfo",
+    "SiiNames",
     "SiiWord",
     "crc8_sii",
     "decode_category_header",
@@ -312,5 +365,8 @@ __all__ = [
     "decode_sii_header",
     "decode_sii_strings",
     "protocol_names",
+    "read_sii",
+    "read_sii_header",
+    "read_sii_names",
     "sii_string",
 ]

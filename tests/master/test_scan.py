@@ -61,7 +61,8 @@ def test_lola_chain_as_found(lola: Eni) -> None:
         assert s.al_state == "INIT" and s.al_status_code == 0
         assert s.parent == s.position - 1
         assert s.counters is not None and s.counters.total == 0
-        assert s.mailbox_protocols == (0x04 if want.mailbox else 0)
+        assert s.sii is not None and s.sii.header.checksum_ok
+        assert s.sii.header.mailbox_protocols == (0x04 if want.mailbox else 0)
     ports = [tuple(p.open for p in s.ports[:2]) for s in report.slaves]
     assert ports == [(True, True)] * 24 + [(True, False)]
     doc = report.to_dict()

@@ -16,14 +16,17 @@ from lolacli.wire.commands import Command
 from lolacli.wire.frame import decode_any
 from lolacli.wire.sii import (
     HEADER_BYTES,
+    MASTER_HEADER_WORDS,
     MailboxProtocol,
     SiiCategory,
+    SiiWords,
     crc8_sii,
     decode_sii,
     decode_sii_general,
     decode_sii_header,
     decode_sii_strings,
     protocol_names,
+    read_sii,
     sii_string,
 )
 
@@ -94,6 +97,34 @@ def test_emulator_images_of_every_lola_slave() -> None:
         assert h.checksum_ok
         want = slave.mailbox.protocols if slave.mailbox is not None else ()
         assert set(protocol_names(h.mailbox_protocols)) == set(want)
+
+
+@pytest.mark.parametrize("chunk_words", [2, 4])
+def test_a_master_reads_what_decode_sii_reads_of_every_lola_image(chunk_words: int) -> None:
+    """read_sii, fed 4 or 8 bytes a read as an ESC answers, gives the header, strings and
+    general category decode_sii finds in the whole image, having read only the master's
+    header words and the categories up to STRINGS and GENERAL."""
+    from lolacli.emulator.sii import sii_from_slave
+    from lolacli.files import load_eni
+
+    eni = load_eni(ROOT / "lolacli" / "eni_examples" / "lola.xml")
+    for slave in eni.slaves:
+        image = sii_from_slave(slave)
+        whole = decode_sii(image)
+        walk, asked = read_sii(SiiWords()), []
+        try:
+            address = next(walk)
+            while True:
+                asked.append(address)
+                address = walk.send(image[2 * address : 2 * (address + chunk_words)])
+        except StopIteration as done:
+            info = done.value
+        assert info.header == whole.header and info.name == slave.name
+        assert (info.strings, info.general) == (whole.strings, whole.general)
+        header = [a for a in asked if a < 0x40]
+        assert header[0] == 0 and set(header) <= {
+            w for first, n in MASTER_HEADER_WORDS for w in range(first, first + n)
+        }
 
 
 def test_esi_images_name_the_device(corpus) -> None:
