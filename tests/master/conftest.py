@@ -1,4 +1,4 @@
-"""Fixtures of the master tests: a live bus in a namespace of its own (tests/master/live.py)."""
+"""Fixtures of the master tests: a live bus in a namespace of its own (tests/live.py)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.master.live import LiveBus, make_bus, remove_bus
+from tests.live import LiveBus, make_bus, remove_bus
 
 
 @pytest.fixture

@@ -19,7 +19,7 @@ from lolacli.master.transport import RawSocketTransport
 from lolacli.rawsocket import ETH_P_ECAT
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
-from tests.master.live import ROOT, inside, need_root, run
+from tests.live import ROOT, inside, need_root, run
 
 pytestmark = [pytest.mark.root]
 

@@ -11,7 +11,7 @@ from lolacli.master.cyclic import plan_frame
 from lolacli.master.realtime import CycleClock, is_cyclic, realtime_section
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, encode_frame, make_frame
-from tests.master.live import LOLA
+from tests.live import LOLA
 
 
 def test_the_lola_cyclic_frame_is_cyclic_and_mailbox_reads_are_not() -> None:

@@ -29,7 +29,7 @@ from lolacli.wire.commands import Command
 from lolacli.wire.frame import decode_frame
 from lolacli.wire.registers import AlState
 from tests.conftest import corpus_files
-from tests.master.live import EXAMPLES, LOLA
+from tests.live import EXAMPLES, LOLA
 
 WRITES = {Command.APWR, Command.FPWR, Command.BWR, Command.APRW, Command.FPRW, Command.BRW}
 

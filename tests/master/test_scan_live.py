@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from lolacli.files import load_eni
-from tests.master.live import (
+from tests.live import (
     LOLA,
     LiveBus,
     inside,

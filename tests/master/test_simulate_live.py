@@ -13,7 +13,7 @@ import pytest
 
 from lolacli.files import load_eni
 from lolacli.master.simulate import SimulateOptions, simulate
-from tests.master.live import LOLA, inside, run, run_json, start_emulator, stop_emulator
+from tests.live import LOLA, inside, run, run_json, start_emulator, stop_emulator
 
 pytestmark = [pytest.mark.root, pytest.mark.slow]
 CYCLE_US = 500.0

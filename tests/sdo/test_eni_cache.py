@@ -12,7 +12,7 @@ import lolacli.eni.parser
 from lolacli.eni_cache import cache_key, load_eni_cached
 from lolacli.errors import EniError
 from lolacli.files import load_eni, read_eni_bytes
-from tests.sdo.live import EXAMPLES, LOLA
+from tests.live import EXAMPLES, LOLA
 
 SINGLE = EXAMPLES / "single_drive.xml"
 

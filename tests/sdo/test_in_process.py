@@ -23,7 +23,7 @@ from lolacli.errors import SdoAbortError, TransportError, UsageError
 from lolacli.sdo import read, write
 from lolacli.sdo.session import LolaSession, TransportOptions, open_session
 from tests.conftest import CORPUS, corpus_files, corpus_ids
-from tests.sdo.live import LOLA, ROOT
+from tests.live import LOLA, ROOT
 
 ELMO_ESI = CORPUS / "esi" / "elmo_ethercat_sdk__Elmo_ECAT_00010420_V11.xml"
 WRONG_LENGTH_LOW = WRONG_LENGTH_HIGH = {"0x06070010"}  # see test_live_bus.py

@@ -1,7 +1,7 @@
 """Acceptance, EtherCAT on a live bus: ``lolacli sdo … --iface IF`` through our master
 (``--backend lolacli``, the default) and through pysoem (``--backend soem``) against
 ``lolacli bus emulate`` at the other end of a veth pair, each in its own process (the
-pair in a network namespace of its own: tests/sdo/live.py).
+pair in a network namespace of its own: tests/live.py).
 
 The emulator answers from the device models' dictionaries (devices/od.py, cia402.py); the
 values asserted are the ones those models define (0x1000 = 0x00020192, the ENI's vendor
@@ -20,14 +20,14 @@ from collections.abc import Iterator
 import pytest
 
 from lolacli.devices.cia402 import Cia402Drive
-from tests.sdo.live import (
+from tests.live import (
     LOLA,
     ROOT,
     LiveBus,
     json_of,
-    lolacli,
     make_bus,
     remove_bus,
+    run,
     start_emulator,
     stop_emulator,
 )
@@ -59,17 +59,11 @@ def backend(request: pytest.FixtureRequest) -> str:
 
 
 def sdo(bus: LiveBus, backend: str, *args: str, iface: str | None = None) -> tuple[int, str, str]:
-    return lolacli(
-        bus,
-        "sdo",
-        *args,
-        "--iface",
-        iface or bus.master,
-        "--backend",
-        backend,
-        "--timeout",
-        "2",
+    done = run(
+        "sdo", *args, "--iface", iface or bus.master, "--backend", backend, "--timeout", "2",
+        bus=bus,
     )
+    return done.returncode, done.stdout, done.stderr
 
 
 def value(bus: LiveBus, backend: str, *args: str) -> dict:
@@ -227,19 +221,12 @@ def silent() -> Iterator[LiveBus]:
 
 def test_a_bus_that_does_not_answer_is_exit_4(silent, backend) -> None:
     t0 = time.monotonic()
-    code, _out, err = lolacli(
-        silent,
-        "sdo",
-        "read",
-        "5",
-        "0x1000",
-        "--iface",
-        silent.master,
-        "--backend",
-        backend,
-        "--timeout",
-        "0.5",
+    done = run(
+        "sdo", "read", "5", "0x1000", "--iface", silent.master, "--backend", backend,
+        "--timeout", "0.5",
+        bus=silent,
     )
+    code, err = done.returncode, done.stderr
     assert code == 4, err
     assert err.startswith("lolacli: error:") and err.count("\n") == 1
     assert time.monotonic() - t0 < 60

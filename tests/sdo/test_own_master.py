@@ -17,7 +17,7 @@ from lolacli.master.sdo_info import od_list, read_dictionary
 from lolacli.master.transport import ChainTransport
 from lolacli.sdo.lola_client import LolaBus
 from tests.conftest import CORPUS
-from tests.sdo.live import EXAMPLES, LOLA
+from tests.live import EXAMPLES, LOLA
 
 ELMO_ESI = CORPUS / "esi" / "elmo_ethercat_sdk__Elmo_ECAT_00010420_V11.xml"
 

@@ -1,9 +1,11 @@
-"""A live bus for tests: a veth pair, `lolacli bus emulate` on one end in its own process
-(its own GIL, as a real slave chain has its own silicon), our master or pysoem on the
-other. Needs root and iproute2; tests using it skip cleanly otherwise.
+"""A live bus for tests (the master's, the SDO tests'): a veth pair, `lolacli bus emulate`
+on one end in its own process (its own GIL, as a real slave chain has its own silicon), our
+master, the CLI under test or pysoem on the other. Needs root and iproute2; tests using it
+skip cleanly otherwise.
 
-Each pair lives in a network namespace of its own (``f11n…``; interfaces ``f11m…`` and
-``f11e…``, with the pid), so runs in parallel on the same host never see each other's
+Each pair lives in a network namespace of its own, named from
+``LOLACLI_TEST_NETNS_PREFIX`` (default ``lct``) and the pid (``lctn…``; interfaces
+``lctm…`` and ``lcte…``), so runs in parallel on the same host never see each other's
 frames; the emulator and the CLI run inside it through ``ip netns exec``, in-process
 users open their sockets inside it with :func:`inside`.
 """
@@ -25,10 +27,10 @@ from typing import Any
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "lolacli" / "eni_examples"
 LOLA = EXAMPLES / "lola.xml"
-PREFIX = "f11"
+PREFIX = os.environ.get("LOLACLI_TEST_NETNS_PREFIX", "lct")
 
 
 def need_root() -> None:
@@ -60,10 +62,11 @@ class LiveBus:
         _ip("-n", self.netns, *args)
 
 
-def make_bus() -> LiveBus:
-    """A fresh namespace with a veth pair, up, without IPv6 chatter."""
+def make_bus(tag: str = "") -> LiveBus:
+    """A fresh namespace with a veth pair, up, without IPv6 chatter (``tag``: a letter or
+    two that tell the test's pairs apart)."""
     need_root()
-    tag = f"{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
+    tag += f"{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
     bus = LiveBus(f"{PREFIX}n{tag}", f"{PREFIX}m{tag}", f"{PREFIX}e{tag}")
     _ip("netns", "add", bus.netns)
     try:
@@ -172,10 +175,14 @@ def run(
     )
 
 
+def json_of(out: str) -> dict[str, Any]:
+    """The JSON document a command wrote (empty when it wrote none)."""
+    return json.loads(out) if out.strip() else {}
+
+
 def run_json(
     *args: str, bus: LiveBus | None = None, timeout: float = 120
 ) -> tuple[int, dict[str, Any], str]:
     """Exit code, the JSON document on stdout, stderr."""
     done = run(*args, "--format", "json", bus=bus, timeout=timeout)
-    doc = json.loads(done.stdout) if done.stdout.strip() else {}
-    return done.returncode, doc, done.stderr
+    return done.returncode, json_of(done.stdout), done.stderr
