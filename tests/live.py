@@ -33,14 +33,15 @@ LOLA = EXAMPLES / "lola.xml"
 PREFIX = os.environ.get("LOLACLI_TEST_NETNS_PREFIX", "lct")
 
 
-def need_root() -> None:
+def need_root(what: str = "a veth pair") -> None:
     if os.geteuid() != 0:
-        pytest.skip("needs root for a veth pair")
+        pytest.skip(f"needs root for {what}")
     if shutil.which("ip") is None:
         pytest.skip("needs iproute2 (ip)")
 
 
-def _ip(*args: str) -> None:
+def ip(*args: str) -> None:
+    """``ip ARGS`` (iproute2), failing on error."""
     subprocess.run(["ip", *args], check=True, capture_output=True)
 
 
@@ -59,7 +60,7 @@ class LiveBus:
         return ["ip", "netns", "exec", self.netns, *argv]
 
     def ip(self, *args: str) -> None:
-        _ip("-n", self.netns, *args)
+        ip("-n", self.netns, *args)
 
 
 def make_bus(tag: str = "") -> LiveBus:
@@ -68,7 +69,7 @@ def make_bus(tag: str = "") -> LiveBus:
     need_root()
     tag += f"{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
     bus = LiveBus(f"{PREFIX}n{tag}", f"{PREFIX}m{tag}", f"{PREFIX}e{tag}")
-    _ip("netns", "add", bus.netns)
+    ip("netns", "add", bus.netns)
     try:
         bus.ip("link", "add", bus.master, "type", "veth", "peer", "name", bus.emulator)
         for name in (bus.master, bus.emulator):

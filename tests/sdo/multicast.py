@@ -10,7 +10,6 @@ IPv6 default group gets no loopback delivery there). Needs root and ``ip``.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -18,36 +17,24 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-import pytest
-
 from lolacli.sdo.canopen_client import UDP_MULTICAST_IPV4
+from tests.live import ip, need_root
 
 ROOT = Path(__file__).resolve().parents[2]
 PREFIX = os.environ.get("LOLACLI_TEST_NETNS_PREFIX", "lcn")
 CAN = ["--can", UDP_MULTICAST_IPV4, "--interface", "udp_multicast"]
 
 
-def need_root() -> None:
-    if os.geteuid() != 0:
-        pytest.skip("needs root for a private network namespace (udp_multicast stays on it)")
-    if shutil.which("ip") is None:
-        pytest.skip("needs iproute2 (ip)")
-
-
-def _ip(*args: str) -> None:
-    subprocess.run(["ip", *args], check=True, capture_output=True)
-
-
 @contextmanager
 def namespace() -> Iterator[str]:
     """A network namespace with only ``lo``, multicast on, removed afterwards."""
-    need_root()
+    need_root("a private network namespace (udp_multicast stays on it)")
     name = f"{PREFIX}{os.getpid() % 100000}x{time.monotonic_ns() % 1000}"
-    _ip("netns", "add", name)
+    ip("netns", "add", name)
     try:
-        _ip("-n", name, "link", "set", "lo", "up")
-        _ip("-n", name, "link", "set", "lo", "multicast", "on")
-        _ip("-n", name, "route", "add", "224.0.0.0/4", "dev", "lo")
+        ip("-n", name, "link", "set", "lo", "up")
+        ip("-n", name, "link", "set", "lo", "multicast", "on")
+        ip("-n", name, "route", "add", "224.0.0.0/4", "dev", "lo")
         yield name
     finally:
         subprocess.run(["ip", "netns", "del", name], capture_output=True, check=False)
