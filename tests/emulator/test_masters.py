@@ -30,6 +30,7 @@ import pytest
 from lolacli.devices.cia402 import Cia402Drive
 from tests.emulator.bus import EXAMPLES
 from tests.emulator.master_capture import Exchange, MasterCapture, realtime_ns
+from tests.live import ip, need_root
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = [pytest.mark.root, pytest.mark.slow]
@@ -37,24 +38,13 @@ CYCLES = 10_000  # 10 s at 1 kHz
 SOAK_S = float(os.environ.get("LOLACLI_SOAK_S", "5"))  # 60 for the acceptance soak
 
 
-def _need_root() -> None:
-    if os.geteuid() != 0:
-        pytest.skip("needs root for a veth pair")
-    if shutil.which("ip") is None:
-        pytest.skip("needs iproute2 (ip)")
-
-
-def _ip(*args: str) -> None:
-    subprocess.run(["ip", *args], check=True, capture_output=True)
-
-
 @pytest.fixture
 def veth() -> Iterator[tuple[str, str]]:
     """A fresh veth pair (master end, emulator end), removed afterwards."""
-    _need_root()
+    need_root()
     tag = f"{os.getpid() % 10000:04d}{time.monotonic_ns() % 100:02d}"
     master, emulator = f"lcm{tag}", f"lce{tag}"
-    _ip("link", "add", master, "type", "veth", "peer", "name", emulator)
+    ip("link", "add", master, "type", "veth", "peer", "name", emulator)
     try:
         for name in (master, emulator):
             subprocess.run(
@@ -62,7 +52,7 @@ def veth() -> Iterator[tuple[str, str]]:
                 capture_output=True,
                 check=False,
             )
-            _ip("link", "set", name, "up")
+            ip("link", "set", name, "up")
         yield master, emulator
     finally:
         subprocess.run(["ip", "link", "del", master], capture_output=True, check=False)
@@ -810,7 +800,7 @@ def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
 
 
 def test_emulate_without_raw_socket_permission_exits_4() -> None:
-    _need_root()
+    need_root()
     if shutil.which("setpriv") is None:
         pytest.skip("needs setpriv to drop CAP_NET_RAW")
     done = subprocess.run(
