@@ -10,7 +10,10 @@ totals (pairs, lost frames, round trip), and the reader + wire decoder for the r
 latency per command type (an echo is the next frame with the same command/index/length
 sequence: KickCAT's own MAC has the locally administered bit set, so the MAC cannot tell).
 The table shows p50/p99/max against the 2 ms budget real masters wait per frame (SOEM's
-EC_TIMEOUTRET, KickCAT's link timeout) and the target p99 <= 150 µs, max <= 1 ms.
+EC_TIMEOUTRET, KickCAT's link timeout) and the target p99 <= 150 µs, max <= 1 ms. After
+each run, the baseline: the host's own wake-up latency measured cyclictest's way (a
+SCHED_FIFO 10 process sleeping to a deadline every 1 ms, same load), and the ratio of the
+emulator's worst reply to the host's worst wake-up.
 
     sudo python benchmarks/emulate_latency.py                      # LOLA, both masters
     sudo python benchmarks/emulate_latency.py --masters pysoem --cycles 2000 --loads idle
@@ -255,6 +258,41 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
     return result
 
 
+def host_baseline(seconds: float, hog: bool) -> dict[str, float]:
+    """The host's own wake-up latency, cyclictest's way: a process at the emulator's
+    scheduling (SCHED_FIFO 10 where permitted) sleeps to a deadline every 1 ms and
+    records how late it wakes. Nothing can answer a frame faster than this host wakes
+    the process that answers it, so the emulator's maxima are read against these."""
+    code = (
+        "import os, time, json\n"
+        "try: os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))\n"
+        "except OSError: pass\n"
+        "late = []\n"
+        "t = time.monotonic_ns()\n"
+        f"end = t + {int(seconds * 1e9)}\n"
+        "while t < end:\n"
+        "    t += 1_000_000\n"
+        "    time.sleep(max(0, t - time.monotonic_ns()) / 1e9)\n"
+        "    late.append(time.monotonic_ns() - t)\n"
+        "late.sort()\n"
+        "print(json.dumps({'n': len(late), 'p50_us': late[len(late) // 2] / 1e3,\n"
+        "    'p99_us': late[int(len(late) * 0.99)] / 1e3, 'max_us': late[-1] / 1e3}))\n"
+    )
+    procs = []
+    if hog:
+        hog_cmd = [sys.executable, "-c", "while 1: pass"]
+        if shutil.which("taskset"):
+            hog_cmd = ["taskset", "-c", "1", *hog_cmd]
+        procs.append(subprocess.Popen(hog_cmd))
+    try:
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    finally:
+        for proc in procs:
+            proc.terminate()
+            proc.wait()
+    return json.loads(done.stdout) if done.returncode == 0 else {}
+
+
 def print_table(result: dict[str, object]) -> None:
     load = "CPU hog on core 1" if result["hog"] else "other core idle"
     print(f"\n== {result['master']}, {load}: start-up {result.get('startup_s', 0):.2f} s, "
@@ -274,6 +312,15 @@ def print_table(result: dict[str, object]) -> None:
             f"{s['max_us']:9.1f} {s['p99_us'] / BUDGET_US:10.3f}  {'ok' if ok else 'MISSED'}"
         )
     print(f"emulator's own reply time: {result['emulator']}")
+    base = result.get("host_baseline")
+    if isinstance(base, dict) and base:
+        worst = max(s["max_us"] for s in by_command.values())
+        print(
+            f"host baseline (a SCHED_FIFO 10 sleeper woken every 1 ms for "
+            f"{base['n'] / 1000:.0f} s, same load): late p50 {base['p50_us']:.0f} µs, "
+            f"p99 {base['p99_us']:.0f} µs, max {base['max_us']:.0f} µs; the emulator's "
+            f"worst reply / the host's worst wake-up = {worst / base['max_us']:.2f}"
+        )
 
 
 def main() -> None:
@@ -285,6 +332,10 @@ def main() -> None:
     parser.add_argument("--master-nice", type=int, default=0)
     parser.add_argument("--prefix", default="lbl", help="veth name prefix")
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder")
+    parser.add_argument(
+        "--baseline-s", type=float, default=10.0,
+        help="seconds of the host's own wake-up latency measured after each run (0: none)",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="also print the results as JSON")
     parser.add_argument("--run-master", choices=sorted(MASTERS), help=argparse.SUPPRESS)
     parser.add_argument("--iface", help=argparse.SUPPRESS)
@@ -302,6 +353,8 @@ def main() -> None:
     for master in args.masters.split(","):
         for load in args.loads.split(","):
             results.append(one_run(args, master, load == "hog", folder))
+            if args.baseline_s > 0:
+                results[-1]["host_baseline"] = host_baseline(args.baseline_s, load == "hog")
             print_table(results[-1])
     print(f"\nENI {args.eni.name}, {args.cycles} cycles at 1 kHz after start-up; "
           f"load average during the run: {os.getloadavg()[0]:.2f} (2 cores); "
