@@ -484,8 +484,13 @@ def _judge(
     if log:
         with open(log, "a") as f:
             record = {"phases": figures, "late": len(late), "stalls": stalls}
-            record |= {"errors": len(errors), "note": note}
+            record |= {"errors": len(errors), "note": note, "test": _test_name()}
+            record["startup_errors"] = sum(1 for e in errors if e.start_ns < phases[-1][0])
             f.write(json.dumps(record) + "\n")
+
+
+def _test_name() -> str:
+    return os.environ.get("PYTEST_CURRENT_TEST", "").split(" ")[0]
 
 
 def test_kickcat_single_drive(veth) -> None:
