@@ -756,6 +756,8 @@ class Chain:
             if core is not None:  # the firmware's slave: its ESC state back from the C core
                 core.release_owner(function)
             function(*args)
+            if core is not None:
+                core.prepare_device(function)
 
     def _run_pdi(self) -> None:
         while self._pdi:

@@ -696,6 +696,27 @@ def test_the_core_holds_the_state_and_chain_slaves_gives_it_back() -> None:
     assert core.held_devices() == [0]
 
 
+def test_the_core_takes_the_devices_in_when_they_reach_safeop_not_in_a_cycle() -> None:
+    """The devices' tables are built and loaded by the firmware that enters SAFEOP (after
+    that frame's answer), so the first application cycle, which a real-time server may
+    have to run in a later frame's answer path, finds them held (KickCAT's first LWR on
+    LOLA took 1.5 ms while it built 25 of them)."""
+    from lolacli.master.core import Master, MasterOptions
+    from lolacli.master.transport import ChainTransport
+    from lolacli.wire.registers import AlState as Al
+
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni, engine="c")
+    core = chain._core
+    assert core is not None
+    master = Master(eni, ChainTransport(chain), options=MasterOptions(dc_drift_frames=50))
+    master.bring_up(Al.PREOP)
+    assert core.held_devices() == []
+    master.bring_up(Al.SAFEOP)
+    with_device = [i for i, esc in enumerate(chain._slaves) if device_of(esc) is not None]
+    assert len(with_device) == 25 and core.held_devices() == with_device
+
+
 def test_firmware_work_runs_on_the_state_the_core_gave_back() -> None:
     """Work a slave's firmware does after the answer (queued while compiled frames ran
     and the core took every slave's ESC state) finds that state in its Esc object."""
