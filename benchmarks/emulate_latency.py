@@ -204,10 +204,7 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         if "emulating" not in ready:
             raise SystemExit(f"emulator did not start: {ready}{emulator.stderr.read()}")
         if hog:
-            hog_cmd = [sys.executable, "-c", "while 1: pass"]
-            if shutil.which("taskset"):
-                hog_cmd = ["taskset", "-c", "1", *hog_cmd]
-            procs.append(subprocess.Popen(hog_cmd))
+            procs.append(_hog())
         dumpcap = subprocess.Popen(
             ["dumpcap", "-q", "-i", m_if, "-w", str(pcap)],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -258,6 +255,14 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
     return result
 
 
+def _hog() -> subprocess.Popen[bytes]:
+    """A CPU hog on core 1 (a plain busy loop)."""
+    cmd = [sys.executable, "-c", "while 1: pass"]
+    if shutil.which("taskset"):
+        cmd = ["taskset", "-c", "1", *cmd]
+    return subprocess.Popen(cmd)
+
+
 def host_baseline(seconds: float, hog: bool) -> dict[str, float]:
     """The host's own wake-up latency, cyclictest's way: a process at the emulator's
     scheduling (SCHED_FIFO 10 where permitted) sleeps to a deadline every 1 ms and
@@ -278,12 +283,7 @@ def host_baseline(seconds: float, hog: bool) -> dict[str, float]:
         "print(json.dumps({'n': len(late), 'p50_us': late[len(late) // 2] / 1e3,\n"
         "    'p99_us': late[int(len(late) * 0.99)] / 1e3, 'max_us': late[-1] / 1e3}))\n"
     )
-    procs = []
-    if hog:
-        hog_cmd = [sys.executable, "-c", "while 1: pass"]
-        if shutil.which("taskset"):
-            hog_cmd = ["taskset", "-c", "1", *hog_cmd]
-        procs.append(subprocess.Popen(hog_cmd))
+    procs = [_hog()] if hog else []
     try:
         done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     finally:

@@ -757,7 +757,7 @@ class Chain:
                 core.release_owner(function)
             function(*args)
             if core is not None:
-                core.prepare_device(function)
+                core.prepare_device(function, len(self._active))
 
     def _run_pdi(self) -> None:
         while self._pdi:

@@ -277,14 +277,15 @@ class ChainCore:
         elif i not in self.released:
             self.release((i,))
 
-    def prepare_device(self, work: object) -> None:
+    def prepare_device(self, work: object, active: int) -> None:
         """Take in the device of the slave whose firmware ``work`` just ran, once it is in
         SAFEOP or OP (its PDO mapping is fixed there): its tables built and its state
         loaded in the firmware's time, after the answer, rather than by the first cycle
         that needs them, which may run in a frame's answer path (25 LOLA devices: 1.5 ms
-        in KickCAT's first LWR, whose LRD's cycle waited for it)."""
+        in KickCAT's first LWR, whose LRD's cycle waited for it). Only the first
+        ``active`` slaves (those the frames reach) run cycles."""
         i = self._index.get(id(getattr(work, "__self__", None)))
-        if i is None or i not in self.devices_released:
+        if i is None or i >= active or i not in self.devices_released:
             return
         if self.escs[i].al_state not in (AlState.SAFEOP, AlState.OP):
             return

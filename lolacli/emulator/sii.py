@@ -23,9 +23,16 @@ from enum import IntEnum, IntFlag
 from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import ConfiguredSyncManager, Direction, Pdo, Slave
+from lolacli.wire.registers import (
+    SM_CONTROL_INPUTS,
+    SM_CONTROL_MAILBOX_IN,
+    SM_CONTROL_MAILBOX_OUT,
+    SM_CONTROL_OUTPUTS,
+)
 from lolacli.wire.sii import (  # the one definition
     CATEGORY_END,
     HEADER_WORDS,
+    PROTOCOL_NAMES,
     MailboxProtocol,
     SiiCategory,
 )
@@ -86,13 +93,13 @@ DATA_TYPE_CODES = {
     "BIT8": 0x37,
 }
 
-_PROTOCOL_NAMES = {"AoE": 0x01, "EoE": 0x02, "CoE": 0x04, "FoE": 0x08, "SoE": 0x10, "VoE": 0x20}
+_PROTOCOL_NAMES = {name: int(bit) for bit, name in PROTOCOL_NAMES}  # "CoE" -> 0x04
 
 SM_CONTROL = {
-    SmType.MAILBOX_OUT: 0x26,
-    SmType.MAILBOX_IN: 0x22,
-    SmType.OUTPUTS: 0x64,
-    SmType.INPUTS: 0x20,
+    SmType.MAILBOX_OUT: SM_CONTROL_MAILBOX_OUT,
+    SmType.MAILBOX_IN: SM_CONTROL_MAILBOX_IN,
+    SmType.OUTPUTS: SM_CONTROL_OUTPUTS,
+    SmType.INPUTS: SM_CONTROL_INPUTS,
 }
 
 
@@ -320,12 +327,20 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
     sms: list[SiiSyncManager] = []
     if slave.mailbox is not None:
         mb = slave.mailbox
-        sms.append(SiiSyncManager(mb.out_start, mb.out_length_bytes, 0x26, 1, SmType.MAILBOX_OUT))
-        sms.append(SiiSyncManager(mb.in_start, mb.in_length_bytes, 0x22, 1, SmType.MAILBOX_IN))
+        for start, length, kind in (
+            (mb.out_start, mb.out_length_bytes, SmType.MAILBOX_OUT),
+            (mb.in_start, mb.in_length_bytes, SmType.MAILBOX_IN),
+        ):
+            sms.append(SiiSyncManager(start, length, SM_CONTROL[kind], 1, kind))
     out_enable = 1 if out_bytes else 0
     in_enable = 1 if in_bytes else 0
-    sms.append(SiiSyncManager(DEFAULT_OUTPUTS_START, out_bytes, 0x64, out_enable, SmType.OUTPUTS))
-    sms.append(SiiSyncManager(DEFAULT_INPUTS_START, in_bytes, 0x20, in_enable, SmType.INPUTS))
+    outputs, inputs = SmType.OUTPUTS, SmType.INPUTS
+    sms.append(
+        SiiSyncManager(DEFAULT_OUTPUTS_START, out_bytes, SM_CONTROL[outputs], out_enable, outputs)
+    )
+    sms.append(
+        SiiSyncManager(DEFAULT_INPUTS_START, in_bytes, SM_CONTROL[inputs], in_enable, inputs)
+    )
     return tuple(sms)
 
 

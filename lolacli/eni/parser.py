@@ -472,13 +472,14 @@ class _Reader:
         result = {sm.index: sm for sm in written}
         if mailbox is not None:  # mailbox SMs the ENI describes but no InitCmd writes
             mbx = (
-                (0, mailbox.out_start, mailbox.out_length_bytes, 0x26),
-                (1, mailbox.in_start, mailbox.in_length_bytes, 0x22),
+                (0, mailbox.out_start, mailbox.out_length_bytes, reg.SM_CONTROL_MAILBOX_OUT),
+                (1, mailbox.in_start, mailbox.in_length_bytes, reg.SM_CONTROL_MAILBOX_IN),
             )
             for n, start, length, control in mbx:
                 if n not in result and n not in declared and length:
                     result[n] = ConfiguredSyncManager(
-                        n, reg.SyncManager(start, length, control, activate=1)
+                        n,
+                        reg.SyncManager(start, length, control, activate=reg.SM_ACTIVATE_ENABLE),
                     )
         for n, el in declared.items():
             if n not in result:
@@ -504,7 +505,10 @@ class _Reader:
         for n, el in self.sm_elements(process_data).items():
             for p in self.children(el, "Pdo"):
                 if p.text and p.text.strip():
-                    assigned[parse_number(p.text)] = n
+                    try:
+                        assigned[parse_number(p.text)] = n
+                    except ValueError:
+                        raise self.error(p, f"<Pdo>: not a number: {p.text.strip()!r}") from None
         pdos: list[Pdo] = []
         for tag, direction in (("RxPdo", Direction.OUTPUT), ("TxPdo", Direction.INPUT)):
             for el in self.children(process_data, tag):

@@ -41,6 +41,9 @@ from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
     SII_COMMAND_SHIFT,
+    SM_ACTIVATE_ENABLE,
+    SM_CONTROL_MAILBOX_IN,
+    SM_CONTROL_MAILBOX_OUT,
     AlState,
     Register,
     SiiCommand,
@@ -60,9 +63,6 @@ EEPROM_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.CHECKSUM_ERROR
 EEPROM_POLLS = 100
 
 # mailbox sync managers: control byte (mailbox mode, direction, interrupt), activate
-SM_MAILBOX_OUT_CONTROL = 0x26
-SM_MAILBOX_IN_CONTROL = 0x22
-SM_ENABLE = 0x01
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _AL_MASK = b"\x1f\x00"  # state and error indicator
@@ -210,12 +210,14 @@ def preop_init_cmds(station: int, mailbox: Mailbox | None) -> tuple[InitCmd, ...
     ]
     if mailbox is None:
         return tuple(cmds)
-    sm0 = encode_sync_manager(SyncManager(
-        mailbox.out_start, mailbox.out_length_bytes, SM_MAILBOX_OUT_CONTROL, activate=SM_ENABLE
-    ))
-    sm1 = encode_sync_manager(SyncManager(
-        mailbox.in_start, mailbox.in_length_bytes, SM_MAILBOX_IN_CONTROL, activate=SM_ENABLE
-    ))
+    out, inn = SM_CONTROL_MAILBOX_OUT, SM_CONTROL_MAILBOX_IN
+    on = SM_ACTIVATE_ENABLE
+    sm0 = encode_sync_manager(
+        SyncManager(mailbox.out_start, mailbox.out_length_bytes, out, activate=on)
+    )
+    sm1 = encode_sync_manager(
+        SyncManager(mailbox.in_start, mailbox.in_length_bytes, inn, activate=on)
+    )
     cmds += [
         cmd(Command.FPWR, sync_manager_address(0), sm0, "SM0 mailbox out"),
         cmd(Command.FPWR, sync_manager_address(1), sm1, "SM1 mailbox in"),

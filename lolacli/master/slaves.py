@@ -5,8 +5,10 @@ it declares its Bus Variables as class attributes with :func:`bus_field`, named 
 to the slave (``"Inputs.Statusword"``); constructing it for an ENI slave name links them
 (``"Joint04 L Knee.Inputs.Statusword"``). Where ENIs spell a name differently
 (``Status word`` / ``Statusword``) a field lists the spellings it takes; the last part
-of the name is then matched under the slave. The master calls :meth:`BusSlave.process`
-every cycle after the inputs came in (the seed's procData).
+of the name is then matched under the slave, and last the object (index, subindex) the
+slave's assigned PDOs map (``obj=(0x6064, 0)``: "Actual motor position" in one ENI). The
+master calls :meth:`BusSlave.process` every cycle after the inputs came in (the seed's
+procData).
 
 The first users: :class:`Cia402Drive` (the seed's Elmo drive class: a power state machine
 and get/set of actual and target position), and the CAN gateway's :class:`Imu` and
@@ -119,13 +121,13 @@ def _resolve(image: ProcessImage, slave: str, spec: BusField) -> str | None:
         if len(hits) == 1:
             return hits[0]
     if spec.obj is not None:
-        mapped = image.objects.get((slave, *spec.obj))
-        if mapped is not None and image.variables[mapped].direction == spec.direction:
+        mapped = image.objects.get((slave, *spec.obj, spec.direction))
+        if mapped is not None:
             return mapped
     return None
 
 
-def has_field(image: ProcessImage, slave: str, spec: Any) -> bool:
+def has_field(image: ProcessImage, slave: str, spec: BusField) -> bool:
     """Whether ``slave`` has the Bus Variable a device class declares as ``spec``."""
     return _resolve(image, slave, spec) is not None
 

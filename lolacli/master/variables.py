@@ -325,7 +325,7 @@ class ProcessImage:
         eni_image: EniProcessImage,
         inputs_bytes: int,
         outputs_bytes: int,
-        slaves: Sequence[Slave] = (),
+        slaves: Sequence[Slave],
     ) -> None:
         self.inputs = bytearray(inputs_bytes)
         self.outputs = bytearray(outputs_bytes)
@@ -333,9 +333,9 @@ class ProcessImage:
         self.snapshot = Snapshot(-1, bytes(inputs_bytes))
         self.variables = {v.name: v for v in eni_image.variables}
         self.linked: list[BusVariable] = []
-        #: (slave name, object index, subindex) -> the variable an assigned PDO maps it to
-        #: (ENI variables are named "<slave>.<PDO name>.<entry name>", ETG.2100)
-        self.objects: dict[tuple[str, int, int], str] = {}
+        #: (slave name, object index, subindex, direction) -> the variable an assigned PDO
+        #: maps it to (ENI variables are named "<slave>.<PDO name>.<entry name>", ETG.2100)
+        self.objects: dict[tuple[str, int, int, Direction], str] = {}
         for slave in slaves:
             for pdo in slave.pdos:
                 if pdo.sync_manager is None:
@@ -343,7 +343,8 @@ class ProcessImage:
                 for e in pdo.entries:
                     name = f"{slave.name}.{pdo.name}.{e.name}"
                     if e.index and name in self.variables:
-                        self.objects.setdefault((slave.name, e.index, e.subindex), name)
+                        key = (slave.name, e.index, e.subindex, pdo.direction)
+                        self.objects.setdefault(key, name)
 
     def publish(self, cycle: int) -> None:
         """copyRXData: the inputs as they are now become the snapshot of ``cycle``."""

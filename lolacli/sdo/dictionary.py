@@ -168,15 +168,19 @@ _NAMES: dict[int, str] = {
     0x1C00: "Sync manager communication type",
     0x1C10: "Sync manager PDO assignment",
 }
+_SDO_PARAMETER = {1: "COB-ID client to server", 2: "COB-ID server to client"}
 _PDO_COMM = {1: "COB-ID", 2: "Transmission type", 3: "Inhibit time", 5: "Event timer"}
 #: entry names by the first index of the object's range; a str is a pattern for every sub
 _SUB_NAMES: dict[int, dict[int, str] | str] = {
     0x1003: "Standard error field {sub}",
-    0x1010: {1: "Save all parameters"},
-    0x1011: {1: "Restore all default parameters"},
+    0x1010: {1: "Save all parameters", 2: "Save communication parameters",
+             3: "Save application parameters"},
+    0x1011: {1: "Restore all default parameters", 2: "Restore communication default parameters",
+             3: "Restore application default parameters"},
     0x1016: "Consumer heartbeat time {sub}",
     0x1018: {1: "Vendor ID", 2: "Product code", 3: "Revision number", 4: "Serial number"},
-    0x1200: {1: "COB-ID client to server", 2: "COB-ID server to client", 3: "Node-ID"},
+    0x1200: _SDO_PARAMETER | {3: "Node-ID of the client"},
+    0x1280: _SDO_PARAMETER | {3: "Node-ID of the server"},
     0x1400: _PDO_COMM,
     0x1600: "Mapped object {sub}",
     0x1800: _PDO_COMM | {6: "SYNC start value"},
@@ -193,7 +197,7 @@ def _object_name(index: int) -> tuple[int, str] | None:
     if 0x1C10 <= index <= 0x1C2F:
         return first, f"Sync manager {index - 0x1C10} PDO assignment"
     if first in (0x1400, 0x1600, 0x1800, 0x1A00):  # RPDO/TPDO n: CiA 301 counts from 1
-        return first, f"{_NAMES[first]} {index - first + 1}" if index != first else _NAMES[first]
+        return first, f"{_NAMES[first]} {index - first + 1}"
     return first, _NAMES[first]
 
 

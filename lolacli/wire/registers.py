@@ -323,6 +323,13 @@ SM_DIRECTION_WRITE = 0x04  # ECAT writes, PDI reads (outputs, mailbox out)
 SM_CONTROL_WATCHDOG = 0x40
 SM_STATUS_MAILBOX_FULL = 0x08
 SM_ACTIVATE_ENABLE = 0x01
+SM_CONTROL_PDI_EVENT = 0x20  # bit 5: the PDI gets an event on each access
+#: the usual control bytes (what configurators write and SII gives): mailbox out (written
+#: by the master), mailbox in (read by it), outputs (buffered, written, watchdog), inputs
+SM_CONTROL_MAILBOX_OUT = SM_MODE_MAILBOX | SM_DIRECTION_WRITE | SM_CONTROL_PDI_EVENT
+SM_CONTROL_MAILBOX_IN = SM_MODE_MAILBOX | SM_DIRECTION_READ | SM_CONTROL_PDI_EVENT
+SM_CONTROL_OUTPUTS = SM_DIRECTION_WRITE | SM_CONTROL_PDI_EVENT | SM_CONTROL_WATCHDOG
+SM_CONTROL_INPUTS = SM_MODE_BUFFERED | SM_DIRECTION_READ | SM_CONTROL_PDI_EVENT
 SM_PDI_DEACTIVATE = 0x01
 
 

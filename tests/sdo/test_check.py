@@ -151,25 +151,3 @@ def test_bad_file_is_exit_3_before_any_bus(cli, tmp_path) -> None:
     code, _out, err = cli("sdo", "check", str(tmp_path / "missing.yaml"), "--can", "x")
     assert code == 3 and "no such file" in err
 
-
-@pytest.mark.parametrize(
-    ("index", "sub", "name"),
-    [
-        (0x1000, 0, "Device type"),
-        (0x1008, 0, "Manufacturer device name"),
-        (0x1018, 0, "Number of entries"),
-        (0x1018, 3, "Revision number"),
-        (0x1601, 2, "Mapped object 2"),
-        (0x1801, 2, "Transmission type"),
-        (0x1C12, 1, "Assigned PDO 1"),
-        (0x6041, 0, ""),  # a device profile object: not a communication object
-        (0x2000, 0, ""),
-    ],
-)
-def test_standard_names_of_the_communication_objects(index: int, sub: int, name: str) -> None:
-    from lolacli.sdo.dictionary import standard_name, standard_object
-
-    assert standard_name(index, sub) == name
-    if 0x1600 <= index <= 0x1BFF:
-        obj = standard_object(index, 2)
-        assert obj is not None and obj.name.endswith(f" {index % 0x200 + 1}")
