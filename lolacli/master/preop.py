@@ -58,7 +58,8 @@ from lolacli.wire.sii import SiiInfo, SiiWords, protocol_names
 #: SOEM's station addresses: 0x1001, 0x1002, … in line order (ecx_config_init)
 FIRST_STATION = 0x1001
 
-#: EEPROM status bits that fail a read (0x0502; a checksum error too, as SOEM's error mask)
+#: EEPROM status bits that fail a read (0x0502): a command error, and a checksum error
+#: (the words read may be wrong). `bus scan` fails on a command error only: it reports.
 EEPROM_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.CHECKSUM_ERROR
 EEPROM_POLLS = 100
 
