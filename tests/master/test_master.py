@@ -277,8 +277,10 @@ def test_simulate_enables_and_moves_every_cia402_drive_found_by_object_index(pat
 
     eni = load_eni(path)
     positions = _cia402_positions(eni)
-    if not positions:
-        pytest.skip("no CiA 402 drive in this ENI's process image")
+    if not positions:  # nothing to move: and simulate finds no drive either
+        doc = simulate(eni, SimulateOptions(cycles=20)).doc
+        assert doc["drives"] == doc["drives_enabled"] == 0, doc
+        return
     # where the drives stand when enabled (the emulated chain starts the same every run) and,
     # 1.5 s later at 2 kHz (three quarters of the 2 s back-and-forth), 20,000 counts away
     home = simulate(eni, SimulateOptions(cycles=20, watch=tuple(positions))).doc["watch"]
