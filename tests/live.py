@@ -113,9 +113,37 @@ def inside(bus: LiveBus) -> Iterator[None]:
         os.close(target)
 
 
+def emulate_argv(iface: str, eni: Path, *extra: str) -> list[str]:
+    """The command line of `lolacli bus emulate` serving ``eni`` on ``iface``."""
+    argv = [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", iface]
+    return [*argv, "--eni", str(eni), "--quiet", *extra]
+
+
+def spawn_emulator(argv: list[str]) -> subprocess.Popen[bytes]:
+    """Start `bus emulate` (``argv``) and return once it answers: its first stderr line
+    ("emulating N slaves of …", kept as ``first_line``) says the socket is open. Read byte
+    by byte, so nothing after it is buffered here and lost to :func:`stop_emulator`."""
+    proc = subprocess.Popen(
+        argv, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0
+    )
+    assert proc.stderr is not None
+    line = b""
+    while not line.endswith(b"\n"):
+        byte = proc.stderr.read(1)
+        if not byte:
+            break
+        line += byte
+    if b"emulating" not in line:
+        proc.kill()
+        raise AssertionError((line + proc.stderr.read()).decode())
+    proc.first_line = line.decode()  # type: ignore[attr-defined]
+    time.sleep(0.2)
+    return proc
+
+
 def start_emulator(
     bus: LiveBus, *extra: str, eni: Path = LOLA, priority: int | None = None
-) -> subprocess.Popen[str]:
+) -> subprocess.Popen[bytes]:
     """`lolacli bus emulate` serving ``eni`` on the bus (returns once it answers), with the
     product's scheduling (SCHED_FIFO 10 as root) unless ``priority`` is given (0: normal
     scheduling). Real time stands in for slave hardware, which does not stall when the
@@ -123,43 +151,21 @@ def start_emulator(
     answered mailboxes too late for SOEM and tripped its own process-data watchdogs)."""
     if priority is not None:
         extra = ("--realtime-priority", str(priority), *extra)
-    proc = subprocess.Popen(
-        bus.command(
-            sys.executable,
-            "-m",
-            "lolacli",
-            "bus",
-            "emulate",
-            "--iface",
-            bus.emulator,
-            "--eni",
-            str(eni),
-            "--quiet",
-            *extra,
-        ),
-        cwd=ROOT,
-        stderr=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stderr is not None
-    line = proc.stderr.readline()  # "emulating N slaves of …" once the socket is open
-    if "emulating" not in line:
-        proc.kill()
-        raise AssertionError(line + proc.stderr.read())
-    time.sleep(0.2)
-    return proc
+    return spawn_emulator(bus.command(*emulate_argv(bus.emulator, eni, *extra)))
 
 
-def stop_emulator(proc: subprocess.Popen[str]) -> None:
-    proc.send_signal(2)  # SIGINT: stops cleanly
+def stop_emulator(proc: subprocess.Popen[bytes]) -> str:
+    """Stop it with SIGINT (a clean stop, exit 0); its whole stderr (status and stop lines)."""
+    proc.send_signal(2)
     try:
         _out, err = proc.communicate(timeout=20)
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.communicate()
         raise
-    assert proc.returncode == 0, err
+    text = getattr(proc, "first_line", "") + err.decode()
+    assert proc.returncode == 0, text
+    return text
 
 
 def run(

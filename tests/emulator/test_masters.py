@@ -30,7 +30,7 @@ import pytest
 from lolacli.devices.cia402 import Cia402Drive
 from tests.emulator.bus import EXAMPLES
 from tests.emulator.master_capture import Exchange, MasterCapture, realtime_ns
-from tests.live import ip, need_root
+from tests.live import emulate_argv, ip, need_root, spawn_emulator, stop_emulator
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = [pytest.mark.root, pytest.mark.slow]
@@ -59,44 +59,10 @@ def veth() -> Iterator[tuple[str, str]]:
 
 
 def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[bytes]:
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "lolacli",
-            "bus",
-            "emulate",
-            "--iface",
-            iface,
-            "--eni",
-            str(eni),
-            "--quiet",
-            *extra,
-        ],
-        cwd=ROOT,
-        stderr=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        bufsize=0,
-    )
-    assert proc.stderr is not None
-    line = b""  # "emulating N slaves of …" once the socket is open; read byte by byte,
-    while not line.endswith(b"\n"):  # so nothing after it is buffered here and lost
-        byte = proc.stderr.read(1)
-        if not byte:
-            break
-        line += byte
-    assert b"emulating" in line, (line + proc.stderr.read()).decode()
-    proc.first_line = line.decode()  # type: ignore[attr-defined]
-    time.sleep(0.2)
-    return proc
+    return spawn_emulator(emulate_argv(iface, eni, *extra))
 
 
-def _stop(proc: subprocess.Popen[bytes]) -> str:
-    proc.send_signal(2)  # SIGINT: stops cleanly
-    _out, err = proc.communicate(timeout=20)
-    text = getattr(proc, "first_line", "") + err.decode()
-    assert proc.returncode == 0, text
-    return text
+_stop = stop_emulator
 
 
 @pytest.fixture
