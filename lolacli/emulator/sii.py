@@ -1,70 +1,59 @@
-"""SII EEPROM images (ETG.1000.6 §5.4, ETG.2010): build one from an ENI slave, read it back.
+"""The SII EEPROM image of an emulated slave (ETG.1000.6 §5.4, ETG.2010): what goes in it,
+from an ENI slave or an ESI device, and what the emulated ESC reads back from it.
 
-Layout (word addresses)::
-
-    0x00 PDI control   0x01 PDI configuration   0x02 SYNC impulse length  0x03 PDI config 2
-    0x04 configured station alias                0x07 checksum (CRC-8 of words 0..6, low byte)
-    0x08 vendor id (2 words)  0x0A product code  0x0C revision  0x0E serial number
-    0x14/0x15 bootstrap receive mailbox offset/size   0x16/0x17 bootstrap send mailbox
-    0x18/0x19 standard receive mailbox (master -> slave)  0x1A/0x1B standard send mailbox
-    0x1C mailbox protocols   0x3E EEPROM size (KiBit - 1)   0x3F version
-    0x40… categories: type (word), length in words (word), data; 0xFFFF ends the list.
-
-Categories written: STRINGS (10), GENERAL (30), FMMU (40), SYNCM (41), TXPDO (50),
-RXPDO (51), DC (60). Pure: values in, bytes out.
+Every layout and code (header words, categories, SYNCM/PDO/FMMU/DC entries) is
+:mod:`lolacli.wire.sii`'s; this module chooses the content. Categories written: STRINGS
+(10), GENERAL (30), FMMU (40), SYNCM (41), TXPDO (50), RXPDO (51), DC (60). Pure: values
+in, bytes out.
 """
 
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, replace
-from enum import IntEnum, IntFlag
 
 from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import ConfiguredSyncManager, Direction, Pdo, Slave
+from lolacli.errors import WireError
 from lolacli.wire.registers import (
     SM_CONTROL_INPUTS,
     SM_CONTROL_MAILBOX_IN,
     SM_CONTROL_MAILBOX_OUT,
     SM_CONTROL_OUTPUTS,
+    SyncManager,
 )
-from lolacli.wire.sii import (  # the one definition
+from lolacli.wire.sii import (  # the one definition of every layout and code
     CATEGORY_END,
-    HEADER_WORDS,
+    HEADER_BYTES,
+    PDO_NOT_ASSIGNED,
     PROTOCOL_NAMES,
+    CoeDetails,
+    FmmuUsage,
     MailboxProtocol,
     SiiCategory,
+    SiiGeneral,
+    SiiHeader,
+    SiiPdo,
+    SiiPdoEntry,
+    SiiSyncManager,
+    SmType,
+    decode_sii_header,
+    decode_sii_pdos,
+    decode_sii_strings,
+    decode_sii_sync_managers,
+    encode_sii_category,
+    encode_sii_dc,
+    encode_sii_fmmus,
+    encode_sii_general,
+    encode_sii_header,
+    encode_sii_pdos,
+    encode_sii_strings,
+    encode_sii_sync_managers,
+    sii_categories,
 )
 
 _U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
-_SM_ENTRY = struct.Struct("<HHBBBB")
-_PDO_HEAD = struct.Struct("<HBBBBH")
-_PDO_ENTRY = struct.Struct("<HBBBBH")
-
-
-
-class SmType(IntEnum):
-    """SYNCM category "type" byte (ETG.2010 Table 12)."""
-
-    UNUSED = 0
-    MAILBOX_OUT = 1
-    MAILBOX_IN = 2
-    OUTPUTS = 3
-    INPUTS = 4
-
-
-class CoeDetails(IntFlag):
-    """GENERAL category CoE details (ETG.2010 Table 8)."""
-
-    SDO = 0x01
-    SDO_INFO = 0x02
-    PDO_ASSIGN = 0x04
-    PDO_CONFIG = 0x08
-    UPLOAD_AT_STARTUP = 0x10
-    SDO_COMPLETE_ACCESS = 0x20
-
 
 #: CoE data type codes of ENI/ESI type names (ETG.1000.6 Table 64).
 DATA_TYPE_CODES = {
@@ -104,15 +93,6 @@ SM_CONTROL = {
 
 
 @dataclass(frozen=True, slots=True)
-class SiiSyncManager:
-    start: int
-    length_bytes: int
-    control: int
-    enable: int
-    type: int
-
-
-@dataclass(frozen=True, slots=True)
 class SiiLayout:
     """What the ESC and a master learn from an SII image."""
 
@@ -142,16 +122,6 @@ def _sm_of(sms: tuple[SiiSyncManager, ...], kind: SmType, default: int) -> int:
     return next((i for i, sm in enumerate(sms) if sm.type == kind), default)
 
 
-def crc8_sii(data: bytes) -> int:
-    """CRC-8 of the first 14 header bytes: polynomial x^8+x^2+x+1, initial 0xFF."""
-    crc = 0xFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x07) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc
-
-
 # ------------------------------------------------------------------ building
 @dataclass(frozen=True, slots=True)
 class SiiSpec:
@@ -178,113 +148,100 @@ class SiiSpec:
     config_data: bytes = b""  # ESI <ConfigData>: header words 0..6 (PDI control, ...)
 
 
-def _category(kind: int, data: bytes) -> bytes:
-    if len(data) % 2:
-        data += b"\x00"
-    return _U16.pack(kind) + _U16.pack(len(data) // 2) + data
+def _sii_pdos(pdos: list[Pdo], sm_of: dict[int, int]) -> list[SiiPdo]:
+    """The PDOs as SII states them: a PDO that no sync manager takes by default has SM
+    0xFF, so a master that maps from the SII leaves it out."""
+    return [
+        SiiPdo(
+            pdo.index,
+            pdo.sync_manager
+            if pdo.sync_manager is not None
+            else sm_of.get(pdo.index, PDO_NOT_ASSIGNED),
+            tuple(
+                SiiPdoEntry(
+                    e.index, e.subindex, e.bit_size, DATA_TYPE_CODES.get(e.data_type.upper(), 0)
+                )
+                for e in pdo.entries
+            ),
+            flags=(0x0001 if pdo.mandatory else 0) | (0x0010 if pdo.fixed else 0),
+        )
+        for pdo in pdos
+    ]
 
 
-def _strings(strings: list[str]) -> bytes:
-    out = bytearray([len(strings)])
-    for s in strings:
-        raw = s.encode("latin-1", "replace")[:255]
-        out += bytes([len(raw)]) + raw
-    return bytes(out)
-
-
-def _general(spec: SiiSpec) -> bytes:
-    out = bytearray(32)
-    out[0], out[2], out[3] = 2, 3, 1  # group, order, name string indices
-    out[5] = spec.coe_details
-    out[9] = spec.ds402_channels
-    _U16.pack_into(out, 16, 0x0011)  # physical ports 0 and 1: MII
-    return bytes(out)
-
-
-def _pdo_category(pdos: list[Pdo], sm_of: dict[int, int]) -> bytes:
-    """PDO entries (ETG.2010 Table 14): a PDO that no sync manager takes by default has
-    SM 0xFF, so a master that maps from the SII leaves it out."""
-    out = bytearray()
-    for pdo in pdos:
-        sm = pdo.sync_manager if pdo.sync_manager is not None else sm_of.get(pdo.index, 0xFF)
-        flags = (0x0001 if pdo.mandatory else 0) | (0x0010 if pdo.fixed else 0)
-        out += _PDO_HEAD.pack(pdo.index, len(pdo.entries), sm, 0, 0, flags)
-        for e in pdo.entries:
-            code = DATA_TYPE_CODES.get(e.data_type.upper(), 0)
-            out += _PDO_ENTRY.pack(e.index, e.subindex, 0, code, e.bit_size, 0)
-    return bytes(out)
+#: PDI control word 0x0C05 (SPI, enhanced link detection) where no ESI gives words 0-6
+_DEFAULT_CONFIG = _U16.pack(0x0C05) + bytes(12)
 
 
 def build_sii(spec: SiiSpec) -> bytes:
     """The EEPROM image of ``spec``: 64-word header and categories up to 0xFFFF."""
-    head = bytearray(2 * HEADER_WORDS)
-    _U16.pack_into(head, 0, 0x0C05)  # PDI control: SPI, enhanced link detection
-    config = spec.config_data[:14]
-    head[: len(config)] = config
-    if spec.station_alias or not config:
-        _U16.pack_into(head, 8, spec.station_alias)
-    _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
-    for word, value in (
-        (0x08, spec.vendor_id),
-        (0x0A, spec.product_code),
-        (0x0C, spec.revision),
-        (0x0E, spec.serial),
-    ):
-        _U32.pack_into(head, 2 * word, value & 0xFFFFFFFF)
-    if spec.mailbox is not None:
-        out_start, out_len, in_start, in_len = spec.mailbox
-        for word, value in (
-            (0x14, out_start),
-            (0x15, out_len),
-            (0x16, in_start),
-            (0x17, in_len),
-            (0x18, out_start),
-            (0x19, out_len),
-            (0x1A, in_start),
-            (0x1B, in_len),
-            (0x1C, spec.protocols),
-        ):
-            _U16.pack_into(head, 2 * word, value)
-    _U16.pack_into(head, 2 * 0x3E, spec.eeprom_kibit - 1)
-    _U16.pack_into(head, 2 * 0x3F, 1)
-    _U16.pack_into(head, 14, crc8_sii(bytes(head[:14])))
-
-    body = bytearray()
-    body += _category(SiiCategory.STRINGS, _strings([spec.name, spec.group, spec.name]))
-    body += _category(SiiCategory.GENERAL, _general(spec))
-    fmmus = bytes(spec.fmmus) + (b"\xff" if len(spec.fmmus) % 2 else b"")
-    body += _category(SiiCategory.FMMU, fmmus)
-    sms = b"".join(
-        _SM_ENTRY.pack(s.start, s.length_bytes, s.control, 0, s.enable, s.type)
-        for s in spec.sync_managers
+    config = bytearray(_DEFAULT_CONFIG)
+    given = spec.config_data[:14]
+    config[: len(given)] = given
+    alias = spec.station_alias
+    if given and not alias:
+        alias = _U16.unpack_from(config, 8)[0]  # the ESI's word 4
+    out_start, out_len, in_start, in_len = spec.mailbox or (0, 0, 0, 0)
+    header = SiiHeader(
+        station_alias=alias,
+        vendor_id=spec.vendor_id,
+        product_code=spec.product_code,
+        revision=spec.revision,
+        serial=spec.serial,
+        rx_mailbox_offset=out_start,
+        rx_mailbox_bytes=out_len,
+        tx_mailbox_offset=in_start,
+        tx_mailbox_bytes=in_len,
+        mailbox_protocols=spec.protocols if spec.mailbox is not None else 0,
+        size_bytes=spec.eeprom_kibit * 128,
+        version=1,
+        checksum=0,
+        checksum_ok=True,
+        bootstrap_rx_mailbox_offset=out_start,
+        bootstrap_rx_mailbox_bytes=out_len,
+        bootstrap_tx_mailbox_offset=in_start,
+        bootstrap_tx_mailbox_bytes=in_len,
     )
-    body += _category(SiiCategory.SYNCM, sms)
+    general = SiiGeneral(
+        group_index=2,
+        image_index=0,
+        order_index=3,
+        name_index=1,
+        coe_details=spec.coe_details,
+        ds402_channels=spec.ds402_channels,
+        physical_ports=0x0011,  # ports 0 and 1: MII
+    )
+    body = [
+        encode_sii_category(
+            SiiCategory.STRINGS, encode_sii_strings([spec.name, spec.group, spec.name])
+        ),
+        encode_sii_category(SiiCategory.GENERAL, encode_sii_general(general)),
+        encode_sii_category(SiiCategory.FMMU, encode_sii_fmmus(spec.fmmus)),
+        encode_sii_category(SiiCategory.SYNCM, encode_sii_sync_managers(spec.sync_managers)),
+    ]
     sm_of = spec.pdo_sync_manager or {}
     tx = [p for p in spec.pdos if p.direction == Direction.INPUT]
     rx = [p for p in spec.pdos if p.direction == Direction.OUTPUT]
     if tx:
-        body += _category(SiiCategory.TXPDO, _pdo_category(tx, sm_of))
+        body.append(encode_sii_category(SiiCategory.TXPDO, encode_sii_pdos(_sii_pdos(tx, sm_of))))
     if rx:
-        body += _category(SiiCategory.RXPDO, _pdo_category(rx, sm_of))
+        body.append(encode_sii_category(SiiCategory.RXPDO, encode_sii_pdos(_sii_pdos(rx, sm_of))))
     if spec.dc:
-        body += _category(SiiCategory.DC, _dc_category(spec.dc_assign_activate))
-    body += _U16.pack(CATEGORY_END)
-    image = bytes(head) + bytes(body)
+        body.append(encode_sii_category(SiiCategory.DC, encode_sii_dc(spec.dc_assign_activate)))
+    body.append(_U16.pack(CATEGORY_END))
+    image = encode_sii_header(header, bytes(config)) + b"".join(body)
     size = max(len(image), spec.eeprom_kibit * 128)
     return image + b"\xff" * (size - len(image))
 
 
-def _dc_category(assign_activate: int = 0x0300) -> bytes:
-    """One DC operation mode "DC-Synchron" (ETG.2010 Table 16), default assign-activate
-    0x0300 (SYNC0 + cyclic operation)."""
-    out = bytearray(24)
-    _U32.pack_into(out, 0, 0)  # cycle time 0: set by the master
-    _U16.pack_into(out, 20, assign_activate)
-    return bytes(out)
-
-
 # ------------------------------------------------------------ from an ENI
 DEFAULT_MAILBOX = (0x1000, 128, 0x1080, 128)
+
+
+def _sm(start: int, length: int, control: int, enable: int, kind: int) -> SiiSyncManager:
+    return SiiSyncManager(SyncManager(start, length, control, 0, enable), kind)
+
+
 DEFAULT_OUTPUTS_START = 0x1100
 DEFAULT_INPUTS_START = 0x1400
 
@@ -312,13 +269,13 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
         out: list[SiiSyncManager] = []
         for i in range(max(by_index) + 1):
             if i not in by_index:
-                out.append(SiiSyncManager(0, 0, 0, 0, SmType.UNUSED))
+                out.append(_sm(0, 0, 0, 0, SmType.UNUSED))
                 continue
             configured, kind = by_index[i]
             sm = configured.sync_manager
             control = sm.control  # as the ENI states it: 0 stays 0 (buffered, ECAT reads)
             enable = 1 if sm.enabled else 0
-            out.append(SiiSyncManager(sm.physical_start, sm.length_bytes, control, enable, kind))
+            out.append(_sm(sm.physical_start, sm.length_bytes, control, enable, kind))
         return tuple(out)
     if slave.mailbox is None and not slave.pdos and not slave.outputs and not slave.inputs:
         return ()
@@ -331,16 +288,12 @@ def sync_managers_for(slave: Slave) -> tuple[SiiSyncManager, ...]:
             (mb.out_start, mb.out_length_bytes, SmType.MAILBOX_OUT),
             (mb.in_start, mb.in_length_bytes, SmType.MAILBOX_IN),
         ):
-            sms.append(SiiSyncManager(start, length, SM_CONTROL[kind], 1, kind))
+            sms.append(_sm(start, length, SM_CONTROL[kind], 1, kind))
     out_enable = 1 if out_bytes else 0
     in_enable = 1 if in_bytes else 0
     outputs, inputs = SmType.OUTPUTS, SmType.INPUTS
-    sms.append(
-        SiiSyncManager(DEFAULT_OUTPUTS_START, out_bytes, SM_CONTROL[outputs], out_enable, outputs)
-    )
-    sms.append(
-        SiiSyncManager(DEFAULT_INPUTS_START, in_bytes, SM_CONTROL[inputs], in_enable, inputs)
-    )
+    sms.append(_sm(DEFAULT_OUTPUTS_START, out_bytes, SM_CONTROL[outputs], out_enable, outputs))
+    sms.append(_sm(DEFAULT_INPUTS_START, in_bytes, SM_CONTROL[inputs], in_enable, inputs))
     return tuple(sms)
 
 
@@ -404,12 +357,16 @@ _ESI_SM_TYPES = {
 }
 
 #: FMMU category bytes of ESI ``<Fmmu>`` texts (ETG.2010 Table 10); others are 0 (unused).
-_ESI_FMMU_TYPES = {"outputs": 1, "inputs": 2, "mboxstate": 3}
+_ESI_FMMU_TYPES = {
+    "outputs": FmmuUsage.OUTPUTS,
+    "inputs": FmmuUsage.INPUTS,
+    "mboxstate": FmmuUsage.SYNCM_STATUS,
+}
 
 
 def _esi_sync_managers(device: EsiDevice) -> tuple[SiiSyncManager, ...]:
     return tuple(
-        SiiSyncManager(
+        _sm(
             sm.start_address,
             sm.default_size_bytes,
             sm.control,
@@ -468,7 +425,7 @@ def sii_spec_from_esi_device(
         coe_details=_esi_coe_details(device),
         ds402_channels=1 if device.profile_no == 402 else 0,
         sync_managers=sms,
-        fmmus=tuple(_ESI_FMMU_TYPES.get(f.lower(), 0) for f in device.fmmus),
+        fmmus=tuple(int(_ESI_FMMU_TYPES.get(f.lower(), FmmuUsage.UNUSED)) for f in device.fmmus),
         pdos=pdos,
         pdo_sync_manager={p.index: sm_of[p.direction] for p in pdos if p.direction in sm_of},
         dc=bool(device.dc_op_modes),
@@ -495,69 +452,41 @@ def sii_from_esi_device(
 
 
 # ------------------------------------------------------------------ reading
-def categories(image: bytes) -> dict[int, bytes]:
-    """Category type -> data (first occurrence), walking from word 0x40 to 0xFFFF."""
-    out: dict[int, bytes] = {}
-    pos = 2 * HEADER_WORDS
-    while pos + 4 <= len(image):
-        kind, words = struct.unpack_from("<HH", image, pos)
-        if kind == CATEGORY_END:
-            break
-        out.setdefault(kind, image[pos + 4 : pos + 4 + 2 * words])
-        pos += 4 + 2 * words
-    return out
-
-
 def _first_string(data: bytes) -> str:
-    if len(data) < 2:
+    try:
+        strings = decode_sii_strings(data)
+    except WireError:
         return ""
-    n = data[1]
-    return data[2 : 2 + n].decode("latin-1")
+    return strings[0] if strings else ""
 
 
-def _sm_entries(data: bytes) -> tuple[SiiSyncManager, ...]:
-    out = []
-    for pos in range(0, len(data) - 7, 8):
-        start, length, control, _status, enable, kind = _SM_ENTRY.unpack_from(data, pos)
-        out.append(SiiSyncManager(start, length, control, enable, kind))
-    return tuple(out)
-
-
-def _pdo_bits(data: bytes) -> int:
-    bits, pos = 0, 0
-    while pos + 8 <= len(data):
-        _index, n, sm, *_rest = _PDO_HEAD.unpack_from(data, pos)
-        pos += 8
-        for _ in range(n):
-            if pos + 8 > len(data):
-                break
-            bits += data[pos + 5] if sm != 0xFF else 0
-            pos += 8
-    return bits
+def _assigned_bits(data: bytes) -> int:
+    """Bits of the PDOs a sync manager takes by default (SM not 0xFF)."""
+    return sum(p.bit_length for p in decode_sii_pdos(data) if p.sync_manager != PDO_NOT_ASSIGNED)
 
 
 def sii_layout(image: bytes) -> SiiLayout:
     """Read identity, mailbox, SMs and process-data sizes back from an image."""
-    if len(image) < 2 * HEADER_WORDS:
+    if len(image) < HEADER_BYTES:
         return SiiLayout()
-    w = struct.unpack_from("<64H", image, 0)
-    cats = categories(image)
-    sms = _sm_entries(cats.get(SiiCategory.SYNCM, b""))
+    h = decode_sii_header(image)
+    cats = sii_categories(image)
+    sms = decode_sii_sync_managers(cats.get(SiiCategory.SYNCM, b""))
     return SiiLayout(
-        vendor_id=w[8] | w[9] << 16,
-        product_code=w[10] | w[11] << 16,
-        revision=w[12] | w[13] << 16,
-        serial=w[14] | w[15] << 16,
-        station_alias=w[4],
-        mailbox_out_start=w[0x18],
-        mailbox_out_bytes=w[0x19],
-        mailbox_in_start=w[0x1A],
-        mailbox_in_bytes=w[0x1B],
-        protocols=w[0x1C],
+        vendor_id=h.vendor_id,
+        product_code=h.product_code,
+        revision=h.revision,
+        serial=h.serial,
+        station_alias=h.station_alias,
+        mailbox_out_start=h.rx_mailbox_offset,
+        mailbox_out_bytes=h.rx_mailbox_bytes,
+        mailbox_in_start=h.tx_mailbox_offset,
+        mailbox_in_bytes=h.tx_mailbox_bytes,
+        protocols=h.mailbox_protocols,
         name=_first_string(cats.get(SiiCategory.STRINGS, b"")),
         sync_managers=sms,
-        outputs_bytes=(_pdo_bits(cats.get(SiiCategory.RXPDO, b"")) + 7) // 8,
-        inputs_bytes=(_pdo_bits(cats.get(SiiCategory.TXPDO, b"")) + 7) // 8,
+        outputs_bytes=(_assigned_bits(cats.get(SiiCategory.RXPDO, b"")) + 7) // 8,
+        inputs_bytes=(_assigned_bits(cats.get(SiiCategory.TXPDO, b"")) + 7) // 8,
         mailbox_out_sm=_sm_of(sms, SmType.MAILBOX_OUT, 0),
         mailbox_in_sm=_sm_of(sms, SmType.MAILBOX_IN, 1),
         outputs_sm=_sm_of(sms, SmType.OUTPUTS, 2),

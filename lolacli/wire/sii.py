@@ -14,7 +14,12 @@ From word 0x40 on come categories: type (word), length in words (word), data; ty
 byte, then length-prefixed strings, referred to by 1-based index) and GENERAL (30: the
 indices of the group, image, order and name strings, CoE/FoE/EoE details, ports).
 
-Pure: bytes in, values out; a short or inconsistent image is a :class:`WireError`.
+The other categories a slave states its process data with (FMMU 40, SYNCM 41, TXPDO 50,
+RXPDO 51, DC 60) are coded here too, both ways: a master decodes them, the emulator encodes
+the images its slaves answer with.
+
+Pure: bytes in, values out (and back); a short or inconsistent image is a
+:class:`WireError`.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from enum import IntEnum, IntFlag
 
 from lolacli.errors import WireError
 from lolacli.wire._codes import need
+from lolacli.wire.registers import SyncManager
 
 HEADER_WORDS = 0x40
 HEADER_BYTES = 2 * HEADER_WORDS
@@ -36,6 +42,16 @@ MAX_WORDS = 0x4000  # a category walk stops here (32 KiB: beyond any real SII)
 
 _HEADER = struct.Struct("<64H")
 _CATEGORY = struct.Struct("<HH")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_SYNC_MANAGER = struct.Struct("<HHBBBB")  # ETG.2010 Table 12
+_PDO = struct.Struct("<HBBBBH")  # ETG.2010 Table 14: the PDO, then each entry
+_PDO_ENTRY = struct.Struct("<HBBBBH")
+SII_SYNC_MANAGER_BYTES = _SYNC_MANAGER.size
+_DC = struct.Struct("<IiihHhBB4x")  # ETG.2010 Table 16: one DC operation mode
+DC_BYTES = _DC.size
+#: the SM of a PDO that no sync manager takes by default (ETG.2010 Table 14)
+PDO_NOT_ASSIGNED = 0xFF
 
 
 class SiiWord(IntEnum):
@@ -78,6 +94,36 @@ class SiiCategory(IntEnum):
     RXPDO = 51
     DC = 60
     END = CATEGORY_END
+
+
+class SmType(IntEnum):
+    """What a SYNCM category entry is for (ETG.2010 Table 12, "type")."""
+
+    UNUSED = 0
+    MAILBOX_OUT = 1
+    MAILBOX_IN = 2
+    OUTPUTS = 3
+    INPUTS = 4
+
+
+class FmmuUsage(IntEnum):
+    """What an FMMU category byte says the FMMU is for (ETG.2010 Table 10)."""
+
+    UNUSED = 0
+    OUTPUTS = 1
+    INPUTS = 2
+    SYNCM_STATUS = 3
+
+
+class CoeDetails(IntFlag):
+    """GENERAL category CoE details (ETG.2010 Table 8)."""
+
+    SDO = 0x01
+    SDO_INFO = 0x02
+    PDO_ASSIGN = 0x04
+    PDO_CONFIG = 0x08
+    UPLOAD_AT_STARTUP = 0x10
+    SDO_COMPLETE_ACCESS = 0x20
 
 
 class MailboxProtocol(IntFlag):
@@ -125,6 +171,10 @@ class SiiHeader:
     version: int
     checksum: int
     checksum_ok: bool
+    bootstrap_rx_mailbox_offset: int = 0
+    bootstrap_rx_mailbox_bytes: int = 0
+    bootstrap_tx_mailbox_offset: int = 0
+    bootstrap_tx_mailbox_bytes: int = 0
 
 
 def decode_sii_header(buf: bytes | memoryview, offset: int = 0) -> SiiHeader:
@@ -147,7 +197,43 @@ def decode_sii_header(buf: bytes | memoryview, offset: int = 0) -> SiiHeader:
         version=w[SiiWord.VERSION],
         checksum=w[SiiWord.CHECKSUM] & 0xFF,
         checksum_ok=crc8_sii(first) == w[SiiWord.CHECKSUM] & 0xFF,
+        bootstrap_rx_mailbox_offset=w[SiiWord.BOOTSTRAP_RX_MAILBOX_OFFSET],
+        bootstrap_rx_mailbox_bytes=w[SiiWord.BOOTSTRAP_RX_MAILBOX_SIZE],
+        bootstrap_tx_mailbox_offset=w[SiiWord.BOOTSTRAP_TX_MAILBOX_OFFSET],
+        bootstrap_tx_mailbox_bytes=w[SiiWord.BOOTSTRAP_TX_MAILBOX_SIZE],
     )
+
+
+def encode_sii_header(header: SiiHeader, config: bytes = b"") -> bytes:
+    """The 64-word header of ``header``: ``config`` gives words 0-6 (PDI control and
+    configuration, as an ESI's ``<ConfigData>``), the station alias of ``header`` then
+    overwrites word 4; the checksum is computed (``header.checksum`` is not used)."""
+    head = bytearray(HEADER_BYTES)
+    head[: min(len(config), 14)] = config[:14]
+    _U16.pack_into(head, 2 * SiiWord.STATION_ALIAS, header.station_alias & 0xFFFF)
+    for word, value in (
+        (SiiWord.VENDOR_ID, header.vendor_id),
+        (SiiWord.PRODUCT_CODE, header.product_code),
+        (SiiWord.REVISION, header.revision),
+        (SiiWord.SERIAL, header.serial),
+    ):
+        _U32.pack_into(head, 2 * word, value & 0xFFFFFFFF)
+    for word, value in (
+        (SiiWord.BOOTSTRAP_RX_MAILBOX_OFFSET, header.bootstrap_rx_mailbox_offset),
+        (SiiWord.BOOTSTRAP_RX_MAILBOX_SIZE, header.bootstrap_rx_mailbox_bytes),
+        (SiiWord.BOOTSTRAP_TX_MAILBOX_OFFSET, header.bootstrap_tx_mailbox_offset),
+        (SiiWord.BOOTSTRAP_TX_MAILBOX_SIZE, header.bootstrap_tx_mailbox_bytes),
+        (SiiWord.RX_MAILBOX_OFFSET, header.rx_mailbox_offset),
+        (SiiWord.RX_MAILBOX_SIZE, header.rx_mailbox_bytes),
+        (SiiWord.TX_MAILBOX_OFFSET, header.tx_mailbox_offset),
+        (SiiWord.TX_MAILBOX_SIZE, header.tx_mailbox_bytes),
+        (SiiWord.MAILBOX_PROTOCOL, header.mailbox_protocols),
+        (SiiWord.SIZE, max(header.size_bytes // 128 - 1, 0)),
+        (SiiWord.VERSION, header.version),
+    ):
+        _U16.pack_into(head, 2 * word, value & 0xFFFF)
+    _U16.pack_into(head, 2 * SiiWord.CHECKSUM, crc8_sii(bytes(head[:14])))
+    return bytes(head)
 
 
 def crc8_sii(data: bytes) -> int:
@@ -213,6 +299,165 @@ def decode_sii_general(data: bytes | memoryview) -> SiiGeneral:
         eoe_details=raw[7],
         ds402_channels=raw[9],
         physical_ports=raw[16] | raw[17] << 8,
+    )
+
+
+def encode_sii_general(general: SiiGeneral) -> bytes:
+    """The GENERAL category's 32 data bytes (fields :class:`SiiGeneral` does not hold are 0)."""
+    out = bytearray(GENERAL_BYTES)
+    out[0:4] = bytes(
+        (general.group_index, general.image_index, general.order_index, general.name_index)
+    )
+    out[5], out[6], out[7] = general.coe_details, general.foe_details, general.eoe_details
+    out[9] = general.ds402_channels
+    _U16.pack_into(out, 16, general.physical_ports & 0xFFFF)
+    return bytes(out)
+
+
+def encode_sii_strings(strings: tuple[str, ...] | list[str]) -> bytes:
+    """The STRINGS category's data: a count byte, then each string with its length byte
+    (Latin-1, at most 255 bytes each; up to 255 strings)."""
+    out = bytearray([len(strings[:255])])
+    for text in strings[:255]:
+        raw = text.encode("latin-1", "replace")[:255]
+        out += bytes([len(raw)]) + raw
+    return bytes(out)
+
+
+def encode_sii_category(kind: int, data: bytes) -> bytes:
+    """A category: type, length in words, data (a 0 byte pads odd data to a word)."""
+    if len(data) % 2:
+        data += b"\x00"
+    return _CATEGORY.pack(kind, len(data) // 2) + data
+
+
+def sii_categories(image: bytes | memoryview) -> dict[int, bytes]:
+    """Category type -> data of its first occurrence, from word 0x40 to 0xFFFF or the
+    image's end; lenient, as a slave reading its own EEPROM: a category running past the
+    end gets the bytes there are (:func:`decode_sii` is the strict walk)."""
+    out: dict[int, bytes] = {}
+    pos = HEADER_BYTES
+    while pos + CATEGORY_HEADER_BYTES <= len(image):
+        kind, words = _CATEGORY.unpack_from(image, pos)
+        if kind == CATEGORY_END:
+            break
+        start = pos + CATEGORY_HEADER_BYTES
+        out.setdefault(kind, bytes(image[start : start + 2 * words]))
+        pos = start + 2 * words
+    return out
+
+
+def encode_sii_fmmus(usages: tuple[int, ...]) -> bytes:
+    """The FMMU category's data: a :class:`FmmuUsage` byte per FMMU, 0xFF pads to a word."""
+    return bytes(usages) + (b"\xff" if len(usages) % 2 else b"")
+
+
+@dataclass(frozen=True, slots=True)
+class SiiSyncManager:
+    """A SYNCM category entry (ETG.2010 Table 12): the sync manager's register content as
+    the slave proposes it (``activate`` holds the entry's enable byte: bit 0 enable, then
+    fixed content, virtual, OP only) and what it is for."""
+
+    sync_manager: SyncManager
+    type: int = SmType.UNUSED
+
+
+def encode_sii_sync_managers(sync_managers: tuple[SiiSyncManager, ...]) -> bytes:
+    """The SYNCM category's data, 8 bytes per sync manager."""
+    return b"".join(
+        _SYNC_MANAGER.pack(
+            s.sync_manager.physical_start & 0xFFFF,
+            s.sync_manager.length_bytes & 0xFFFF,
+            s.sync_manager.control & 0xFF,
+            s.sync_manager.status & 0xFF,
+            s.sync_manager.activate & 0xFF,
+            s.type & 0xFF,
+        )
+        for s in sync_managers
+    )
+
+
+def decode_sii_sync_managers(data: bytes | memoryview) -> tuple[SiiSyncManager, ...]:
+    """The SYNCM category's entries (a trailing part entry is left out)."""
+    out = []
+    for pos in range(0, len(data) - SII_SYNC_MANAGER_BYTES + 1, SII_SYNC_MANAGER_BYTES):
+        start, length, control, status, enable, kind = _SYNC_MANAGER.unpack_from(data, pos)
+        out.append(SiiSyncManager(SyncManager(start, length, control, status, enable), kind))
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True)
+class SiiPdoEntry:
+    """A PDO entry in a TXPDO/RXPDO category (ETG.2010 Table 15)."""
+
+    index: int
+    subindex: int
+    bit_length: int
+    data_type: int = 0  # CoE data type code (ETG.1000.6 Table 64)
+    name_index: int = 0
+    flags: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class SiiPdo:
+    """A PDO in a TXPDO (inputs) or RXPDO (outputs) category (ETG.2010 Table 14);
+    ``sync_manager`` :data:`PDO_NOT_ASSIGNED` (0xFF): no SM takes it by default."""
+
+    index: int
+    sync_manager: int
+    entries: tuple[SiiPdoEntry, ...] = ()
+    synchronization: int = 0
+    name_index: int = 0
+    flags: int = 0  # bit 0 mandatory, bit 4 fixed content
+
+    @property
+    def bit_length(self) -> int:
+        return sum(e.bit_length for e in self.entries)
+
+
+def encode_sii_pdos(pdos: tuple[SiiPdo, ...] | list[SiiPdo]) -> bytes:
+    """A TXPDO or RXPDO category's data: each PDO, then its entries, 8 bytes each."""
+    out = bytearray()
+    for p in pdos:
+        out += _PDO.pack(
+            p.index, len(p.entries), p.sync_manager, p.synchronization, p.name_index, p.flags
+        )
+        for e in p.entries:
+            out += _PDO_ENTRY.pack(
+                e.index, e.subindex, e.name_index, e.data_type, e.bit_length, e.flags
+            )
+    return bytes(out)
+
+
+def decode_sii_pdos(data: bytes | memoryview) -> tuple[SiiPdo, ...]:
+    """A TXPDO or RXPDO category's PDOs; a PDO cut short keeps the entries there are."""
+    out: list[SiiPdo] = []
+    pos = 0
+    while pos + _PDO.size <= len(data):
+        index, count, sm, sync, name, flags = _PDO.unpack_from(data, pos)
+        pos += _PDO.size
+        entries = []
+        for _ in range(count):
+            if pos + _PDO_ENTRY.size > len(data):
+                break
+            e_index, sub, e_name, dtype, bits, e_flags = _PDO_ENTRY.unpack_from(data, pos)
+            entries.append(SiiPdoEntry(e_index, sub, bits, dtype, e_name, e_flags))
+            pos += _PDO_ENTRY.size
+        out.append(SiiPdo(index, sm, tuple(entries), sync, name, flags))
+    return tuple(out)
+
+
+def encode_sii_dc(assign_activate: int) -> bytes:
+    """A DC category with one operation mode (ETG.2010 Table 16: SYNC0 cycle time, SYNC0
+    and SYNC1 shift, SYNC1 cycle factor, assign-activate, SYNC0 cycle factor, name and
+    description string indices, 4 reserved bytes) whose times the master sets (0)."""
+    return _DC.pack(0, 0, 0, 0, assign_activate & 0xFFFF, 0, 0, 0)
+
+
+def decode_sii_dc_assign_activate(data: bytes | memoryview) -> tuple[int, ...]:
+    """The assign-activate word of each operation mode in a DC category."""
+    return tuple(
+        _DC.unpack_from(data, pos)[4] for pos in range(0, len(data) - DC_BYTES + 1, DC_BYTES)
     )
 
 
@@ -296,9 +541,13 @@ class SiiWords:
 
 
 #: The header words a master reads of a slave, (first word, count): the checksummed area
-#: with the station alias and the identity, the standard mailbox with its protocols, the
-#: EEPROM size and version: every field of :class:`SiiHeader`.
-MASTER_HEADER_WORDS = ((SiiWord.PDI_CONTROL, 16), (SiiWord.RX_MAILBOX_OFFSET, 5), (SiiWord.SIZE, 2))
+#: with the station alias and the identity, the bootstrap and standard mailboxes and the
+#: protocols, the EEPROM size and version: every field of :class:`SiiHeader`.
+MASTER_HEADER_WORDS = (
+    (SiiWord.PDI_CONTROL, 16),
+    (SiiWord.BOOTSTRAP_RX_MAILBOX_OFFSET, 9),
+    (SiiWord.SIZE, 2),
+)
 
 
 def read_sii_header(words: SiiWords) -> Generator[int, bytes, SiiHeader]:
@@ -345,6 +594,27 @@ def read_sii(words: SiiWords) -> Generator[int, bytes, SiiInfo]:
 
 
 __all__ = [
+    "DC_BYTES",
+    "PDO_NOT_ASSIGNED",
+    "SII_SYNC_MANAGER_BYTES",
+    "CoeDetails",
+    "FmmuUsage",
+    "SiiPdo",
+    "SiiPdoEntry",
+    "SiiSyncManager",
+    "SmType",
+    "decode_sii_dc_assign_activate",
+    "decode_sii_pdos",
+    "decode_sii_sync_managers",
+    "encode_sii_category",
+    "encode_sii_dc",
+    "encode_sii_fmmus",
+    "encode_sii_general",
+    "encode_sii_header",
+    "encode_sii_pdos",
+    "encode_sii_strings",
+    "encode_sii_sync_managers",
+    "sii_categories",
     "MASTER_HEADER_WORDS",
     "MAX_WORDS",
     "SiiWords",

@@ -14,11 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from lolacli.emulator.sii import SmType, sii_from_slave, sii_layout, sync_managers_for
+from lolacli.emulator.sii import sii_from_slave, sii_layout, sync_managers_for
 from lolacli.emulator.slave import build_chain, with_process_data_pdos
 from lolacli.eni.model import Eni, Slave
 from lolacli.files import load_eni
 from lolacli.wire.sdo import SdoAbort
+from lolacli.wire.sii import SmType
 from tests.conftest import corpus_files, corpus_ids
 from tests.emulator.bus import EXAMPLES, Bus
 
@@ -105,9 +106,9 @@ def test_sm_control_bytes_stay_as_the_eni_gives_them(eni_name: str, position: in
     slave = load_eni(EXAMPLES / eni_name).slaves[position - 1]
     declared = next(m for m in slave.sync_managers if m.index == sm)
     assert declared.sync_manager.control == 0x00  # an inputs SM: buffered, ECAT reads, no interrupt
-    assert sync_managers_for(slave)[sm].control == 0x00
+    assert sync_managers_for(slave)[sm].sync_manager.control == 0x00
     layout = sii_layout(sii_from_slave(slave))
-    assert layout.sync_managers[sm].control == 0x00
+    assert layout.sync_managers[sm].sync_manager.control == 0x00
     assert layout.sync_managers[sm].type == SmType.INPUTS
 
 

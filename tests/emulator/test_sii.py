@@ -10,17 +10,12 @@ import pytest
 
 from lolacli.emulator.chain import Chain
 from lolacli.emulator.esc import Esc
-from lolacli.emulator.sii import (
-    SiiCategory,
-    SmType,
-    categories,
-    crc8_sii,
-    sii_from_slave,
-    sii_layout,
-)
+from lolacli.emulator.sii import sii_from_slave, sii_layout
 from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
 from lolacli.wire.frame import Frame, decode_frame
+from lolacli.wire.sii import SiiCategory, SmType, crc8_sii
+from lolacli.wire.sii import sii_categories as categories
 from tests.conftest import corpus_files
 from tests.emulator.bus import EXAMPLES
 from tests.emulator.pcapng_frames import pcapng_frames
@@ -86,7 +81,9 @@ def test_every_lola_slave_has_a_consistent_image() -> None:
         assert layout.outputs_bytes * 8 >= slave.outputs_bits
         assert layout.inputs_bytes * 8 >= slave.inputs_bits
         for sm in slave.sync_managers:  # SM index = position in the SYNCM category
-            assert layout.sync_managers[sm.index].start == sm.sync_manager.physical_start
+            assert layout.sync_managers[sm.index].sync_manager.physical_start == (
+                sm.sync_manager.physical_start
+            )
 
 
 # ---------------------------------------------------------------- transcripts

@@ -9,18 +9,18 @@ from pathlib import Path
 import pytest
 
 from lolacli.emulator.run import EmulateOptions, esi_matches, make_chain
-from lolacli.emulator.sii import (
-    CoeDetails,
-    SiiCategory,
-    SmType,
-    categories,
-    sii_from_esi_device,
-    sii_layout,
-)
+from lolacli.emulator.sii import sii_from_esi_device, sii_layout
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import Direction
 from lolacli.files import load_eni, load_esi
 from lolacli.wire.commands import Command
+from lolacli.wire.sii import (
+    CoeDetails,
+    SiiCategory,
+    SmType,
+    decode_sii_dc_assign_activate,
+)
+from lolacli.wire.sii import sii_categories as categories
 from tests.conftest import CORPUS, corpus_files
 from tests.emulator.bus import EXAMPLES, Bus
 from tests.emulator.test_masters import _emulate, _stop, pysoem, veth  # noqa: F401 (fixtures)
@@ -60,7 +60,14 @@ def test_sii_of_every_esi_device_reads_back(path: Path) -> None:
         )
         assert layout.name == device.name[:255]
         assert [
-            (s.start, s.length_bytes, s.control, s.enable, s.type) for s in layout.sync_managers
+            (
+                s.sync_manager.physical_start,
+                s.sync_manager.length_bytes,
+                s.sync_manager.control,
+                s.sync_manager.activate,
+                s.type,
+            )
+            for s in layout.sync_managers
         ] == [
             (
                 s.start_address,
@@ -105,7 +112,10 @@ def test_elmo_sii_categories_carry_the_esi_details() -> None:
     )
     assert general[9] == 1  # one CiA 402 channel
     assert cats[SiiCategory.FMMU][:2] == bytes([1, 2])
-    assert struct.unpack_from("<H", cats[SiiCategory.DC], 20)[0] == 0x0300
+    # assign-activate at byte 14 of the operation mode (ETG.2010 Table 16; it was at the
+    # reserved bytes 20-21 before)
+    assert decode_sii_dc_assign_activate(cats[SiiCategory.DC]) == (0x0300,)
+    assert struct.unpack_from("<H", cats[SiiCategory.DC], 14)[0] == 0x0300
     assert device.eeprom is not None
     assert image[:6] == device.eeprom.config_data == bytes.fromhex("050c0304e803")
     assert struct.unpack_from("<H", image, 2 * 0x1C)[0] == 0x02 | 0x04 | 0x08  # EoE CoE FoE
