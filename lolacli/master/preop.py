@@ -18,10 +18,8 @@ process data, no distributed clocks, no other slave. Two ways there:
   INIT (acknowledging an error), check it, SM0 mailbox out and SM1 mailbox in at the SII's
   offsets and sizes, request PREOP, check it. :class:`PreopBus` then runs them.
 
-The SII is read for all slaves at once, a word address per slave per round: one frame
-writes every slave's EEPROM read command (0x0502–0x0507), the next reads every slave's
-status and data back (0x0502–0x050F), polled while a slave says busy (ETG.1000.4 §6.4).
-A slave whose EEPROM its PDI holds is taken over first (0x0500) and handed back after.
+The SII is read for all slaves at once by :mod:`lolacli.master.eeprom`, the reader
+`bus scan` uses too.
 """
 
 from __future__ import annotations
@@ -33,39 +31,28 @@ from dataclasses import dataclass, replace
 from lolacli.eni.model import Eni, Identity, InitCmd, Mailbox, Slave
 from lolacli.eni.model import Master as EniMaster
 from lolacli.eni.model import ProcessImage as EniProcessImage
-from lolacli.errors import TransportError, WireError
+from lolacli.errors import TransportError
+from lolacli.master import eeprom
 from lolacli.master.core import Master, MasterOptions
 from lolacli.master.transport import Transport
-from lolacli.wire import sii
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
-    SII_COMMAND_SHIFT,
     SM_ACTIVATE_ENABLE,
     SM_CONTROL_MAILBOX_IN,
     SM_CONTROL_MAILBOX_OUT,
     AlState,
     Register,
-    SiiCommand,
-    SiiConfig,
-    SiiStatus,
     SyncManager,
     encode_sync_manager,
     sync_manager_address,
 )
-from lolacli.wire.sii import SiiInfo, SiiWords, protocol_names
+from lolacli.wire.sii import SiiInfo, protocol_names
 
 #: SOEM's station addresses: 0x1001, 0x1002, … in line order (ecx_config_init)
 FIRST_STATION = 0x1001
 
-#: EEPROM status bits that fail a read (0x0502): a command error, and a checksum error
-#: (the words read may be wrong). `bus scan` fails on a command error only: it reports.
-EEPROM_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.CHECKSUM_ERROR
-EEPROM_POLLS = 100
-
-# mailbox sync managers: control byte (mailbox mode, direction, interrupt), activate
 _U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
 _AL_MASK = b"\x1f\x00"  # state and error indicator
 
 
@@ -169,7 +156,10 @@ def _slave(info: SiiSlave) -> Slave:
     if h.rx_mailbox_bytes and h.tx_mailbox_bytes:
         names = protocol_names(h.mailbox_protocols)
         mailbox = Mailbox(
-            h.rx_mailbox_offset, h.rx_mailbox_bytes, h.tx_mailbox_offset, h.tx_mailbox_bytes,
+            h.rx_mailbox_offset,
+            h.rx_mailbox_bytes,
+            h.tx_mailbox_offset,
+            h.tx_mailbox_bytes,
             protocols=names,
         )
     return Slave(
@@ -229,95 +219,19 @@ def preop_init_cmds(station: int, mailbox: Mailbox | None) -> tuple[InitCmd, ...
 
 
 # ------------------------------------------------------------------------------ SII
-
-
 def read_sii(master: Master, stations: Sequence[int]) -> list[SiiSlave]:
-    """Identity, mailbox, protocols and name of the slaves at ``stations`` (see the
-    module docstring); TransportError naming the slave whose EEPROM does not answer."""
-    configs = master.exchange_many(
-        [Datagram.physical(Command.FPRD, s, Register.SII_CONFIG, 1) for s in stations]
-    )
-    held = [
-        s
-        for s, d in zip(stations, configs, strict=True)
-        if d.wkc == 1 and d.data[0] & SiiConfig.PDI_OFFERED
+    """Identity, mailbox, protocols and name of the slaves at ``stations``, all at once
+    (:mod:`lolacli.master.eeprom`); TransportError naming the first slave whose EEPROM
+    does not read."""
+    found = eeprom.read_sii(master, stations, auto_increment=False)
+    for station, got in zip(stations, found, strict=True):
+        if got.error is not None or got.info is None:
+            raise TransportError(f"station 0x{station:04X}: {got.error or 'no SII'}")
+    return [
+        SiiSlave(k, station, got.info)
+        for k, (station, got) in enumerate(zip(stations, found, strict=True), start=1)
+        if got.info is not None
     ]
-    _eeprom_owner(master, held, to_pdi=False)
-    try:
-        found: dict[int, SiiInfo] = {}
-        walks = {s: sii.read_sii(SiiWords()) for s in stations}
-        pending = {s: next(walks[s]) for s in stations}
-        while pending:
-            for station, data in _read_words(master, list(pending.items())).items():
-                try:
-                    pending[station] = walks[station].send(data)
-                except StopIteration as done:
-                    found[station] = done.value
-                    del pending[station]
-                except WireError as exc:
-                    where = f"station 0x{station:04X}"
-                    raise TransportError(f"{where}: SII not readable: {exc}") from exc
-    finally:
-        _eeprom_owner(master, held, to_pdi=True)
-    return [SiiSlave(k, s, found[s]) for k, s in enumerate(stations, start=1)]
-
-
-def _eeprom_owner(master: Master, stations: Sequence[int], *, to_pdi: bool) -> None:
-    """Take the EEPROM from the PDI (force, then release the force bit), or give it back."""
-    if not stations:
-        return
-    for value in [SiiConfig.PDI_OFFERED] if to_pdi else [SiiConfig.FORCE_ECAT, 0]:
-        master.exchange_many(
-            [
-                Datagram.physical(Command.FPWR, s, Register.SII_CONFIG, bytes([value]))
-                for s in stations
-            ]
-        )
-
-
-def _read_words(master: Master, asks: Sequence[tuple[int, int]]) -> dict[int, bytes]:
-    """One round: every slave (station) reads the words at its address (4 or 8 bytes)."""
-    commands = master.exchange_many(
-        [
-            Datagram.physical(
-                Command.FPWR,
-                station,
-                Register.SII_CONTROL_STATUS,
-                _U16.pack(SiiCommand.READ << SII_COMMAND_SHIFT) + _U32.pack(address),
-            )
-            for station, address in asks
-        ]
-    )
-    for (station, address), d in zip(asks, commands, strict=True):
-        if d.wkc != 1:
-            raise TransportError(
-                f"station 0x{station:04X}: SII read of word 0x{address:X} not taken"
-            )
-    out: dict[int, bytes] = {}
-    waiting = list(asks)
-    for _ in range(EEPROM_POLLS):
-        reads = [
-            Datagram.physical(Command.FPRD, s, Register.SII_CONTROL_STATUS, 14) for s, _a in waiting
-        ]
-        still = []
-        for (station, address), d in zip(waiting, master.exchange_many(reads), strict=True):
-            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else SiiStatus.BUSY
-            if status & SiiStatus.BUSY:
-                still.append((station, address))
-            elif status & EEPROM_ERROR:
-                raise TransportError(
-                    f"station 0x{station:04X}: SII read of word 0x{address:X} failed "
-                    f"(EEPROM status 0x{status:04X})"
-                )
-            else:
-                n = 8 if status & SiiStatus.READ_8_BYTES else 4
-                out[station] = bytes(d.data[6 : 6 + n])
-        waiting = still
-        if not waiting:
-            return out
-        master.idle(master.options.poll_ns)
-    station, address = waiting[0]
-    raise TransportError(f"station 0x{station:04X}: SII EEPROM stays busy (word 0x{address:X})")
 
 
 __all__ = [

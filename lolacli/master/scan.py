@@ -8,8 +8,9 @@ working counter is the number of slaves on the line):
   address and alias (0x0010), DL status (0x0110: link, loop and communication per port),
   AL status and AL status code (0x0130/0x0134), the error counters 0x0300-0x0313;
 * the SII EEPROM (identity, mailbox protocols, STRINGS and GENERAL categories for the
-  name), read through 0x0502-0x050F for all slaves at once: one frame writes every
-  slave's read command, one frame reads every slave's status and data back.
+  name), read through 0x0502-0x050F for all slaves at once (:mod:`lolacli.master.eeprom`):
+  one frame writes every slave's read command, one frame reads every slave's status and
+  data back.
 
 Nothing is configured: no station address is written, no state is requested, no counter
 is cleared, because a scan is a diagnosis of a bus someone else may have brought up (a
@@ -33,42 +34,33 @@ from __future__ import annotations
 
 import struct
 import time
-from collections.abc import Generator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from lolacli.eni.model import Eni, Identity, Slave
 from lolacli.eni.model import Master as EniMaster
 from lolacli.eni.model import ProcessImage as EniProcessImage
-from lolacli.errors import TransportError, UsageError, WireError
+from lolacli.errors import TransportError, UsageError
+from lolacli.master import eeprom
 from lolacli.master.core import Master, MasterOptions, Refusal
 from lolacli.master.transport import Transport
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
     AL_ERROR_INDICATOR,
-    SII_COMMAND_SHIFT,
     AlState,
     Register,
-    SiiCommand,
-    SiiConfig,
-    SiiStatus,
     al_state_name,
     al_status_text,
 )
 from lolacli.wire.sii import (
     SiiInfo,
-    SiiWords,
     protocol_names,
-    read_sii_header,
-    read_sii_names,
 )
 
 SCHEMA = "lolacli.scan/1"
 _U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
-
-SII_POLLS = 50  # reads of a busy EEPROM before it counts as not answering
 
 # DL status 0x0110 (ETG.1000.4 Table 32)
 DL_PDI_OPERATIONAL = 0x0001
@@ -408,9 +400,9 @@ def _read_registers(master: Master, count: int) -> list[ScannedSlave]:
     per = len(_REGISTER_READS)
     slaves = []
     for k in range(1, count + 1):
-        esc, addr, dl, al, counters, eeprom = got[(k - 1) * per : k * per]
+        esc, addr, dl, al, counters, sii_if = got[(k - 1) * per : k * per]
         s = ScannedSlave(k)
-        if not all(d.wkc == 1 for d in (esc, addr, dl, al, counters, eeprom)):
+        if not all(d.wkc == 1 for d in (esc, addr, dl, al, counters, sii_if)):
             s.answered = False
             slaves.append(s)
             continue
@@ -424,107 +416,22 @@ def _read_registers(master: Master, count: int) -> list[ScannedSlave]:
         s.al_status = _U16.unpack_from(al.data)[0]
         s.al_status_code = _U16.unpack_from(al.data, 4)[0]
         s.counters = decode_error_counters(counters.data)
-        s.eeprom_config = eeprom.data[0]
-        s.eeprom_control = _U16.unpack_from(eeprom.data, 2)[0]
+        s.eeprom_config = sii_if.data[0]
+        s.eeprom_control = _U16.unpack_from(sii_if.data, 2)[0]
         slaves.append(s)
     return slaves
 
 
 # ----------------------------------------------------------------------------- SII
-# a walk yields the word address it needs and receives the bytes read there (4 or 8)
-_Walk = Generator[int, bytes, None]
-
-
-def _walk(slave: ScannedSlave, words: SiiWords) -> _Walk:
-    """The header, then the categories up to STRINGS and GENERAL (or the end); the header
-    stays known when the categories do not read."""
-    slave.sii = SiiInfo((yield from read_sii_header(words)))
-    strings, general, categories = yield from read_sii_names(words)
-    slave.sii = SiiInfo(slave.sii.header, strings, general, categories)
-
-
 def read_sii(master: Master, slaves: Sequence[ScannedSlave]) -> None:
-    """Read every answering slave's SII in parallel rounds (see the module docstring);
-    a slave whose EEPROM does not read gets ``sii_error``."""
+    """Read every answering slave's SII at once (:mod:`lolacli.master.eeprom`, by
+    position); a slave whose EEPROM does not read keeps what was read and gets
+    ``sii_error``."""
     readers = [s for s in slaves if s.answered]
-    taken = [s for s in readers if s.eeprom_config & SiiConfig.PDI_OFFERED]
-    _eeprom_owner(master, taken, to_pdi=False)
-    try:
-        walks: dict[int, _Walk] = {}
-        pending: dict[int, int] = {}  # position -> word address its walk waits for
-        for s in readers:
-            walks[s.position] = _walk(s, SiiWords())
-            pending[s.position] = next(walks[s.position])
-        by_position = {s.position: s for s in readers}
-        while pending:
-            asks = [(by_position[p], a) for p, a in pending.items()]
-            for position, result in _read_words(master, asks).items():
-                s = by_position[position]
-                if isinstance(result, str):
-                    s.sii_error = result
-                    del pending[position]
-                    continue
-                try:
-                    pending[position] = walks[position].send(result)
-                except StopIteration:
-                    del pending[position]
-                except WireError as exc:
-                    s.sii_error = f"SII not readable: {exc}"
-                    del pending[position]
-    finally:
-        _eeprom_owner(master, taken, to_pdi=True)
-
-
-def _eeprom_owner(master: Master, slaves: Sequence[ScannedSlave], *, to_pdi: bool) -> None:
-    """Take the EEPROM from the PDI (force, then release the force bit), or give it back."""
-    if not slaves:
-        return
-    steps = [SiiConfig.PDI_OFFERED] if to_pdi else [SiiConfig.FORCE_ECAT, 0]
-    for value in steps:
-        master.exchange_many(
-            [
-                Datagram.physical(
-                    Command.APWR, s.auto_inc_address, Register.SII_CONFIG, bytes([value])
-                )
-                for s in slaves
-            ]
-        )
-
-
-def _read_words(master: Master, asks: Sequence[tuple[ScannedSlave, int]]) -> dict[int, bytes | str]:
-    """One round: every slave reads the words at its address; bytes, or an error text."""
-    commands = [
-        Datagram.physical(
-            Command.APWR,
-            s.auto_inc_address,
-            Register.SII_CONTROL_STATUS,
-            _U16.pack(SiiCommand.READ << SII_COMMAND_SHIFT) + _U32.pack(address),
-        )
-        for s, address in asks
-    ]
-    out: dict[int, bytes | str] = {}
-    for (s, address), d in zip(asks, master.exchange_many(commands), strict=True):
-        if d.wkc != 1:
-            out[s.position] = f"SII read command at word 0x{address:X} not taken"
-    waiting = [(s, a) for s, a in asks if s.position not in out]
-    for _ in range(SII_POLLS):
-        if not waiting:
-            break
-        reads = [_aprd(s.position, Register.SII_CONTROL_STATUS, 14) for s, _address in waiting]
-        still = []
-        for (s, address), d in zip(waiting, master.exchange_many(reads), strict=True):
-            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else SiiStatus.BUSY
-            if status & SiiStatus.BUSY:
-                still.append((s, address))
-            elif status & SiiStatus.COMMAND_ERROR:
-                out[s.position] = f"SII read at word 0x{address:X}: EEPROM error 0x{status:04X}"
-            else:
-                n = 8 if status & SiiStatus.READ_8_BYTES else 4
-                out[s.position] = bytes(d.data[6 : 6 + n])
-        waiting = still
-    for s, address in waiting:
-        out[s.position] = f"SII read at word 0x{address:X}: EEPROM stays busy"
-    return out
+    addresses = [s.auto_inc_address for s in readers]
+    found = eeprom.read_sii(master, addresses, auto_increment=True)
+    for s, got in zip(readers, found, strict=True):
+        s.sii, s.sii_error = got.info, got.error
 
 
 # ------------------------------------------------------------------------- topology

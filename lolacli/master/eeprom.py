@@ -1,0 +1,159 @@
+"""What slaves' SII EEPROMs say, read through their ESCs' EEPROM interface, all at once.
+
+One reader for `bus scan` (slaves by auto-increment position: nothing configured yet, or
+someone else's configuration left alone) and for the PREOP bring-up without an ENI
+(slaves by the station addresses it gave them). Each slave walks
+:func:`lolacli.wire.sii.read_sii` (the header words a master needs, then the categories
+up to STRINGS and GENERAL); a round asks every slave for the word its walk waits for:
+
+* one frame writes every slave's read command and word address (0x0502-0x0507),
+* the next reads every slave's status and data back (0x0502-0x050F), again after
+  ``master.options.poll_ns`` while a slave says busy, :data:`POLLS` times at most
+  (ETG.1000.4 §6.4; an ESC answers 4 or 8 bytes a read, as its status says).
+
+A slave whose EEPROM its PDI holds (0x0500 bit 0 set) is taken over first (force, then
+release the force bit) and handed back after, also when a read fails.
+
+A read fails for the slave on a missing working counter, on the command error bit
+(missing EEPROM acknowledge or invalid command), on an EEPROM still busy after the polls,
+or on an image the walk cannot decode. The checksum error bit is not a read failure: it
+says the ESC found its configuration area's CRC wrong at power-up, and the words still
+read; the header's own ``checksum_ok`` reports it. SOEM clears and retries on either.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Generator, Sequence
+from dataclasses import dataclass
+
+from lolacli.errors import WireError
+from lolacli.master.core import Master
+from lolacli.wire.commands import Command
+from lolacli.wire.frame import Datagram
+from lolacli.wire.registers import SII_COMMAND_SHIFT, Register, SiiCommand, SiiConfig, SiiStatus
+from lolacli.wire.sii import SiiInfo, SiiWords, read_sii_header, read_sii_names
+
+#: status bits at 0x0502 that fail a read
+READ_ERROR = SiiStatus.COMMAND_ERROR
+#: status reads of a busy EEPROM before it counts as not answering
+POLLS = 100
+#: bytes read back per poll: control/status, address, data (0x0502-0x050F)
+_STATUS_AND_DATA = 14
+
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+
+
+@dataclass(slots=True)
+class SiiRead:
+    """What was read of one slave's SII: ``info`` has the header as soon as it is read
+    (strings and GENERAL once the walk got that far); ``error`` says why the read
+    stopped short, else ``None``."""
+
+    info: SiiInfo | None = None
+    error: str | None = None
+
+
+_Walk = Generator[int, bytes, None]
+
+
+def _walk(result: SiiRead, words: SiiWords) -> _Walk:
+    result.info = SiiInfo((yield from read_sii_header(words)))
+    strings, general, categories = yield from read_sii_names(words)
+    result.info = SiiInfo(result.info.header, strings, general, categories)
+
+
+def read_sii(master: Master, addresses: Sequence[int], *, auto_increment: bool) -> list[SiiRead]:
+    """The SII of the slaves at ``addresses`` (auto-increment ADPs ``0, 0xFFFF, ...`` or
+    station addresses), in their order. Errors are per slave (:class:`SiiRead`); only the
+    transport's own failures raise."""
+    write, read = (Command.APWR, Command.APRD) if auto_increment else (Command.FPWR, Command.FPRD)
+    configs = master.exchange_many(
+        [Datagram.physical(read, a, Register.SII_CONFIG, 1) for a in addresses]
+    )
+    held = [
+        a
+        for a, d in zip(addresses, configs, strict=True)
+        if d.wkc == 1 and d.data[0] & SiiConfig.PDI_OFFERED
+    ]
+    results = [SiiRead() for _ in addresses]
+    _owner(master, write, held, to_pdi=False)
+    try:
+        walks = {i: _walk(results[i], SiiWords()) for i in range(len(addresses))}
+        pending = {i: next(walk) for i, walk in walks.items()}
+        while pending:
+            asks = [(i, addresses[i], word) for i, word in pending.items()]
+            for i, got in _read_words(master, write, read, asks).items():
+                if isinstance(got, str):
+                    results[i].error = got
+                    del pending[i]
+                    continue
+                try:
+                    pending[i] = walks[i].send(got)
+                except StopIteration:
+                    del pending[i]
+                except WireError as exc:
+                    results[i].error = f"SII not readable: {exc}"
+                    del pending[i]
+    finally:
+        _owner(master, write, held, to_pdi=True)
+    return results
+
+
+def _owner(master: Master, write: Command, addresses: Sequence[int], *, to_pdi: bool) -> None:
+    """Take the EEPROM from the PDI (force, then release the force bit), or give it back."""
+    if not addresses:
+        return
+    for value in [SiiConfig.PDI_OFFERED] if to_pdi else [SiiConfig.FORCE_ECAT, 0]:
+        master.exchange_many(
+            [Datagram.physical(write, a, Register.SII_CONFIG, bytes([value])) for a in addresses]
+        )
+
+
+def _read_words(
+    master: Master, write: Command, read: Command, asks: Sequence[tuple[int, int, int]]
+) -> dict[int, bytes | str]:
+    """One round: every slave ``(key, address, word)`` reads at its word; the 4 or 8
+    bytes read, or why not, by key."""
+    out: dict[int, bytes | str] = {}
+    commands = [
+        Datagram.physical(
+            write,
+            address,
+            Register.SII_CONTROL_STATUS,
+            _U16.pack(SiiCommand.READ << SII_COMMAND_SHIFT) + _U32.pack(word),
+        )
+        for _key, address, word in asks
+    ]
+    for (key, _address, word), d in zip(asks, master.exchange_many(commands), strict=True):
+        if d.wkc != 1:
+            out[key] = f"SII read of word 0x{word:X} not taken"
+    waiting = [ask for ask in asks if ask[0] not in out]
+    for poll in range(POLLS):
+        if not waiting:
+            break
+        if poll:
+            master.idle(master.options.poll_ns)
+        reads = [
+            Datagram.physical(read, address, Register.SII_CONTROL_STATUS, _STATUS_AND_DATA)
+            for _key, address, _word in waiting
+        ]
+        still = []
+        for ask, d in zip(waiting, master.exchange_many(reads), strict=True):
+            key, _address, word = ask
+            status = _U16.unpack_from(d.data)[0] if d.wkc == 1 else SiiStatus.BUSY
+            if status & SiiStatus.BUSY:
+                still.append(ask)
+            elif status & READ_ERROR:
+                out[key] = f"SII read of word 0x{word:X}: EEPROM error (status 0x{status:04X})"
+            else:
+                n = 8 if status & SiiStatus.READ_8_BYTES else 4
+                out[key] = bytes(d.data[6 : 6 + n])
+        waiting = still
+    for key, _address, word in waiting:
+        out[key] = f"SII read of word 0x{word:X}: EEPROM stays busy"
+    return out
+
+
+__all__ = ["POLLS", "READ_ERROR", "SiiRead", "read_sii"]
