@@ -141,6 +141,39 @@ def _pysoem_cycles(master, n: int, poll=None) -> list[MasterError]:  # type: ign
     return errors
 
 
+#: CiA 402: controlword, then the statusword (masked 0x6F) it leads to, then position
+_ENABLE = ((0x06, 0x21), (0x07, 0x23), (0x0F, 0x27))
+
+
+def _enable_drive(master, slave, target: int, deadline_s: float = 0.5) -> list[int]:  # type: ignore[no-untyped-def]
+    """Enable a CiA 402 drive and command ``target`` as a master does: each controlword
+    cycle after cycle (1 kHz) until the statusword shows its state, then until the
+    position follows. A drive steps on its own cycle, not on every frame: a real one
+    takes a few of them per transition. The frames each step took (the emulated drive
+    steps once per frame it gets: 1 each, plus the answer's one-frame lag)."""
+    frames = []
+    for cw, want in (*_ENABLE, (0x0F, None)):
+        n, until = 0, time.perf_counter() + deadline_s
+        while True:
+            slave.output = struct.pack("<HbiI", cw, 8, target, 0)
+            master.send_processdata()
+            assert master.receive_processdata(2000) == master.expected_wkc
+            n += 1
+            status, _mode, actual = struct.unpack_from("<Hbi", slave.input)
+            if (status & 0x6F == want) if want is not None else actual == target:
+                break
+            assert time.perf_counter() < until, (
+                f"cw 0x{cw:02X}: status 0x{status:04X} after {n} frames"
+            )
+            time.sleep(0.001)
+        frames.append(n)
+    log = os.environ.get("LOLACLI_MASTER_LOG")
+    if log:
+        with open(log, "a") as f:
+            f.write(json.dumps({"test": _test_name(), "enable_frames": frames}) + "\n")
+    return frames
+
+
 def test_pysoem_single_drive(veth, pysoem) -> None:
     from lolacli.files import load_eni
 
@@ -171,12 +204,9 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
         t1 = realtime_ns()
         errors = _pysoem_cycles(master, CYCLES)  # 10 s at 1 kHz
         t2 = realtime_ns()
-        for cw in (0x06, 0x07, 0x0F, 0x0F, 0x0F):
-            slave.output = struct.pack("<HbiI", cw, 8, 4242, 0)
-            master.send_processdata()
-            assert master.receive_processdata(2000) == master.expected_wkc
+        steps = _enable_drive(master, slave, target=4242)
         status, mode, actual, _velocity = struct.unpack("<Hbii", slave.input)
-        assert status & 0x6F == 0x27 and mode == 8 and actual == 4242
+        assert status & 0x6F == 0x27 and mode == 8 and actual == 4242, steps
         master.state = pysoem.INIT_STATE
         master.write_state()
         capture.__exit__()
