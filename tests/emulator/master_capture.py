@@ -12,6 +12,7 @@ tell a master's time-out from a late answer (:meth:`CaptureReport.late_in`).
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
 import subprocess
@@ -49,6 +50,11 @@ class CaptureReport:
             for e in self.between(start_ns, end_ns)
             if e.latency_ns is None or e.latency_ns > deadline_ns
         ]
+
+    def longest_silence_ns(self, start_ns: int, end_ns: int) -> int:
+        """The longest time between two frames the master sent in the window."""
+        sent = [e.sent_ns for e in self.between(start_ns, end_ns)]
+        return max((b - a for a, b in itertools.pairwise(sent)), default=0)
 
     def percentile_ns(self, p: float, exchanges: list[Exchange] | None = None) -> int:
         values = sorted(
