@@ -234,8 +234,15 @@ class ChainCore:
         self._index = {id(esc): i for i, esc in enumerate(escs)}
         for i, esc in enumerate(escs):
             app = esc.app
-            if _device_of(app) is not None:
+            device = _device_of(app)
+            if device is not None:
                 app.before_use = partial(self.release_device, i)  # type: ignore[union-attr]
+                # the device as tables now, before any master: the take-in at SAFEOP then
+                # only loads them while its dictionary is unchanged (flattening a drive
+                # takes ~150 µs of firmware time, which a frame arriving meanwhile waits)
+                self._flat[i] = flatten(device)
+                if self._flat[i] is None:
+                    self._unflat[i] = (device.od.version, device.od.writes)
 
     # ------------------------------------------------------------ ownership
     def acquire(self) -> bool:
