@@ -75,6 +75,11 @@ def _to_op(master, pysoem, timeout_us: int = 2000) -> None:
     assert master.state_check(pysoem.SAFEOP_STATE, 5_000_000) == pysoem.SAFEOP_STATE
     master.send_processdata()
     master.receive_processdata(timeout_us)
+    _request_op(master, pysoem, timeout_us)
+
+
+def _request_op(master, pysoem, timeout_us: int = 2000) -> None:  # type: ignore[no-untyped-def]
+    """Request OP and send process data (the outputs OP needs) until every slave is there."""
     master.state = pysoem.OP_STATE
     master.write_state()
     for _ in range(500):
@@ -106,15 +111,7 @@ def _watchdog_trips(master, pysoem) -> tuple[int, int]:  # type: ignore[no-untyp
         s.state = pysoem.SAFEOP_STATE | pysoem.STATE_ACK
         s.write_state()
     if tripped:
-        master.state = pysoem.OP_STATE
-        master.write_state()
-        for _ in range(500):
-            master.send_processdata()
-            master.receive_processdata(2000)
-            if master.state_check(pysoem.OP_STATE, 1000) == pysoem.OP_STATE:
-                break
-        else:
-            pytest.fail(f"not back in OP: {[hex(s.al_status) for s in master.slaves]}")
+        _request_op(master, pysoem)
     return len(tripped), checked_ns
 
 
