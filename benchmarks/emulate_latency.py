@@ -18,6 +18,7 @@ emulator's worst reply to the host's worst wake-up.
     sudo python benchmarks/emulate_latency.py                      # LOLA, both masters
     sudo python benchmarks/emulate_latency.py --masters pysoem --cycles 2000 --loads idle
     sudo python benchmarks/emulate_latency.py --eni lolacli/eni_examples/single_drive.xml
+    sudo python benchmarks/emulate_latency.py --emulate-arg=--let-cpus-sleep  # no PM QoS hold
 
 Needs root (veth, raw sockets), dumpcap, pysoem and/or kickcat. The masters run at
 ``--master-nice`` (default 0: normal; SOEM polls its socket without sleeping, and above
@@ -195,7 +196,7 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         emu_log = folder / f"{master}-{'hog' if hog else 'idle'}.emulate.txt"
         emulator = subprocess.Popen(
             [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", e_if,
-             "--eni", str(args.eni), "--quiet"],
+             "--eni", str(args.eni), "--quiet", *args.emulate_arg],
             cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
         )  # fmt: skip
         procs.append(emulator)
@@ -335,6 +336,10 @@ def main() -> None:
     parser.add_argument(
         "--baseline-s", type=float, default=10.0,
         help="seconds of the host's own wake-up latency measured after each run (0: none)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--emulate-arg", action="append", default=[],
+        help="an extra argument for `lolacli bus emulate` (repeatable), e.g. --let-cpus-sleep",
     )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="also print the results as JSON")
     parser.add_argument("--run-master", choices=sorted(MASTERS), help=argparse.SUPPRESS)

@@ -70,6 +70,15 @@ def emulate_cmd(
             "scheduling. Default: SCHED_FIFO 10 where permitted, else normal.",
         ),
     ] = None,
+    keep_cpus_awake: Annotated[
+        bool,
+        typer.Option(
+            "--keep-cpus-awake/--let-cpus-sleep",
+            help="While serving, hold the CPUs' wake-up latency at 0 (PM QoS, "
+            "/dev/cpu_dma_latency; needs root) so a frame after a quiet spell does not "
+            "wait for an idle core to wake, as cyclictest does.",
+        ),
+    ] = True,
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
     drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
@@ -157,6 +166,7 @@ def emulate_cmd(
         on_ready=ready,
         realtime_priority=realtime_priority,
         scratch=scratch,
+        keep_cpus_awake=keep_cpus_awake,
     )
     status(stats)
     drops = "" if stats.socket_drops is None else f", {stats.socket_drops} dropped at the socket"

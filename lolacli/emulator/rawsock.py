@@ -16,7 +16,11 @@ the answer, a piece at a time while no frame waits, at least one piece per frame
 
 Scheduling: by default the server asks for SCHED_FIFO (priority :data:`DEFAULT_PRIORITY`)
 and keeps normal scheduling where the OS refuses; it blocks on the socket, so it takes a
-core only while it answers. :attr:`RawSocketServer.scheduling` says which it got. The
+core only while it answers. While it serves it also holds the CPUs' wake-up latency at 0
+(Linux PM QoS, ``/dev/cpu_dma_latency``, as cyclictest does): an idle core then polls
+instead of halting, so a frame that arrives after a quiet spell (a start-up's first
+frame, a master cycling every 5 ms) does not wait for the core to wake; the hold ends with
+the server. :attr:`RawSocketServer.scheduling` says which it got. The
 collector is off while serving (the chain makes little cyclic garbage); young objects are
 collected in idle moments.
 
@@ -45,6 +49,7 @@ DEFAULT_GRACE_S = 100e-6
 DEFAULT_PRIORITY = 10  # SCHED_FIFO priority asked for by default (1..99)
 PR_SET_TIMERSLACK = 29
 TIMER_SLACK_NS = 1000
+CPU_DMA_LATENCY = "/dev/cpu_dma_latency"  # Linux PM QoS: the CPUs' wake-up latency bound
 SO_TIMESTAMPNS = 35  # Linux: receive timestamps as struct timespec (socket module lacks it)
 SCM_TIMESTAMPNS = SO_TIMESTAMPNS
 _TIMESPEC = struct.Struct("qq")
@@ -121,7 +126,9 @@ class RawSocketServer:
 
     ``realtime_priority``: ``None`` asks for SCHED_FIFO at :data:`DEFAULT_PRIORITY` and
     keeps normal scheduling where that is not permitted; 0 keeps normal scheduling; 1..99
-    asks for that priority and fails (TransportError) where it is not permitted."""
+    asks for that priority and fails (TransportError) where it is not permitted.
+    ``keep_cpus_awake``: hold the CPUs' wake-up latency at 0 while serving where permitted
+    (root); False leaves the CPUs' idle states alone."""
 
     def __init__(
         self,
@@ -130,8 +137,11 @@ class RawSocketServer:
         *,
         grace_s: float = DEFAULT_GRACE_S,
         realtime_priority: int | None = None,
+        keep_cpus_awake: bool = True,
     ) -> None:
         self.iface = iface
+        self.keep_cpus_awake = keep_cpus_awake
+        self._latency_hold: int | None = None
         self.chain = chain
         self.grace_s = grace_s
         self.grace_ns = round(grace_s * 1e9)
@@ -154,6 +164,13 @@ class RawSocketServer:
             pass  # no receive timestamps: the wake-up figures stay empty
         _tight_timers()
         self.scheduling = _scheduling(self.realtime_priority)
+        if self.keep_cpus_awake:
+            self._latency_hold = hold_cpu_latency(0)
+            self.scheduling += (
+                ", CPU wake-up latency held at 0 µs"
+                if self._latency_hold is not None
+                else ", CPU idle states as they are (PM QoS not permitted)"
+            )
         gc.collect()
         gc.freeze()  # the chain lives as long as the server: no collector passes over it
         self._gc_was_enabled = gc.isenabled()
@@ -163,6 +180,9 @@ class RawSocketServer:
     def __exit__(self, *exc: object) -> None:
         if self._gc_was_enabled:
             gc.enable()
+        if self._latency_hold is not None:
+            os.close(self._latency_hold)  # closing the file ends the request
+            self._latency_hold = None
         if self._sock is not None:
             self.stats.socket_drops = _socket_drops(self._sock)
             self._sock.close()
@@ -320,6 +340,38 @@ def _realtime(priority: int) -> None:
         raise TransportError(
             f"cannot run SCHED_FIFO at priority {priority}: {getattr(exc, 'strerror', exc)}"
         ) from None
+
+
+def hold_cpu_latency(us: int) -> int | None:
+    """Ask Linux to keep every CPU's wake-up latency at or below ``us`` (PM QoS): the
+    request holds while the returned descriptor is open (close it to end it). None where
+    ``/dev/cpu_dma_latency`` is missing or not writable (it needs root)."""
+    try:
+        fd = os.open(CPU_DMA_LATENCY, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        os.write(fd, struct.pack("=i", us))
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def cpu_latency_limit_us() -> int | None:
+    """The CPUs' wake-up latency bound in force now (the tightest request), in µs; None
+    where it cannot be read."""
+    try:
+        fd = os.open(CPU_DMA_LATENCY, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        raw = os.read(fd, 4)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return struct.unpack("=i", raw)[0] if len(raw) == 4 else None
 
 
 def _tight_timers() -> None:

@@ -194,6 +194,7 @@ def serve(
     on_ready: Callable[[str], None] | None = None,
     realtime_priority: int | None = None,
     scratch: Chain | None = None,
+    keep_cpus_awake: bool = True,
 ) -> ServerStats:
     """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
     ``on_ready(scheduling)`` is called once the socket is open (frames are answered from
@@ -201,10 +202,14 @@ def serve(
     SCHED_FIFO where permitted (root or CAP_SYS_NICE) and normal scheduling elsewhere,
     0 normal scheduling, 1..99 SCHED_FIFO at that priority or a TransportError. A slave
     does not wait for other processes to yield the core; neither should its stand-in.
-    ``scratch``: a second chain of the same ENI to :func:`warm_up` with first."""
+    ``scratch``: a second chain of the same ENI to :func:`warm_up` with first.
+    ``keep_cpus_awake``: hold the CPUs' wake-up latency at 0 while serving (PM QoS, where
+    permitted), as slave hardware never sleeps between frames."""
     if scratch is not None:
         warm_up(scratch)
-    with RawSocketServer(iface, chain, realtime_priority=realtime_priority) as server:
+    with RawSocketServer(
+        iface, chain, realtime_priority=realtime_priority, keep_cpus_awake=keep_cpus_awake
+    ) as server:
         if on_ready is not None:
             on_ready(server.scheduling)
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)

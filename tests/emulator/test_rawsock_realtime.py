@@ -1,13 +1,24 @@
-"""The raw-socket server's real-time knobs: SCHED_FIFO on request, a clear error if not."""
+"""The raw-socket server's real-time knobs: SCHED_FIFO on request, a clear error if not;
+the CPUs held awake while it serves."""
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
-from lolacli.emulator.rawsock import _realtime
+from lolacli.emulator.rawsock import (
+    CPU_DMA_LATENCY,
+    RawSocketServer,
+    _realtime,
+    cpu_latency_limit_us,
+)
+from lolacli.emulator.slave import build_chain
 from lolacli.errors import TransportError
+from lolacli.files import load_eni
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "lolacli" / "eni_examples"
 
 
 def test_an_impossible_priority_is_one_transport_error() -> None:
@@ -24,3 +35,19 @@ def test_realtime_priority_is_applied_in_a_child() -> None:
         os._exit(0 if ok else 1)
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+@pytest.mark.skipif(
+    not os.access(CPU_DMA_LATENCY, os.W_OK), reason="PM QoS requests need root"
+)
+def test_the_server_holds_the_cpus_awake_while_it_serves_and_lets_go_after() -> None:
+    chain = build_chain(load_eni(EXAMPLES / "single_drive.xml"))
+    before = cpu_latency_limit_us()
+    assert before is not None and before > 0  # nothing else holds it during the tests
+    with RawSocketServer("lo", chain, realtime_priority=0) as server:
+        assert cpu_latency_limit_us() == 0
+        assert server.scheduling == "normal, CPU wake-up latency held at 0 µs"
+    assert cpu_latency_limit_us() == before
+    with RawSocketServer("lo", chain, realtime_priority=0, keep_cpus_awake=False) as server:
+        assert cpu_latency_limit_us() == before
+        assert server.scheduling == "normal"
