@@ -745,19 +745,28 @@ class Chain:
         return len(self._pdi)
 
     def run_firmware(self, limit: int | None = None) -> None:
-        """Handle up to ``limit`` (``None``: all) pieces of pending firmware work, oldest
-        first; work they queue in turn waits for the next call."""
+        """Handle up to ``limit`` (``None``: as many as are pending now) pieces of pending
+        firmware work, oldest first; a piece's continuation (the rest of its work, see
+        :meth:`~lolacli.emulator.esc.memory.EscMemory.continue_in_firmware`) comes next."""
         work = self._pdi
         n = len(work) if limit is None else min(limit, len(work))
-        batch = work[:n]
-        del work[:n]
         core = self._core
-        for function, args in batch:
-            if core is not None:  # the firmware's slave: its ESC state back from the C core
-                core.release_owner(function)
+        for _ in range(n):
+            if not work:
+                return
+            function, args = work.pop(0)
+            if core is None:
+                function(*args)
+                continue
+            if function == core.take_in_device:  # pieces of its own (see device_due)
+                if function(*args):
+                    work.insert(0, (function, args))
+                continue
+            core.release_owner(function)  # the firmware's slave: its ESC state back
             function(*args)
-            if core is not None:
-                core.prepare_device(function, len(self._active))
+            due = core.device_due(function, len(self._active))
+            if due is not None:
+                work.append((core.take_in_device, (due,)))
 
     def _run_pdi(self) -> None:
         while self._pdi:

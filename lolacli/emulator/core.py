@@ -284,21 +284,43 @@ class ChainCore:
         elif i not in self.released:
             self.release((i,))
 
-    def prepare_device(self, work: object, active: int) -> None:
-        """Take in the device of the slave whose firmware ``work`` just ran, once it is in
-        SAFEOP or OP (its PDO mapping is fixed there): its tables built and its state
-        loaded in the firmware's time, after the answer, rather than by the first cycle
-        that needs them, which may run in a frame's answer path (25 LOLA devices: 1.5 ms
-        in KickCAT's first LWR, whose LRD's cycle waited for it). Only the first
-        ``active`` slaves (those the frames reach) run cycles."""
+    def device_due(self, work: object, active: int) -> int | None:
+        """The 0-based position of the slave whose firmware ``work`` just ran when its
+        device is now to be taken in: it is in SAFEOP or OP (its PDO mapping is fixed
+        there) and not yet in the tables. The take-in (:meth:`take_in_device`) then runs as
+        firmware work of its own, after the answer, rather than in the first cycle that
+        needs it, which may run in a frame's answer path (25 LOLA devices: 1.5 ms in
+        KickCAT's first LWR, whose LRD's cycle waited for it). Only the first ``active``
+        slaves (those the frames reach) run cycles."""
         i = self._index.get(id(getattr(work, "__self__", None)))
         if i is None or i >= active or i not in self.devices_released:
-            return
+            return None
         if self.escs[i].al_state not in (AlState.SAFEOP, AlState.OP):
-            return
+            return None
+        return i
+
+    def take_in_device(self, i: int) -> bool:
+        """The device at 0-based position ``i`` into the tables, if still due; where it
+        cannot be, Python keeps running it. Two pieces when its dictionary changed since it
+        was flattened (a master's SDO writes at PREOP): this call flattens it again and
+        returns True (call again to load it), so each piece stays short."""
+        if i not in self.devices_released:
+            return False
+        if self.escs[i].al_state not in (AlState.SAFEOP, AlState.OP):
+            return False
+        device = _device_of(self.escs[i].app)
+        flat = self._flat[i]
+        if device is not None and (flat is None or flat.version != device.od.version):
+            stamp = (device.od.version, device.od.writes)
+            if self._unflat[i] != stamp:
+                self._flat[i] = flatten(device)
+                if self._flat[i] is None:
+                    self._unflat[i] = stamp
+                return True
         if self._load_device(i):
             self.devices_released.discard(i)
             self._pieces.clear()
+        return False
 
     def release_all(self) -> None:
         """Everything back to the Python objects, counters included."""

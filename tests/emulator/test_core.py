@@ -808,7 +808,9 @@ def test_a_slave_that_starts_waiting_for_op_invalidates_the_plans() -> None:
     Bus(chain).bring_up(eni)
     esc = chain.slaves[0]
     esc.request_state(AlState.PREOP)
+    chain.run_firmware()  # a checked request is entered by a piece of firmware of its own
     esc.request_state(AlState.SAFEOP)
+    chain.run_firmware()
     epoch = chain._epoch[0]
     esc.request_state(AlState.OP)
     assert esc.pending_op and esc.al_state == AlState.SAFEOP

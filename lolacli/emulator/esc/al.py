@@ -51,8 +51,13 @@ class AlStateMachine(Mailbox):
         self.counters.refused_transitions += 1
         self._set_al(self.al_state, code, error=True)
 
-    def _al_control_written(self) -> None:
-        control = self.mem[r.AL_CONTROL]
+    def _al_control_written(self, control: int) -> None:
+        """Firmware: an AL control request, ``control`` as the master wrote it. Each
+        write is handled in turn, even when the master wrote the next one before the
+        firmware came to this one: each real slave has its own processor, while the
+        emulator's firmware work for every slave of the chain waits its turn on one core
+        (SOEM's ``config_map`` asks each slave for SAFEOP and a master may ask all for OP
+        right after it)."""
         requested = control & r.AL_STATE_MASK
         if self.al_error:
             if not control & r.AL_ERROR_INDICATOR:
@@ -83,7 +88,15 @@ class AlStateMachine(Mailbox):
             self.pending_op = True
             self.epoch[0] += 1
             return
-        self._enter(requested)
+        # checked; the state is entered as a piece of firmware work of its own, so a frame
+        # that arrives between the two is answered without waiting for both
+        self.continue_in_firmware(self._enter_checked, requested, current)
+
+    def _enter_checked(self, requested: int, checked_in: int) -> None:
+        """Firmware: enter ``requested``, checked while in ``checked_in``, unless another
+        request has moved the slave meanwhile (then that request decides)."""
+        if self.al_state == checked_in and not self.al_error:
+            self._enter(requested)
 
     def _transition_check(self, current: int, requested: int) -> int | None:
         if requested == AlState.BOOT:

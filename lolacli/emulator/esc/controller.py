@@ -255,8 +255,8 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             self._system_time_written(start, end, payload, t_ns)
         if plan.sync_managers:
             self._sm_registers_written(start, end)
-        if plan.al_control:
-            self.hand_to_firmware(self._al_control_written)
+        if plan.al_control:  # the request as written: see AlStateMachine._al_control_written
+            self.hand_to_firmware(self._al_control_written, self.mem[r.AL_CONTROL])
 
     def cycle(self, t_ns: int) -> None:
         """One application cycle: outputs from the output SM to the device, inputs back."""

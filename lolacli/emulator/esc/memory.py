@@ -119,6 +119,15 @@ class EscMemory:
         else:
             self.pdi.append((work, args))
 
+    def continue_in_firmware(self, work: Callable[..., None], *args: Any) -> None:
+        """The rest of the piece of firmware work now running, as a piece of its own that
+        comes before any other pending work (a frame may come between the two): at once
+        where there is no queue."""
+        if self.pdi is None:
+            work(*args)
+        else:
+            self.pdi.insert(0, (work, args))
+
     def _store(self, start: int, data: bytes) -> None:
         """``data`` into memory from ``start``, as far as the memory goes (a master may
         place an SM buffer across its end; the memory never grows)."""
