@@ -290,7 +290,7 @@ class Chain:
         self.reachable = len(slaves)
         self._epoch = [0]  # one cell for all slaves: any change invalidates the plans
         self._addressing = [0]  # one cell for all slaves: configured addresses changed
-        self._pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] = []  # firmware work
+        self._pdi: list[tuple[Callable[..., object], tuple[Any, ...]]] = []  # firmware work
         for esc in slaves:
             esc.epoch = self._epoch
             esc.addressing = self._addressing

@@ -78,7 +78,7 @@ class EscMemory:
     # taken by the ESC at once (the frame is answered) and handled by the firmware
     # afterwards, as on hardware. ``None``: handled at once; a list (a chain's): work
     # queued there as (function, arguments), run by the chain after the answer.
-    pdi: list[tuple[Callable[..., None], tuple[Any, ...]]] | None
+    pdi: list[tuple[Callable[..., object], tuple[Any, ...]]] | None
 
     def set_topology(self, *, last: bool) -> None:
         """DL status 0x0110: port 0 link+communication, port 1 too unless last in line."""
