@@ -161,3 +161,63 @@ def test_link_down_position_is_checked(cli) -> None:
     code, _out, err = cli("bus", "emulate", "--iface", "lo", "--link-down", "26")
     assert code == 2
     assert "the chain has slaves 1..25" in err
+
+
+def _deferred(chain, t_ns: int, cmd: int, adp: int, ado: int, data: bytes | int) -> Datagram:
+    """One datagram as the raw-socket server sends it through: the slaves' firmware work
+    stays queued until the server runs it, a piece at a time."""
+    raw = encode_frame(make_frame([Datagram.physical(cmd, adp, ado, data)]), pad=True)
+    reply, _delay = chain.process(raw, t_ns, defer_cycles=True)
+    assert reply is not None
+    return decode_frame(reply).datagrams[0]
+
+
+def test_an_al_transition_is_pieces_of_firmware_a_frame_may_come_between() -> None:
+    """The check of a SAFEOP request and entering SAFEOP are two pieces, the device's
+    take-in into the C core more after them: a frame the master sends meanwhile is
+    answered after one short piece, and reads the state not yet entered."""
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni, engine="c")
+    bus = Bus(chain)
+    bus.transition(eni, "IP")
+    bus.transition(eni, "PS")  # the ENI's SM and FMMU set-up, then SAFEOP...
+    station = eni.slaves[0].station_address
+    assert bus.fpwr(station, 0x0120, b"\x02\x00") == 1  # ...and back to PREOP
+    assert chain.slaves[0].al_state == 0x02
+    t = bus.t_ns
+    assert _deferred(chain, t, C.FPWR, station, 0x0120, b"\x04\x00").wkc == 1
+    assert chain.firmware_pending == 1
+    chain.run_firmware(1)  # the checks
+    assert chain.firmware_pending == 1  # entering SAFEOP comes next
+    assert _deferred(chain, t + 10_000, C.FPRD, station, 0x0130, 2).data == b"\x02\x00"
+    chain.run_firmware(1)
+    assert _deferred(chain, t + 20_000, C.FPRD, station, 0x0130, 2).data == b"\x04\x00"
+    core = chain._core
+    assert core is not None and 0 in core.devices_released
+    core._flat[0] = None  # as when a master's SDO writes in PREOP changed the dictionary
+    pieces = 0
+    while chain.firmware_pending:  # the take-in: flatten the device again, then load it
+        chain.run_firmware(1)
+        pieces += 1
+    assert pieces == 2 and 0 not in core.devices_released
+
+
+def test_each_al_control_request_is_handled_as_written() -> None:
+    """A master that asks for SAFEOP and then for OP before the slave's firmware came to
+    the first (SOEM's config_map, then a write of OP to all) gets SAFEOP and OP pending,
+    not a refused PREOP -> OP (0x0011): the firmware of all slaves shares one core here."""
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain = build_chain(eni, engine="c")
+    bus = Bus(chain)
+    bus.transition(eni, "IP")
+    bus.transition(eni, "PS")
+    station = eni.slaves[0].station_address
+    assert bus.fpwr(station, 0x0120, b"\x02\x00") == 1
+    t = bus.t_ns
+    _deferred(chain, t, C.FPWR, station, 0x0120, b"\x04\x00")
+    _deferred(chain, t + 10_000, C.BWR, 0, 0x0120, b"\x08\x00")
+    while chain.firmware_pending:
+        chain.run_firmware(1)
+    esc = chain.slaves[0]
+    assert (esc.al_state, esc.al_error, esc.al_status_code) == (0x04, False, 0)
+    assert esc.pending_op  # OP with the first valid outputs
