@@ -6,10 +6,13 @@ from __future__ import annotations
 import struct
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.chain import Chain, ChainTiming
 from lolacli.emulator.esc import Esc
+from lolacli.emulator.esc.memory import register_write
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
 from lolacli.emulator.slave import build_chain
@@ -322,3 +325,29 @@ def test_nothing_outside_the_esc_package_reads_its_private_members() -> None:
             ):
                 found.append(f"{path.relative_to(root)}:{node.lineno} .{node.attr}")
     assert found == []
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    start=st.integers(0, r.PROCESS_RAM - 1),  # at and past it: no registers (process RAM)
+    payload=st.binary(min_size=1, max_size=300),
+    seed=st.binary(min_size=512, max_size=512),
+)
+def test_a_register_write_stores_the_writable_bytes_run_by_run_or_masked_alike(
+    start: int, payload: bytes, seed: bytes
+) -> None:
+    """The one-step store (masked where read-only bytes lie between writable ones) leaves
+    the memory exactly as storing each writable run on its own does, and the one-step
+    store of a payload worked out once for many slaves (a BWR) too."""
+    plan = register_write(start, start + len(payload))
+    before = bytearray(r.MEMORY_BYTES)
+    before[start : start + 512] = seed[: max(0, min(512, r.MEMORY_BYTES - start))]
+    runs = bytearray(before)
+    for lo, hi in plan.segments:
+        runs[lo:hi] = payload[lo - start : hi - start]
+    one_step = bytearray(before)
+    plan.store(one_step, start, payload)
+    assert one_step == runs
+    shared = bytearray(before)
+    plan.store_bits(shared, start, plan.writable_bits(payload))
+    assert shared == runs

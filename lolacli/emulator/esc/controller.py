@@ -226,9 +226,7 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             return True
         self.epoch[0] += 1
         plan = register_write(address, end)
-        mem = self.mem
-        for lo, hi in plan.segments:  # the writable bytes
-            mem[lo:hi] = payload[lo - address : hi - address]
+        plan.store(self.mem, address, payload)  # the writable bytes
         if plan.effects:
             self._register_side_effects(plan, address, end, payload, t_ns)
         if end > r.PROCESS_RAM:
@@ -306,16 +304,14 @@ def broadcast_write(
         return None
     payload = bytes(data)
     plan = register_write(ado, end)
-    segments = [(lo, hi, payload[lo - ado : hi - ado]) for lo, hi in plan.segments]
+    bits = plan.writable_bits(payload)
     effects = plan.effects
     for esc, port in zip(escs, ports, strict=False):
         t = t_ns + port.port0_ns
         esc.counters.datagrams += 1
         esc.now_ns = t
         esc.epoch[0] += 1
-        mem = esc.mem
-        for lo, hi, part in segments:
-            mem[lo:hi] = part
+        plan.store_bits(esc.mem, ado, bits)
         if effects:
             esc.frame_t_ns = t_ns
             esc.port_offsets = port

@@ -186,6 +186,30 @@ class RegisterWrite:
     al_control: bool
 
     effects: bool  # any of the above
+    #: the bytes from ``start`` to the end of the last writable run, and the read-only
+    #: ones among them as a little-endian bit mask (0: none)
+    span: int = 0
+    keep: int = 0
+
+    def store(self, mem: bytearray, start: int, payload: bytes) -> None:
+        """``payload`` into ``mem`` at ``start``, the read-only bytes keeping their value:
+        in one step, masked where read-only bytes lie between writable ones (a BWR of 16
+        sync managers has 32 runs: 4.7 µs a slave run by run, 0.5 µs masked)."""
+        if not self.keep:
+            mem[start : start + self.span] = payload[: self.span]
+        else:
+            self.store_bits(mem, start, self.writable_bits(payload))
+
+    def writable_bits(self, payload: bytes) -> int:
+        """``payload`` as a little-endian integer with its read-only bytes cleared (once
+        for a write that many slaves take, see :meth:`store_bits`)."""
+        return int.from_bytes(payload[: self.span], "little") & ~self.keep
+
+    def store_bits(self, mem: bytearray, start: int, bits: int) -> None:
+        """:meth:`store` of a payload given as :meth:`writable_bits`."""
+        end = start + self.span
+        old = int.from_bytes(mem[start:end], "little") & self.keep
+        mem[start:end] = (old | bits).to_bytes(self.span, "little")
 
 
 @lru_cache(maxsize=4096)
@@ -222,4 +246,11 @@ def register_write(start: int, end: int) -> RegisterWrite:
         hit(r.SM, r.SM + 16 * 8),
         hit(r.AL_CONTROL, r.AL_CONTROL + 1),
     )
-    return RegisterWrite(tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags))
+    span = segments[-1][1] - start if segments else 0
+    keep = 0
+    for a in range(start, start + span):
+        if a < r.PROCESS_RAM and _READONLY[a]:
+            keep |= 0xFF << (8 * (a - start))
+    return RegisterWrite(
+        tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags), span, keep
+    )

@@ -19,6 +19,10 @@ from lolacli.wire.registers import (
 _SM = SYNC_MANAGER_LAYOUT
 
 
+_SM_BASE, _SM_BYTES = r.SM, r.SYNC_MANAGER_BYTES
+_NOT_FULL = ~r.SM_STATUS_MAILBOX_FULL & 0xFF
+
+
 @dataclass(frozen=True, slots=True)
 class SmView:
     """A sync manager's registers (ETG.1000.4 Table 58)."""
@@ -131,13 +135,15 @@ class SyncManagers(EscMemory):
             self.config.sync_managers, (end - 1 - r.SM) // r.SYNC_MANAGER_BYTES + 1
         )
         mem = self.mem
+        layout = self.layout
+        mailbox_out, mailbox_in = layout.mailbox_out_sm, layout.mailbox_in_sm
         for i in range(first, last):
-            base = r.SM + r.SYNC_MANAGER_BYTES * i
+            base = _SM_BASE + _SM_BYTES * i
             if not mem[base + 6] & 1:
-                mem[base + 5] &= ~r.SM_STATUS_MAILBOX_FULL  # a disabled SM forgets its buffer
-                if i == self.layout.mailbox_out_sm:
+                mem[base + 5] &= _NOT_FULL  # a disabled SM forgets its buffer
+                if i == mailbox_out:
                     self._write_mailbox_disabled()
-            elif i == self.layout.mailbox_in_sm:
+            elif i == mailbox_in:
                 self._repeat_request(base)
 
     def _sm_written(self, start: int, end: int) -> None:
