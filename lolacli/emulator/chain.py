@@ -271,6 +271,11 @@ class Chain:
     it; ``python`` runs the reference code only."""
 
     plan_after = 2
+    #: a layout without logical datagrams (a start-up's register polls) is planned only
+    #: after this many repeats in one epoch: making a plan takes 40-170 µs after the answer
+    #: (LOLA), which the master's next frame may wait for, and any register write starts
+    #: a new epoch; such frames take 10-20 µs on the general path
+    register_plan_after = 64
 
     def __init__(
         self,
@@ -301,7 +306,8 @@ class Chain:
         self._plans: dict[Key, FramePlan | None] = {}
         self._last_plan: FramePlan | None = None  # the plan the last planned lookup found
         self._plan_epoch = -1
-        self._seen: dict[Key, int] = {}
+        self._seen: dict[Key, int] = {}  # layouts with logical datagrams: times seen
+        self._seen_registers: dict[Key, int] = {}  # the others, in the current epoch
         self._deferred_dc: Deferred = []  # what a plan left for after the answer
         self._held: int | None = None  # a late application cycle's time
         self._held_from = 0  # ... and the position it goes on from
@@ -566,15 +572,18 @@ class Chain:
             return None  # register frames: the general path, no plan to count towards
         if self._plan_epoch != self._epoch[0]:
             self._plans.clear()
+            self._seen_registers.clear()  # register layouts are counted per epoch
             self._plan_epoch = self._epoch[0]
         if key in self._plans:
             plan = self._last_plan = self._plans[key]
             return plan
-        seen = self._seen.get(key, 0) + 1
-        if len(self._seen) >= 1024:
-            self._seen.clear()
-        self._seen[key] = seen
-        if seen < self.plan_after:
+        logical = any(key[i] in LOGICAL for i in range(2, len(key), 4))
+        counts = self._seen if logical else self._seen_registers
+        seen = counts.get(key, 0) + 1
+        if len(counts) >= 1024:
+            counts.clear()
+        counts[key] = seen
+        if seen < (self.plan_after if logical else max(self.plan_after, self.register_plan_after)):
             return None
         if defer:
             self._plan_later = key

@@ -38,7 +38,7 @@ class Twin:
 
     def __init__(self, eni: Eni, engine: str | None = None) -> None:
         self.fast = build_chain(eni, drift_ppb=20, engine=engine)
-        self.fast.plan_after = 1
+        self.fast.plan_after = self.fast.register_plan_after = 1
         self.slow = build_chain(eni, drift_ppb=20, engine=engine)
         self.slow.plan_after = 0
         self.slaves = self.fast.slaves
@@ -313,3 +313,26 @@ def test_a_deferred_cycle_that_gives_way_goes_on_where_it_stopped(engine: str) -
     for i, (a, b) in enumerate(zip(whole.slaves, parts.slaves, strict=True)):
         assert a.mem == b.mem, f"slave {i}"
         assert a.counters == b.counters, f"slave {i}"
+
+
+def test_a_register_poll_is_planned_only_after_many_repeats_in_one_epoch() -> None:
+    """A start-up's register polls (AL status by BRD between writes) stay on the general
+    path: making their plan costs more than it saves before the next write (a new epoch)
+    drops it, and a master's next frame may wait for it. Cyclic frames are still planned
+    from their second time on (above)."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    n = chain.register_plan_after
+    planned = chain.stats.planned_frames
+    for _ in range(n - 1):
+        assert bus.one(C.BRD, 0, 0x0130, 2).wkc == 25
+    assert chain.stats.planned_frames == planned
+    assert bus.fpwr(eni.slaves[0].station_address, 0x0120, b"\x08\x00") == 1  # a new epoch
+    for _ in range(n - 1):
+        bus.one(C.BRD, 0, 0x0130, 2)
+    assert chain.stats.planned_frames == planned  # counted again from the write on
+    for _ in range(3):
+        bus.one(C.BRD, 0, 0x0130, 2)
+    assert chain.stats.planned_frames == planned + 3  # the 64th and on
