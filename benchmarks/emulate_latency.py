@@ -13,7 +13,11 @@ The table shows p50/p99/max against the 2 ms budget real masters wait per frame 
 EC_TIMEOUTRET, KickCAT's link timeout) and the target p99 <= 150 µs, max <= 1 ms. After
 each run, the baseline: the host's own wake-up latency measured cyclictest's way (a
 SCHED_FIFO 10 process sleeping to a deadline every 1 ms, same load), and the ratio of the
-emulator's worst reply to the host's worst wake-up.
+emulator's worst reply to the host's worst wake-up. Per command type, the same frames on a
+100 Mbit line (lolacli's timing model, each frame after those sent just before it, as a
+real port sends them): "line p99", and the p99 of the emulator's reply minus the line's,
+"over line". First of all (``--no-first-frames`` to skip), a probe of a session's first
+frames against the emulator and against a plain echo server on the same kind of veth pair.
 
     sudo python benchmarks/emulate_latency.py                      # LOLA, both masters
     sudo python benchmarks/emulate_latency.py --masters pysoem --cycles 2000 --loads idle
@@ -129,20 +133,32 @@ MASTERS = {"pysoem": run_pysoem, "kickcat": run_kickcat}
 
 
 # ------------------------------------------------------------- the capture
-def per_command_latency(path: Path) -> tuple[dict[str, list[int]], int]:
-    """Reply latency (ns) per command type from a master-side capture; unanswered count.
+def per_command_latency(
+    path: Path, slaves: int = 0
+) -> tuple[dict[str, list[int]], int, dict[str, list[int]]]:
+    """Reply latency (ns) per command type from a master-side capture; unanswered count;
+    and per command type, what a 100 Mbit line of ``slaves`` slaves would take for the
+    same frames sent at the same times: lolacli's timing model of the round trip (the
+    frame's wire time, 1 µs per slave, the cables) after the frames the master sent just
+    before it, which a real port sends one after the other (a start-up sends bursts).
 
     A frame is the echo of the pending one with the same command/index/length sequence
     when the source MAC's locally administered bit differs (DESIGN.md "Direction") or,
     where the master's own MAC has that bit set (KickCAT), when a working counter or an
     ADP changed on the way; otherwise it is the master sending the frame again."""
     from lolacli.capture.reader import iter_frames
+    from lolacli.emulator.chain import ChainTiming
     from lolacli.errors import WireError
+    from lolacli.timing.model import frame_bytes
     from lolacli.wire.commands import Command
     from lolacli.wire.frame import decode_frame
 
+    timing = ChainTiming()
     pending: dict[tuple[tuple[int, int, int], ...], tuple[int, str, bytes, tuple[int, ...]]] = {}
     out: dict[str, list[int]] = defaultdict(list)
+    line: dict[str, list[int]] = defaultdict(list)
+    sent: dict[tuple[tuple[int, int, int], ...], int] = {}  # the line's latency of each
+    free_ns = 0  # when the master's port has sent what it was sending
     unanswered = 0
     for frame in iter_frames(path):
         try:
@@ -158,12 +174,17 @@ def per_command_latency(path: Path) -> tuple[dict[str, list[int]], int]:
             if bit_differs or fields != first[3]:
                 del pending[key]
                 out[first[1]].append(frame.timestamp_ns - first[0])
+                line[first[1]].append(sent.pop(key))
                 continue
             unanswered += 1  # sent again: the first copy had no answer
         names = sorted({_mnemonic(Command, d.cmd) for d in datagrams})
         pending[key] = (frame.timestamp_ns, "+".join(names), frame.data[:12], fields)
+        lengths = [len(d.data) for d in datagrams]
+        start = max(frame.timestamp_ns, free_ns)  # a frame waits for the one before it
+        free_ns = start + timing.wire_time_ns(frame_bytes(lengths))
+        sent[key] = start - frame.timestamp_ns + timing.round_trip_ns(lengths, slaves)
     unanswered += len(pending)
-    return out, unanswered
+    return out, unanswered, line
 
 
 def _mnemonic(command: type, cmd: int) -> str:
@@ -230,9 +251,11 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
             emu_log.write_text(procs[0].stderr.read())
         subprocess.run(["ip", "link", "del", m_if], capture_output=True, check=False)
     from lolacli.capture import analyze_file
+    from lolacli.files import load_eni
 
     report = analyze_file(pcap).to_dict()
-    latency, unanswered = per_command_latency(pcap)
+    slaves = len(load_eni(args.eni).slaves)
+    latency, unanswered, line = per_command_latency(pcap, slaves)
     result.update(
         master=master,
         hog=hog,
@@ -249,6 +272,8 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
                 "p50_us": _pct(v, 0.5),
                 "p99_us": _pct(v, 0.99),
                 "max_us": max(v) / 1000,
+                "line_p99_us": _pct(line[kind], 0.99),
+                "over_line_p99_us": _pct([a - b for a, b in zip(v, line[kind], strict=True)], 0.99),
             }
             for kind, v in sorted(latency.items(), key=lambda kv: -len(kv[1]))
         },
@@ -302,7 +327,8 @@ def print_table(result: dict[str, object]) -> None:
           f"{result['lost_frames']} lost ({result['direction_rule']} direction)")  # fmt: skip
     print(
         f"{'command':>14} {'n':>7} {'p50 µs':>8} {'p99 µs':>8} {'max µs':>9} "
-        f"{'p99/budget':>10}  target (p99 ≤ {TARGET_P99_US:.0f}, max ≤ {TARGET_MAX_US:.0f})"
+        f"{'p99/budget':>10} {'line p99':>9} {'over line':>9}  "
+        f"target (p99 ≤ {TARGET_P99_US:.0f}, max ≤ {TARGET_MAX_US:.0f})"
     )
     by_command = result["by_command"]
     assert isinstance(by_command, dict)
@@ -310,7 +336,8 @@ def print_table(result: dict[str, object]) -> None:
         ok = s["p99_us"] <= TARGET_P99_US and s["max_us"] <= TARGET_MAX_US
         print(
             f"{kind:>14} {s['count']:7d} {s['p50_us']:8.1f} {s['p99_us']:8.1f} "
-            f"{s['max_us']:9.1f} {s['p99_us'] / BUDGET_US:10.3f}  {'ok' if ok else 'MISSED'}"
+            f"{s['max_us']:9.1f} {s['p99_us'] / BUDGET_US:10.3f} {s['line_p99_us']:9.1f} "
+            f"{s['over_line_p99_us']:9.1f}  {'ok' if ok else 'MISSED'}"
         )
     print(f"emulator's own reply time: {result['emulator']}")
     base = result.get("host_baseline")
@@ -322,6 +349,117 @@ def print_table(result: dict[str, object]) -> None:
             f"p99 {base['p99_us']:.0f} µs, max {base['max_us']:.0f} µs; the emulator's "
             f"worst reply / the host's worst wake-up = {worst / base['max_us']:.2f}"
         )
+
+
+# A plain raw-socket echo server at the emulator's scheduling (SCHED_FIFO 10, CPU wake-up
+# latency held at 0 where permitted): what answering a frame costs this host at the least.
+ECHO_SERVER = """
+import os, select, socket, struct, sys
+try:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+except OSError:
+    pass
+try:
+    fd = os.open("/dev/cpu_dma_latency", os.O_WRONLY)
+    os.write(fd, struct.pack("=i", 0))
+except OSError:
+    pass
+s = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
+s.bind((sys.argv[1], 0))
+p = select.poll()
+p.register(s, select.POLLIN)
+print("emulating: a plain echo server", file=sys.stderr, flush=True)
+while True:
+    p.poll(100)
+    try:
+        data, addr = s.recvfrom(2000, socket.MSG_DONTWAIT)
+    except BlockingIOError:
+        continue
+    if addr[2] != 4:
+        b = bytearray(data)
+        b[6] |= 2
+        s.send(b)
+"""
+
+
+def probe(iface: str, rounds: int = 3, idle_s: float = 1.0, frames: int = 10) -> list[list[float]]:
+    """Round trips (µs, this process's clock) of ``frames`` BRDs sent one after the other,
+    each on the answer to the one before, after ``idle_s`` of silence; ``rounds`` times."""
+    import socket
+
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    raw = bytearray(encode_frame(make_frame([Datagram.physical(Command.BRD, 0, 0, 2)]), pad=True))
+    raw[0:6], raw[6:12] = b"\xff" * 6, b"\x00\x01\x01\x01\x01\x01"
+    frame = bytes(raw)
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(0x88A4))
+    sock.bind((iface, 0))
+    sock.settimeout(0.5)
+    out = []
+    try:
+        for _ in range(rounds):
+            time.sleep(idle_s)
+            times = []
+            for _ in range(frames):
+                t = time.perf_counter_ns()
+                sock.send(frame)
+                while True:
+                    data, address = sock.recvfrom(2000)
+                    if address[2] != 4 and data[6] & 0x02:
+                        break
+                times.append((time.perf_counter_ns() - t) / 1000)
+            out.append(times)
+    finally:
+        sock.close()
+    return out
+
+
+def first_frames(args: argparse.Namespace) -> dict[str, list[list[float]]]:
+    """The probe against a plain echo server and against ``lolacli bus emulate``, each on
+    a fresh veth pair: a session's first frame after an idle second costs this host
+    ~250 µs however little the answer takes; the emulator is read against that."""
+    out = {}
+    for name in ("echo", "emulate"):
+        m_if, e_if = f"{args.prefix}fm", f"{args.prefix}fe"
+        _ip("link", "add", m_if, "type", "veth", "peer", "name", e_if)
+        server = None
+        try:
+            for iface in (m_if, e_if):
+                subprocess.run(
+                    ["sysctl", "-qw", f"net.ipv6.conf.{iface}.disable_ipv6=1"], check=False
+                )
+                _ip("link", "set", iface, "up")
+            cmd = (
+                [sys.executable, "-c", ECHO_SERVER, e_if]
+                if name == "echo"
+                else [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", e_if,
+                      "--eni", str(args.eni), "--quiet", *args.emulate_arg]
+            )  # fmt: skip
+            server = subprocess.Popen(
+                cmd, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True
+            )
+            assert server.stderr is not None
+            ready = server.stderr.readline()
+            if "emulating" not in ready:
+                raise SystemExit(f"{name} did not start: {ready}")
+            out[name] = probe(m_if)
+        finally:
+            if server is not None:
+                server.terminate()
+                server.wait(timeout=20)
+            subprocess.run(["ip", "link", "del", m_if], capture_output=True, check=False)
+    return out
+
+
+def print_first_frames(result: dict[str, list[list[float]]]) -> None:
+    print("\n== a session's first frames (BRD, one on the answer to the other, after 1 s idle)")
+    for name, rounds in result.items():
+        label = "plain echo server" if name == "echo" else "lolacli bus emulate"
+        firsts = ", ".join(f"{r[0]:.0f}" for r in rounds)
+        rest = sorted(t for r in rounds for t in r[1:])
+        print(f"{label:>20}: first frame {firsts} µs; the next {len(rest)}: "
+              f"p50 {rest[len(rest) // 2]:.0f} µs, max {rest[-1]:.0f} µs")  # fmt: skip
 
 
 def main() -> None:
@@ -341,6 +479,10 @@ def main() -> None:
         "--emulate-arg", action="append", default=[],
         help="an extra argument for `lolacli bus emulate` (repeatable), e.g. --let-cpus-sleep",
     )  # fmt: skip
+    parser.add_argument(
+        "--first-frames", action=argparse.BooleanOptionalAction, default=True,
+        help="first the probe of a session's first frames, emulator and plain echo server",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="also print the results as JSON")
     parser.add_argument("--run-master", choices=sorted(MASTERS), help=argparse.SUPPRESS)
     parser.add_argument("--iface", help=argparse.SUPPRESS)
@@ -355,6 +497,8 @@ def main() -> None:
     folder = args.keep or Path(tempfile.mkdtemp(prefix="emulate_latency_"))
     folder.mkdir(parents=True, exist_ok=True)
     results = []
+    if args.first_frames:
+        print_first_frames(first_frames(args))
     for master in args.masters.split(","):
         for load in args.loads.split(","):
             results.append(one_run(args, master, load == "hog", folder))
