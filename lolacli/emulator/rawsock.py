@@ -55,6 +55,7 @@ SCM_TIMESTAMPNS = SO_TIMESTAMPNS
 _TIMESPEC = struct.Struct("qq")
 YIELD_CHECK_NS = 20_000  # deferred device work looks for a waiting frame this often
 GC_EVERY_FRAMES = 4096  # a young-generation collection in an idle moment after this many
+WARM_EVERY_MS = 10  # a quiet server runs its keep-warm work this often
 
 
 class LatencyHistogram:
@@ -128,7 +129,9 @@ class RawSocketServer:
     keeps normal scheduling where that is not permitted; 0 keeps normal scheduling; 1..99
     asks for that priority and fails (TransportError) where it is not permitted.
     ``keep_cpus_awake``: hold the CPUs' wake-up latency at 0 while serving where permitted
-    (root); False leaves the CPUs' idle states alone."""
+    (root); False leaves the CPUs' idle states alone. ``keep_warm``: called every
+    :data:`WARM_EVERY_MS` while no frame comes (work that keeps the answer path's code and
+    data in the caches; it must not touch the chain served)."""
 
     def __init__(
         self,
@@ -138,8 +141,10 @@ class RawSocketServer:
         grace_s: float = DEFAULT_GRACE_S,
         realtime_priority: int | None = None,
         keep_cpus_awake: bool = True,
+        keep_warm: Callable[[], None] | None = None,
     ) -> None:
         self.iface = iface
+        self.keep_warm = keep_warm
         self.keep_cpus_awake = keep_cpus_awake
         self._latency_hold: int | None = None
         self.chain = chain
@@ -215,7 +220,9 @@ class RawSocketServer:
 
     def _serve_one(self, sock: socket.socket) -> None:
         if self._next is None and not self._poll(sock):
-            if not self._poller.poll(self._poll_ms):
+            if not self._poller.poll(WARM_EVERY_MS if self.keep_warm else self._poll_ms):
+                if self.keep_warm is not None:
+                    self.keep_warm()
                 self.chain.run_deferred_cycles()  # nothing may wait while the master is silent
                 self.chain.tick(time.monotonic_ns())  # watchdogs run while it is silent
                 gc.collect()

@@ -4,16 +4,19 @@ the CPUs held awake while it serves."""
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import pytest
 
 from lolacli.emulator.rawsock import (
     CPU_DMA_LATENCY,
+    WARM_EVERY_MS,
     RawSocketServer,
     _realtime,
     cpu_latency_limit_us,
 )
+from lolacli.emulator.run import keep_warm_with
 from lolacli.emulator.slave import build_chain
 from lolacli.errors import TransportError
 from lolacli.files import load_eni
@@ -51,3 +54,24 @@ def test_the_server_holds_the_cpus_awake_while_it_serves_and_lets_go_after() -> 
     with RawSocketServer("lo", chain, realtime_priority=0, keep_cpus_awake=False) as server:
         assert cpu_latency_limit_us() == before
         assert server.scheduling == "normal"
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="raw sockets need root")
+def test_a_quiet_server_keeps_warm_on_a_chain_of_its_own() -> None:
+    """While no frame comes, the server runs the keep-warm work every WARM_EVERY_MS: frames
+    through the scratch chain, never through the chain it serves."""
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain, scratch = build_chain(eni), build_chain(eni)
+    warm = keep_warm_with(scratch)
+    calls: list[int] = []
+
+    def counted() -> None:
+        calls.append(1)
+        warm()
+
+    deadline = time.monotonic() + 0.1
+    with RawSocketServer("lo", chain, realtime_priority=0, keep_warm=counted) as server:
+        server.serve(lambda: time.monotonic() >= deadline)
+    assert 100 // WARM_EVERY_MS // 2 <= len(calls) <= 100 // WARM_EVERY_MS + 1
+    assert scratch.stats.frames == 3 * len(calls)
+    assert chain.stats.frames == 0
