@@ -20,7 +20,9 @@ core only while it answers. While it serves it also holds the CPUs' wake-up late
 (Linux PM QoS, ``/dev/cpu_dma_latency``, as cyclictest does): an idle core then polls
 instead of halting, so a frame that arrives after a quiet spell (a start-up's first
 frame, a master cycling every 5 ms) does not wait for the core to wake; the hold ends with
-the server. :attr:`RawSocketServer.scheduling` says which it got. The
+the server; and while no frame comes it runs its keep-warm work (a few frames through a
+chain of its own) every :data:`WARM_EVERY_MS`, so the first frame after a quiet spell finds
+the answer path in the caches. :attr:`RawSocketServer.scheduling` says which it got. The
 collector is off while serving (the chain makes little cyclic garbage); young objects are
 collected in idle moments.
 
