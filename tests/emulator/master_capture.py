@@ -13,6 +13,7 @@ tell a master's time-out from a late answer (:meth:`CaptureReport.late_in`).
 from __future__ import annotations
 
 import itertools
+import os
 import re
 import shutil
 import subprocess
@@ -169,8 +170,21 @@ class MasterCapture:
         return CaptureReport(read_exchanges(self.path))
 
     def close(self) -> None:
-        """dumpcap stopped (when the block was left early) and the capture removed."""
+        """dumpcap stopped (when the block was left early) and the capture removed; kept
+        first, with dumpcap's counts, in ``$LOLACLI_KEEP_CAPTURES`` where that is set (a
+        loop of runs keeps them to look into a failed verdict afterwards)."""
         self.__exit__()
+        keep = os.environ.get("LOLACLI_KEEP_CAPTURES")
+        if keep and self.path.exists():
+            test = os.environ.get("PYTEST_CURRENT_TEST", "capture").split(" ")[0]
+            stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", test.split("::")[-1])
+            folder = Path(keep)
+            folder.mkdir(parents=True, exist_ok=True)
+            stamp = time.strftime("%H%M%S")
+            shutil.copy(self.path, folder / f"{stem}-{stamp}.pcapng")
+            log = Path(self._folder.name) / "dumpcap.log"
+            if log.exists():
+                shutil.copy(log, folder / f"{stem}-{stamp}.dumpcap.log")
         self._folder.cleanup()
 
 
