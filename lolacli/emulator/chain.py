@@ -33,7 +33,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lolacli.emulator.core import ChainCore, core_available
-from lolacli.emulator.esc import Esc, PortTimes, broadcast_read, broadcast_write
+from lolacli.emulator.esc import (
+    Esc,
+    PortTimes,
+    broadcast_of_registers,
+    broadcast_read,
+    broadcast_write,
+)
 from lolacli.emulator.plan import (
     NOT_COMPILED,
     PLANNABLE,
@@ -503,7 +509,8 @@ class Chain:
                             processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
                         )
             else:
-                if core is not None:
+                held = core is not None and broadcast_of_registers(cmd, ado, slot.length)
+                if core is not None and not held:
                     core.release()  # broadcast, logical, xRMW: every slave takes part
                 if (
                     cmd == _BRD
@@ -526,6 +533,8 @@ class Chain:
                         adp, wkc = esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)
                         added += wkc
                     slot.adp = adp
+                if held:  # registers only: the core keeps the slaves, with their new time
+                    core.note_times(reached)  # type: ignore[union-attr]
             data.release()
             _U16.pack_into(buf, slot.header + 2, slot.adp)
             if added:

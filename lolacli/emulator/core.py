@@ -268,6 +268,15 @@ class ChainCore:
                 self._store_esc(i)
                 self.released.add(i)
 
+    def note_times(self, n: int) -> None:
+        """The first ``n`` slaves took a datagram in Python that changed nothing the
+        tables hold but the time it reached them (``Esc.now_ns``): that time into the
+        tables of those the kernel holds."""
+        w, escs, released = self._words, self.escs, self.released
+        for i in range(min(n, len(escs))):
+            if i not in released:
+                w[i * WORDS + F_NOW] = escs[i].now_ns
+
     def release_device(self, i: int) -> None:
         """Give the device at 0-based position ``i`` its state back (before Python uses it)."""
         if i not in self.devices_released:

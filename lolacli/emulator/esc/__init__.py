@@ -22,7 +22,12 @@ the application cycle
 
 from __future__ import annotations
 
-from lolacli.emulator.esc.controller import Esc, broadcast_read, broadcast_write
+from lolacli.emulator.esc.controller import (
+    Esc,
+    broadcast_of_registers,
+    broadcast_read,
+    broadcast_write,
+)
 from lolacli.emulator.esc.counters import EscCounters
 from lolacli.emulator.esc.dc import MAX_CORRECTION_NS, DcClock, PortTimes, system_time_loop
 from lolacli.emulator.esc.fmmu import byte_aligned
@@ -40,6 +45,7 @@ __all__ = [
     "EscCounters",
     "PortTimes",
     "SmView",
+    "broadcast_of_registers",
     "broadcast_read",
     "broadcast_write",
     "byte_aligned",

@@ -48,6 +48,7 @@ _ACCESS: dict[int, int] = {
     **{int(c): _READ_MULTIPLE_WRITE for c in READ_MULTIPLE_WRITES},
 }
 _ARMW, _FRMW, _BRD, _BRW = int(Command.ARMW), int(Command.FRMW), int(Command.BRD), int(Command.BRW)
+_BWR = int(Command.BWR)
 _SYSTEM_TIME = r.DC_SYSTEM_TIME
 _SYSTEM_TIME_END = r.DC_SYSTEM_TIME + 8
 _PROCESS_RAM = r.PROCESS_RAM
@@ -273,6 +274,22 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             self._store(inputs_start, inputs)
 
 
+def broadcast_of_registers(cmd: int, ado: int, length: int) -> bool:
+    """Whether :func:`broadcast_read` or :func:`broadcast_write` takes this BRD/BWR and it
+    changes nothing of a slave but memory, the firmware's work and the time the frame
+    reached it: a BRD of registers other than the DC system time, a BWR of registers whose
+    write is :attr:`~lolacli.emulator.esc.memory.RegisterWrite.memory_only` (an AL control
+    request to every slave, as a master's start and end of a session)."""
+    end = ado + length
+    if cmd == _BRD:
+        return _registers_to_or(ado, end)
+    return cmd == _BWR and end <= _PROCESS_RAM and register_write(ado, end).memory_only
+
+
+def _registers_to_or(ado: int, end: int) -> bool:
+    return end <= _PROCESS_RAM and not (ado < _SYSTEM_TIME_END and _SYSTEM_TIME < end)
+
+
 def broadcast_read(
     escs: list[Esc], ports: list[PortTimes], ado: int, data: memoryview, t_ns: int
 ) -> int | None:
@@ -281,7 +298,7 @@ def broadcast_read(
     increment, as :meth:`Esc.process` would give slave by slave. ``None`` for any other
     range (process RAM and the system time have side effects: :meth:`Esc.process` then)."""
     end = ado + len(data)
-    if end > _PROCESS_RAM or (ado < _SYSTEM_TIME_END and _SYSTEM_TIME < end):
+    if not _registers_to_or(ado, end):
         return None
     merged = int.from_bytes(data, "little")
     for esc, port in zip(escs, ports, strict=False):

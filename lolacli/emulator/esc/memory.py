@@ -191,6 +191,13 @@ class RegisterWrite:
     span: int = 0
     keep: int = 0
 
+    @property
+    def memory_only(self) -> bool:
+        """Whether the write leaves the ESC's clock, watchdog and decoded FMMU/SM
+        configuration alone: it changes memory, and what the firmware does with it (an AL
+        control request, an EEPROM command, the mailbox) runs as firmware work."""
+        return not (self.configuration or self.watchdog or self.latch or self.system_time)
+
     def store(self, mem: bytearray, start: int, payload: bytes) -> None:
         """``payload`` into ``mem`` at ``start``, the read-only bytes keeping their value:
         in one step, masked where read-only bytes lie between writable ones (a BWR of 16
