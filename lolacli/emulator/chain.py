@@ -177,6 +177,7 @@ class ChainStats:
 
 _READS_ONLY = frozenset({Command.APRD, Command.FPRD, Command.BRD})
 _APRD, _FPRD, _BRD, _BWR = int(Command.APRD), int(Command.FPRD), int(Command.BRD), int(Command.BWR)
+_APWR, _FPWR = int(Command.APWR), int(Command.FPWR)
 _PLANNABLE = frozenset(int(c) for c in PLANNABLE)
 _AUTO_INCREMENT_SINGLE = frozenset({Command.APRD, Command.APWR, Command.APRW})
 _CONFIGURED_SINGLE = frozenset({Command.FPRD, Command.FPWR, Command.FPRW})
@@ -490,6 +491,10 @@ class Chain:
                         esc = processing[position]
                         t = t_ns + offsets[position].port0_ns
                         added = esc.read_addressed(cmd, 0, ado, data, t)
+                    elif cmd == _APWR:
+                        added = self._write_one(
+                            processing[position], offsets[position], cmd, 0, ado, data, t_ns
+                        )
                     else:
                         added = self._one(
                             processing[position], offsets[position], cmd, 0, ado, data, t_ns
@@ -504,6 +509,10 @@ class Chain:
                         esc = processing[position]
                         t = t_ns + offsets[position].port0_ns
                         added = esc.read_addressed(cmd, slot.adp, ado, data, t)
+                    elif cmd == _FPWR:
+                        added = self._write_one(
+                            processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
+                        )
                     else:
                         added = self._one(
                             processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
@@ -550,6 +559,14 @@ class Chain:
         esc.frame_t_ns = t_ns
         esc.port_offsets = port
         return esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)[1]
+
+    @staticmethod
+    def _write_one(
+        esc: Esc, port: PortTimes, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
+    ) -> int:
+        esc.frame_t_ns = t_ns
+        esc.port_offsets = port
+        return esc.write_addressed(cmd, adp, ado, data, t_ns + port.port0_ns)
 
     def _station_position(self, address: int) -> int:
         """The first position answering configured ``address`` (station address or
