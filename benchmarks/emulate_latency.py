@@ -94,25 +94,37 @@ def run_pysoem(iface: str, cycles: int) -> dict[str, object]:
         master.close()
 
 
+KICKCAT_STARTS = 3
+
+
 def run_kickcat(iface: str, cycles: int) -> dict[str, object]:
+    """KickCAT's start-up (tried again when it raises: its 2 ms link timeout meets this
+    VM's occasional 4-5 ms stalls, and its own 20 µs sleep-poll overruns; the capture has
+    the failed tries' frames too) and ``cycles`` cycles with its examples' 500 µs."""
     import kickcat
 
-    link = kickcat.create_link(iface, "")  # default link timeout: 2 ms
-    bus = kickcat.Bus(link)
-    t0 = time.perf_counter()
-    try:
-        bus.init(0.1)
-        slaves = bus.slaves()
-        bus.create_mapping()
-        bus.request_state(kickcat.State.SAFE_OP)
-        bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
-        for s in slaves:
-            s.set_output_bytes(bytes(s.output_size))
-        bus.process_data_no_check()
-        bus.request_state(kickcat.State.OPERATIONAL)
-        bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, lambda: bus.process_data_no_check())
-    except RuntimeError as exc:
-        return {"error": f"start-up: {exc}"}
+    failed: list[str] = []
+    for _ in range(KICKCAT_STARTS):
+        link = kickcat.create_link(iface, "")  # default link timeout: 2 ms
+        bus = kickcat.Bus(link)
+        t0 = time.perf_counter()
+        try:
+            bus.init(0.1)
+            slaves = bus.slaves()
+            bus.create_mapping()
+            bus.request_state(kickcat.State.SAFE_OP)
+            bus.wait_for_state(kickcat.State.SAFE_OP, 5.0)
+            for s in slaves:
+                s.set_output_bytes(bytes(s.output_size))
+            bus.process_data_no_check()
+            bus.request_state(kickcat.State.OPERATIONAL)
+            bus.wait_for_state(kickcat.State.OPERATIONAL, 5.0, bus.process_data_no_check)
+        except RuntimeError as exc:
+            failed.append(str(exc))
+            continue
+        break
+    else:
+        return {"error": f"start-up: {failed}", "failed_startups": failed}
     startup_s = time.perf_counter() - t0
     link.set_timeout(0.0005)  # as KickCAT's examples in their cyclic loops
     errors = 0
@@ -126,7 +138,12 @@ def run_kickcat(iface: str, cycles: int) -> dict[str, object]:
         delay = next_t - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
-    return {"slaves": len(slaves), "startup_s": startup_s, "errors": errors}
+    return {
+        "slaves": len(slaves),
+        "startup_s": startup_s,
+        "errors": errors,
+        "failed_startups": failed,
+    }
 
 
 MASTERS = {"pysoem": run_pysoem, "kickcat": run_kickcat}
@@ -321,7 +338,9 @@ def host_baseline(seconds: float, hog: bool) -> dict[str, float]:
 
 def print_table(result: dict[str, object]) -> None:
     load = "CPU hog on core 1" if result["hog"] else "other core idle"
-    print(f"\n== {result['master']}, {load}: start-up {result.get('startup_s', 0):.2f} s, "
+    failed = result.get("failed_startups") or []
+    tries = f" (after {len(failed)} failed: {'; '.join(failed)})" if failed else ""
+    print(f"\n== {result['master']}, {load}: start-up {result.get('startup_s', 0):.2f} s{tries}, "
           f"master errors {result.get('errors', result.get('error'))}, "
           f"unanswered {result['unanswered']}, capture analyze: {result['pairs']} pairs, "
           f"{result['lost_frames']} lost ({result['direction_rule']} direction)")  # fmt: skip
