@@ -5,11 +5,9 @@ whether the master's process was running when they did. KickCAT, for one, polls 
 socket with a 20 µs sleep and gives up when a sleep ends past its deadline, without a last
 look at the socket; on a loaded host such a sleep can last milliseconds while the answer
 waits in the socket buffer. :class:`MasterCapture` records the master's side with dumpcap
-(kernel timestamps, CLOCK_REALTIME; Linux cooked v2, so the kernel's packet type tells each
-frame's direction, which a master's MAC may not) so a test can judge the emulator strictly
-on its own (every frame answered once, each within the master's deadline, the latency
-percentiles) and tell a master's time-out from a late answer
-(:meth:`CaptureReport.late_in`).
+(kernel timestamps, CLOCK_REALTIME) so a test can judge the emulator strictly on its own
+(every frame answered, each within the master's deadline, the latency percentiles) and
+tell a master's time-out from a late answer (:meth:`CaptureReport.late_in`).
 """
 
 from __future__ import annotations
@@ -18,17 +16,11 @@ import itertools
 import os
 import re
 import shutil
-import struct
 import subprocess
 import tempfile
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
-
-ETHERTYPE_ECAT = 0x88A4  # lolacli.wire.frame's, without importing lolacli here
-_SLL2_IFINDEX = struct.Struct(">I")  # Linux cooked v2: the interface index at byte 4
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,9 +37,6 @@ class Exchange:
 @dataclass(slots=True)
 class CaptureReport:
     exchanges: list[Exchange] = field(default_factory=list)
-    #: answers (frames that came back to the master) with no request of theirs pending:
-    #: kernel timestamps. Told only in a capture whose link layer gives the direction.
-    orphans: list[int] = field(default_factory=list)
 
     def between(self, start_ns: int, end_ns: int) -> list[Exchange]:
         return [e for e in self.exchanges if start_ns <= e.sent_ns <= end_ns]
@@ -88,37 +77,33 @@ class CaptureReport:
         return "; ".join(parts)
 
 
-def read_exchanges(path: Path, ifindex: int | None = None) -> list[Exchange]:
-    """The request/answer pairs of a master-side capture (:func:`read_capture`)."""
-    return read_capture(path, ifindex).exchanges
-
-
-def read_capture(path: Path, ifindex: int | None = None) -> CaptureReport:
-    """Request/answer pairs of a master-side capture.
-
-    Linux cooked v2 (what :class:`MasterCapture` records): the kernel's packet type tells
-    a frame the master sent from one that came back, and ``ifindex`` keeps the master's
-    interface. A frame that comes back answers the oldest pending one with the same
-    command/index/length sequence; a frame sent again while its first copy waits is a
-    copy of its own (a master that re-sends, as SOEM after its time-out, gets the late
-    answer paired with the first); an answer with nothing pending is an orphan.
-
-    Ethernet: the direction is guessed. The answer to a pending frame is the next one
-    with the same command/index/length sequence whose source MAC's local bit, a working
-    counter or an ADP differs (a master whose own MAC has the local bit set, as
-    KickCAT's, is told by the WKC/ADP an ESC changes); an identical frame is the master
-    sending again, the first copy unanswered."""
-    from lolacli.capture.reader import (
-        LINKTYPE_ETHERNET,
-        LINKTYPE_LINUX_SLL2,
-        iter_frames,
-        link_header,
-    )
+def read_exchanges(path: Path) -> list[Exchange]:
+    """Request/answer pairs of a master-side capture. The answer to a pending frame is the
+    next one with the same command/index/length sequence whose source MAC's local bit,
+    a working counter or an ADP differs (a master whose own MAC has the local bit set,
+    as KickCAT's, is told by the WKC/ADP an ESC changes); an identical frame is the
+    master sending again, the first copy unanswered."""
+    from lolacli.capture.reader import iter_frames
     from lolacli.errors import WireError
     from lolacli.wire.commands import Command
-    from lolacli.wire.frame import decode_ecat_payload
+    from lolacli.wire.frame import decode_frame
 
-    def kind_of(datagrams: tuple[Any, ...]) -> str:
+    pending: dict[tuple[tuple[int, int, int], ...], tuple[int, bytes, tuple[int, ...], str]] = {}
+    out: list[Exchange] = []
+    for frame in iter_frames(path):
+        try:
+            datagrams = decode_frame(frame.data).datagrams
+        except WireError:
+            continue
+        key = tuple((d.cmd, d.index, len(d.data)) for d in datagrams)
+        fields = tuple(v for d in datagrams for v in (d.wkc, d.adp))
+        first = pending.get(key)
+        if first is not None:
+            if (frame.data[6] ^ first[1][6]) & 0x02 or fields != first[2]:
+                del pending[key]
+                out.append(Exchange(first[0], frame.timestamp_ns, first[3]))
+                continue
+            out.append(Exchange(first[0], None, first[3]))  # sent again
         names: list[str] = []
         for d in datagrams:
             try:
@@ -127,49 +112,10 @@ def read_capture(path: Path, ifindex: int | None = None) -> CaptureReport:
                 name = f"0x{d.cmd:02X}"
             if name not in names:
                 names.append(name)
-        return "+".join(sorted(names))
-
-    guessed: dict[tuple[tuple[int, int, int], ...], tuple[int, bytes, tuple[int, ...], str]] = {}
-    waiting: dict[tuple[tuple[int, int, int], ...], deque[tuple[int, str]]] = {}
-    report = CaptureReport()
-    out = report.exchanges
-    for frame in iter_frames(path):
-        if frame.link_type not in (LINKTYPE_ETHERNET, LINKTYPE_LINUX_SLL2):
-            continue
-        try:
-            link = link_header(frame)
-            if link.ethertype != ETHERTYPE_ECAT:
-                continue
-            datagrams = decode_ecat_payload(frame.data, link.payload)[2]
-        except (ValueError, WireError):
-            continue
-        key = tuple((d.cmd, d.index, len(d.data)) for d in datagrams)
-        if frame.link_type == LINKTYPE_LINUX_SLL2:
-            if ifindex is not None and _SLL2_IFINDEX.unpack_from(frame.data, 4)[0] != ifindex:
-                continue
-            if link.returned:
-                queue = waiting.get(key)
-                if not queue:
-                    report.orphans.append(frame.timestamp_ns)
-                    continue
-                sent_ns, kind = queue.popleft()
-                out.append(Exchange(sent_ns, frame.timestamp_ns, kind))
-            else:
-                waiting.setdefault(key, deque()).append((frame.timestamp_ns, kind_of(datagrams)))
-            continue
-        fields = tuple(v for d in datagrams for v in (d.wkc, d.adp))
-        first = guessed.get(key)
-        if first is not None:
-            if (frame.data[6] ^ first[1][6]) & 0x02 or fields != first[2]:
-                del guessed[key]
-                out.append(Exchange(first[0], frame.timestamp_ns, first[3]))
-                continue
-            out.append(Exchange(first[0], None, first[3]))  # sent again
-        guessed[key] = (frame.timestamp_ns, frame.data[:12], fields, kind_of(datagrams))
-    out += [Exchange(t, None, kind) for t, _mac, _fields, kind in guessed.values()]
-    out += [Exchange(t, None, kind) for queue in waiting.values() for t, kind in queue]
+        pending[key] = (frame.timestamp_ns, frame.data[:12], fields, "+".join(sorted(names)))
+    out += [Exchange(t, None, kind) for t, _mac, _fields, kind in pending.values()]
     out.sort(key=lambda e: e.sent_ns)
-    return report
+    return out
 
 
 class MasterCapture:
@@ -184,7 +130,6 @@ class MasterCapture:
         self._proc: subprocess.Popen[bytes] | None = None
         #: packets the capture itself lost (dumpcap's count at the end; None: not told)
         self.dropped: int | None = None
-        self.ifindex: int | None = None  # the master's interface (known once capturing)
 
     def __enter__(self) -> MasterCapture:
         if not self.available:
@@ -192,14 +137,8 @@ class MasterCapture:
         # counts at the end go to a file (-q would hide the drops; a pipe could fill);
         # a 32 MiB kernel buffer so a starved dumpcap loses nothing
         self._log = open(Path(self._folder.name) / "dumpcap.log", "wb")  # noqa: SIM115
-        # Linux cooked v2 on "any": the kernel's packet type gives each frame's direction
-        # (a master's MAC may have the local bit set, as KickCAT's); the filter keeps the
-        # master's interface (its peer may be in this namespace too)
-        self.ifindex = int(Path(f"/sys/class/net/{self.iface}/ifindex").read_text())
-        only = f"ifindex {self.ifindex} and ether proto 0x{ETHERTYPE_ECAT:04x}"
         self._proc = subprocess.Popen(
-            ["dumpcap", "-B", "32", "-i", "any", "-y", "LINUX_SLL2", "-f", only]
-            + ["-w", str(self.path)],
+            ["dumpcap", "-B", "32", "-i", self.iface, "-w", str(self.path)],
             stdout=subprocess.DEVNULL,
             stderr=self._log,
         )
@@ -228,7 +167,7 @@ class MasterCapture:
     def report(self) -> CaptureReport:
         if not self.available or not self.path.exists():
             return CaptureReport()
-        return read_capture(self.path, self.ifindex)
+        return CaptureReport(read_exchanges(self.path))
 
     def close(self) -> None:
         """dumpcap stopped (when the block was left early) and the capture removed; kept

@@ -437,9 +437,8 @@ def _judge(
     asserted here: on these 2-core VMs an idle vCPU takes 100-200 µs to wake (CI saw a
     185 µs median for SOEM's 5 ms cycle), which no emulator code can change.
 
-    From the capture of the master's side (kernel timestamps, the kernel's word on each
-    frame's direction): every frame the emulator received answered, and no answer to
-    nothing (a frame answered twice); per phase ((start, end, the master's deadline, cyclic)) the
+    From the capture of the master's side (kernel timestamps): every frame the emulator
+    received answered; per phase ((start, end, the master's deadline, cyclic)) the
     answers past the master's deadline at most LATE_SHARE of the phase's exchanges (5 at
     least: on this PREEMPT_NONE VM under load even a SCHED_FIFO C sleeper wakes up to
     ~5 ms late now and then, and the kernel leaves the veth's packets to a ksoftirqd
@@ -479,8 +478,6 @@ def _judge(
             sys.stderr.write(f"{len(missing)} frames never reached the emulator: not judged\n")
         else:
             assert missing == [], (missing[:3], emulator)
-        # the capture gives each frame's direction: nothing comes back but answers, once
-        assert report.orphans == [], (len(report.orphans), report.orphans[:3], emulator)
     else:
         sys.stderr.write(f"dumpcap dropped {capture.dropped} packets: answers not judged\n")
     figures, late = [], []
