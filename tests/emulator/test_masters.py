@@ -58,6 +58,36 @@ def veth() -> Iterator[tuple[str, str]]:
         subprocess.run(["ip", "link", "del", master], capture_output=True, check=False)
 
 
+def test_the_capture_holds_every_frame_up_to_its_end(veth) -> None:
+    """What the master's side carried until the capture ends is all in the file, the
+    last frames and their answers too (dumpcap stopped at once kept 256-342 of 600)."""
+    import socket
+
+    from lolacli.capture.reader import iter_frames
+
+    capture = MasterCapture(veth[0])
+    if not capture.available:
+        pytest.skip("dumpcap not installed")
+    sent = 0
+    try:
+        with capture:
+            ends = [socket.socket(socket.AF_PACKET, socket.SOCK_RAW) for _ in veth]
+            for sock, name in zip(ends, veth, strict=True):
+                sock.bind((name, 0))
+            for i in range(300):  # a request from the master's end, its answer from the other
+                for sock, mac in zip(ends, ("020000000001", "020000000002"), strict=True):
+                    head = bytes.fromhex("ffffffffffff" + mac + "88a4")
+                    sock.send(head + i.to_bytes(4, "big") + bytes(42))
+                    sent += 1
+            for sock in ends:
+                sock.close()
+        got = [f for f in iter_frames(capture.path) if f.data[12:14] == b"\x88\xa4"]
+        assert capture.dropped == 0
+        assert len(got) == sent == 600
+    finally:
+        capture.close()
+
+
 def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[bytes]:
     return spawn_emulator(emulate_argv(iface, eni, *extra))
 
