@@ -173,13 +173,18 @@ class MasterCapture:
         and seen in the file. dumpcap stopped soon after the traffic loses what the kernel
         has not handed it yet (600 frames on a veth: none kept when stopped at once,
         256-342 when 300 frames came over 300 ms and it stopped 0-20 ms after the last);
-        the fixed 0.2 s wait this replaces lost the answer to KickCAT's last frame in one
-        of 47 whole-file runs."""
+        the fixed 0.2 s wait this replaces lost the answer to KickCAT's last frame in a
+        loop run of the whole file. Where the marker cannot be sent (the interface gone),
+        the fixed wait again."""
         marker = os.urandom(16)
         frame = b"\xff" * 6 + b"\x02\x00\x00\x00\x00\x01" + MARKER_ETHERTYPE + marker
-        with socket.socket(socket.AF_PACKET, socket.SOCK_RAW) as sock:
-            sock.bind((self.iface, 0))
-            sock.send(frame.ljust(60, b"\0"))
+        try:
+            with socket.socket(socket.AF_PACKET, socket.SOCK_RAW) as sock:
+                sock.bind((self.iface, 0))
+                sock.send(frame.ljust(60, b"\0"))
+        except OSError:
+            time.sleep(0.2)
+            return
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and self._proc is not None:
             time.sleep(0.05)
