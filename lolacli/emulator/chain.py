@@ -491,10 +491,6 @@ class Chain:
                         esc = processing[position]
                         t = t_ns + offsets[position].port0_ns
                         added = esc.read_addressed(cmd, 0, ado, data, t)
-                    elif cmd == _APWR:
-                        added = self._write_one(
-                            processing[position], offsets[position], cmd, 0, ado, data, t_ns
-                        )
                     else:
                         added = self._one(
                             processing[position], offsets[position], cmd, 0, ado, data, t_ns
@@ -509,10 +505,6 @@ class Chain:
                         esc = processing[position]
                         t = t_ns + offsets[position].port0_ns
                         added = esc.read_addressed(cmd, slot.adp, ado, data, t)
-                    elif cmd == _FPWR:
-                        added = self._write_one(
-                            processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
-                        )
                     else:
                         added = self._one(
                             processing[position], offsets[position], cmd, slot.adp, ado, data, t_ns
@@ -558,15 +550,9 @@ class Chain:
     ) -> int:
         esc.frame_t_ns = t_ns
         esc.port_offsets = port
+        if cmd == _APWR or cmd == _FPWR:  # registers stored straight, no dispatch
+            return esc.write_addressed(cmd, adp, ado, data, t_ns + port.port0_ns)
         return esc.process(cmd, adp, ado, data, t_ns + port.port0_ns)[1]
-
-    @staticmethod
-    def _write_one(
-        esc: Esc, port: PortTimes, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int
-    ) -> int:
-        esc.frame_t_ns = t_ns
-        esc.port_offsets = port
-        return esc.write_addressed(cmd, adp, ado, data, t_ns + port.port0_ns)
 
     def _station_position(self, address: int) -> int:
         """The first position answering configured ``address`` (station address or
