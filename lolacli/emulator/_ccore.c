@@ -33,7 +33,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 4
+#define ABI_VERSION 5
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -522,6 +522,157 @@ void lolacli_core_finish(plan_t *p) {
     }
 }
 
+/* ------------------------------------------------------------------ register frames */
+
+/* A frame whose every datagram is an APRD/FPRD/APWR/FPWR of registers that stores bytes
+ * and nothing the Python objects hold (Esc.read_addressed / Esc.write_addressed through
+ * Chain._run_slots): answered in r->buf. The classes are register_classes() of
+ * lolacli/emulator/esc/memory.py, one per register byte. */
+enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8 };
+enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5 };
+#define REGISTER_BYTES 0x1000
+#define STATION_ADDRESS 0x0010
+#define STATION_ALIAS 0x0012
+#define ALIAS_ENABLE_BYTE 0x0103
+#define SM_REGISTERS 0x0800
+#define SM_BYTES 8
+#define SM_REGISTERS_END (SM_REGISTERS + 16 * SM_BYTES)
+#define SM_STATUS_MAILBOX_FULL 0x08
+#define SM_ACTIVATE_ENABLE 0x01
+#define DC_SYSTEM_TIME 0x0910
+#define MAX_REGISTER_DATAGRAMS 128
+#define LINE_WORDS 4 /* port 0 offset, mailbox out SM, mailbox in SM, sync managers */
+/* out: [touched, MAX_REGISTER_DATAGRAMS entries (position << 2 | T_*), datagrams, lengths] */
+#define OUT_WORDS (2 + 2 * MAX_REGISTER_DATAGRAMS)
+enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
+
+typedef struct {
+    slave_t *slaves; i64 n_slaves;
+    i64 n_active;                  /* the first n_active slaves are the ones frames reach */
+    const i64 *line; i64 line_len; /* LINE_WORDS per active slave */
+    const uint8_t *classes; i64 classes_len;
+    uint8_t *buf; i64 buf_len;     /* the answer */
+    i64 *out; i64 out_len;
+} regs_t;
+
+/* Chain._station_position: the first active slave answering a configured address */
+static i64 station_position(const regs_t *r, i64 adp) {
+    for (i64 i = 0; i < r->n_active; i++) {
+        const uint8_t *m = r->slaves[i].mem;
+        if ((m[STATION_ADDRESS] | m[STATION_ADDRESS + 1] << 8) == adp) return i;
+        if ((m[ALIAS_ENABLE_BYTE] & 1) && (m[STATION_ALIAS] | m[STATION_ALIAS + 1] << 8) == adp)
+            return i;
+    }
+    return r->n_active;
+}
+
+/* SyncManagers._sm_registers_written's range of sync managers for a write [lo, hi) */
+static void sm_range(i64 lo, i64 hi, i64 n_sm, i64 *first, i64 *last) {
+    *first = lo < SM_REGISTERS ? 0 : (lo - SM_REGISTERS) / SM_BYTES;
+    *last = (hi - 1 - SM_REGISTERS) / SM_BYTES + 1;
+    if (*last > n_sm) *last = n_sm;
+}
+
+/* The number of register writes, or -1 (nothing changed) for a frame this path does not
+ * take: not an untagged command frame as Chain's _slots reads it, a datagram of another
+ * command, of no data, beyond the registers, reading the DC system time, or writing where
+ * the write sets off more than the store and the SM/FMMU configuration (a mailbox SM's
+ * registers included), or more than MAX_REGISTER_DATAGRAMS datagrams. */
+i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
+    if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
+    i64 word = frame[14] | frame[15] << 8;
+    i64 end = 16 + (word & 0x7FF);
+    if (word >> 12 != 1 || end > n) return -1;
+    i64 at[MAX_REGISTER_DATAGRAMS], where[MAX_REGISTER_DATAGRAMS];
+    i64 count = 0, pos = 16;
+    const uint8_t *cls = r->classes;
+    for (;;) { /* pass 1: the frame is this path's, nothing written */
+        if (pos + 10 > end || count == MAX_REGISTER_DATAGRAMS) return -1;
+        const uint8_t *h = frame + pos;
+        i64 cmd = h[0], adp = h[2] | h[3] << 8, ado = h[4] | h[5] << 8;
+        i64 lenw = h[6] | h[7] << 8, length = lenw & 0x7FF;
+        if (pos + 10 + length + 2 > end) return -1;
+        if (length == 0 || ado + length > REGISTER_BYTES) return -1;
+        i64 p;
+        if (cmd == CMD_APRD || cmd == CMD_APWR) p = (-adp) & 0xFFFF;
+        else if (cmd == CMD_FPRD || cmd == CMD_FPWR) p = station_position(r, adp);
+        else return -1;
+        if (p > r->n_active) p = r->n_active;
+        if (cmd == CMD_APRD || cmd == CMD_FPRD) {
+            if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < ado + length) return -1;
+        } else {
+            int any = 0;
+            for (i64 a = ado; a < ado + length; a++) any |= cls[a];
+            if (any & R_PYTHON) return -1;
+            if ((any & R_SYNC_MANAGER) && p < r->n_active) {
+                const i64 *row = r->line + p * LINE_WORDS;
+                i64 first, last;
+                sm_range(ado, ado + length, row[3], &first, &last);
+                for (i64 i = first; i < last; i++)
+                    if (i == row[1] || i == row[2]) return -1; /* the mailbox's own work */
+            }
+        }
+        at[count] = pos;
+        where[count++] = p;
+        pos += 10 + length + 2;
+        if (!(lenw & 0x8000)) break;
+    }
+    uint8_t *buf = r->buf;
+    i64 *out = r->out;
+    memcpy(buf, frame, (size_t)n);
+    i64 touched = 0, writes = 0;
+    i64 *lengths = out + 2 + MAX_REGISTER_DATAGRAMS;
+    out[1 + MAX_REGISTER_DATAGRAMS] = count;
+    for (i64 k = 0; k < count; k++) { /* pass 2: datagram by datagram, as the chain does */
+        uint8_t *h = buf + at[k];
+        i64 cmd = h[0], adp = h[2] | h[3] << 8, ado = h[4] | h[5] << 8;
+        i64 length = (h[6] | h[7] << 8) & 0x7FF, p = where[k];
+        uint8_t *data = h + 10;
+        lengths[k] = length;
+        if (p < r->n_active) {
+            slave_t *s = &r->slaves[p];
+            const i64 *row = r->line + p * LINE_WORDS;
+            i64 flags = s->owned ? 0 : T_RELEASED;
+            s->datagrams += 1;
+            s->now_ns = t + row[0];
+            if (cmd == CMD_APRD || cmd == CMD_FPRD) {
+                memcpy(data, s->mem + ado, (size_t)length);
+            } else {
+                int any = 0;
+                for (i64 b = 0; b < length; b++) {
+                    uint8_t c = cls[ado + b];
+                    if (!(c & R_READONLY)) s->mem[ado + b] = data[b];
+                    any |= c;
+                }
+                if (any & R_CONFIGURATION) flags |= T_CONFIGURATION;
+                if (any & R_SYNC_MANAGER) {
+                    i64 first, last;
+                    sm_range(ado, ado + length, row[3], &first, &last);
+                    for (i64 i = first; i < last; i++) {
+                        uint8_t *sm = s->mem + SM_REGISTERS + SM_BYTES * i;
+                        if (!(sm[6] & SM_ACTIVATE_ENABLE)) sm[5] &= (uint8_t)~SM_STATUS_MAILBOX_FULL;
+                    }
+                }
+                writes++;
+            }
+            i64 e = 0;
+            while (e < touched && out[1 + e] >> 2 != p) e++;
+            if (e == touched) out[1 + touched++] = p << 2 | flags;
+            else out[1 + e] |= flags;
+            i64 wkc = (data[length] | data[length + 1] << 8) + 1;
+            data[length] = (uint8_t)wkc;
+            data[length + 1] = (uint8_t)(wkc >> 8);
+        }
+        if (cmd == CMD_APRD || cmd == CMD_APWR) {
+            adp = (adp + r->n_active) & 0xFFFF;
+            h[2] = (uint8_t)adp;
+            h[3] = (uint8_t)(adp >> 8);
+        }
+    }
+    out[0] = touched;
+    return writes;
+}
+
 /* ------------------------------------------------------------------ checks */
 
 static int within(i64 at, i64 n, i64 size) { return at >= 0 && n >= 0 && at <= size - n; }
@@ -585,6 +736,19 @@ i64 lolacli_core_check_slave(const slave_t *s) {
                 !within(row[0], row[1], s->vals_len))
                 return 13;
         }
+    }
+    return 0;
+}
+
+/* 0 when the register path's tables are within their buffers, else a code. */
+i64 lolacli_core_check_registers(const regs_t *r) {
+    if (!r->slaves || r->n_active < 0 || r->n_active > r->n_slaves) return 1;
+    if (r->line_len < r->n_active * LINE_WORDS || (r->n_active && !r->line)) return 2;
+    if (r->classes_len != REGISTER_BYTES || !r->classes) return 3;
+    if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS) return 4;
+    for (i64 i = 0; i < r->n_active; i++) {
+        const i64 *row = r->line + i * LINE_WORDS;
+        if (!bounded(row[0]) || row[3] < 0 || row[3] > 16 || !r->slaves[i].mem) return 5;
     }
     return 0;
 }
@@ -663,6 +827,8 @@ i64 lolacli_core_abi(i64 what) {
     case 2: return (i64)offsetof(slave_t, scale);
     case 3: return (i64)offsetof(slave_t, e);
     case 4: return (i64)sizeof(plan_t);
+    case 5: return (i64)sizeof(regs_t);
+    case 6: return OUT_WORDS;
     }
     return -1;
 }

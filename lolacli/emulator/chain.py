@@ -308,6 +308,7 @@ class Chain:
             esc.addressing = self._addressing
             esc.pdi = self._pdi
         self._stations_at = -1
+        self._line_at = -1  # the addressing cell's value the C core's line is for
         self._stations_map: dict[int, int] = {}
         self._delays: dict[tuple[tuple[int, ...], int], int] = {}
         self._plans: dict[Key, FramePlan | None] = {}
@@ -428,6 +429,16 @@ class Chain:
             if self._deferred_dc:
                 self._run_deferred_dc()
             return self._run_plan(plan, frame, t_ns, defer_cycles)
+        if (
+            self._core is not None
+            and damaged is None
+            and self._held is None
+            and self._active
+            and self.faults.drop_probability <= 0
+        ):
+            answered = self._registers_in_core(frame, t_ns, defer_cycles)
+            if answered is not None:
+                return answered
         slots = _slots(frame)
         if slots is None:
             slots = self._parse(frame)  # tagged, another EtherCAT type, or malformed
@@ -458,6 +469,31 @@ class Chain:
         buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         return bytes(buf), self._delay_ns(tuple(slot.length for slot in slots))
+
+    def _registers_in_core(
+        self, frame: bytes, t_ns: int, defer_cycles: bool
+    ) -> tuple[bytes, int] | None:
+        """The general path of a frame of single-slave register reads and writes in the C
+        core (``ChainCore.register_frame``): a start-up's SM/FMMU set-up and status polls,
+        KickCAT's 15-FPWR frames 5 µs a frame in process against 42 on the Python path,
+        its 15-FPRD polls 6 against 21. ``None``: the frame is not one."""
+        core = self._core
+        assert core is not None
+        if self._line_at != self._addressing[0]:
+            core.set_line([port.port0_ns for port in self._port_offsets])
+            self._line_at = self._addressing[0]
+        if self._deferred_dc:
+            self._run_deferred_dc()  # as the general path does before any datagram
+        got = core.register_frame(frame, t_ns)
+        if got is None:
+            return None
+        buf, lengths = got
+        self.tick(t_ns)
+        if self._pdi and not defer_cycles:
+            self._run_pdi()
+        buf[6] |= SOURCE_MAC_LOCAL_BIT
+        self.stats.replies += 1
+        return bytes(buf), self._delay_ns(lengths)
 
     def _run_slots(
         self, buf: bytearray, slots: list[_Slot], t_ns: int, damaged: int | None

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
+from lolacli.emulator.esc.memory import register_classes
 from lolacli.emulator.plan import FramePlan, _Brd, _DcDistribution, _Logical
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
 
@@ -42,7 +43,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 4
+ABI_VERSION = 5
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -132,6 +133,33 @@ class PlanTable(ctypes.Structure):
     ]
 
 
+class RegisterTable(ctypes.Structure):
+    """``regs_t`` of _ccore.c: the chain's line for single-slave register frames."""
+
+    _fields_ = [
+        ("slaves", _VP),
+        ("n_slaves", _I64),
+        ("n_active", _I64),
+        ("line", _VP),
+        ("line_len", _I64),
+        ("classes", _VP),
+        ("classes_len", _I64),
+        ("buf", _VP),
+        ("buf_len", _I64),
+        ("out", _VP),
+        ("out_len", _I64),
+    ]
+
+
+# register frames (see _ccore.c): line rows, the out array, touched flags
+LINE_WORDS = 4
+MAX_REGISTER_DATAGRAMS = 128
+OUT_WORDS = 2 + 2 * MAX_REGISTER_DATAGRAMS
+OUT_LENGTHS = 2 + MAX_REGISTER_DATAGRAMS
+T_CONFIGURATION, T_RELEASED = 1, 2
+REGISTER_FRAME_BYTES = 2048  # the largest frame the register path answers
+
+
 @lru_cache(maxsize=1)
 def _library() -> ctypes.CDLL | None:
     spec = importlib.util.find_spec("lolacli.emulator._ccore")
@@ -159,6 +187,10 @@ def load_library(path: str) -> ctypes.CDLL | None:
         lib.lolacli_core_check_slave.restype = _I64
         lib.lolacli_core_check_plan.argtypes = [_VP]
         lib.lolacli_core_check_plan.restype = _I64
+        lib.lolacli_core_registers.argtypes = [_VP, ctypes.c_char_p, _I64, _I64]
+        lib.lolacli_core_registers.restype = _I64
+        lib.lolacli_core_check_registers.argtypes = [_VP]
+        lib.lolacli_core_check_registers.restype = _I64
     except (OSError, AttributeError):
         return None  # not built, or a stale build without these functions
     layout = (
@@ -167,6 +199,8 @@ def load_library(path: str) -> ctypes.CDLL | None:
         SlaveTable.scale.offset,
         SlaveTable.e.offset,
         ctypes.sizeof(PlanTable),
+        ctypes.sizeof(RegisterTable),
+        OUT_WORDS,
     )
     if tuple(lib.lolacli_core_abi(i) for i in range(len(layout))) != layout:
         return None
@@ -243,6 +277,80 @@ class ChainCore:
                 self._flat[i] = flatten(device)
                 if self._flat[i] is None:
                     self._unflat[i] = (device.od.version, device.od.writes)
+
+        self._line = array("q")
+        self._classes = bytearray(register_classes())
+        self._regs_buf = bytearray(REGISTER_FRAME_BYTES)
+        self._out = array("q", bytes(8 * OUT_WORDS))
+        self._regs_keep: list[Any] = []
+        self._regs: RegisterTable | None = None
+        self._regs_address = 0
+        self._registers = lib.lolacli_core_registers
+
+    # ------------------------------------------------------------ register frames
+    def set_line(self, port0_ns: list[int]) -> bool:
+        """The slaves the frames reach (the first ``len(port0_ns)``, each reached that long
+        after the frame's start) for :meth:`register_frame`, with their mailbox sync
+        managers as their SII layout gives them now (the chain sets the line again when
+        its addressing cell moves). False: the register path is off (a value out of range)."""
+        n = len(port0_ns)
+        line = array("q", bytes(8 * LINE_WORDS * n))
+        for i, (esc, port0) in enumerate(zip(self.escs, port0_ns, strict=False)):
+            layout = esc.layout
+            row = (port0, layout.mailbox_out_sm, layout.mailbox_in_sm, esc.config.sync_managers)
+            if any(v.__class__ is not int or not -VALUE_LIMIT < v < VALUE_LIMIT for v in row):
+                self._regs = None
+                return False
+            line[LINE_WORDS * i : LINE_WORDS * (i + 1)] = array("q", row)
+        keep: list[Any] = []
+        table = RegisterTable(
+            slaves=self.address,
+            n_slaves=len(self.escs),
+            n_active=min(n, len(self.escs)),
+            line=_address(line, keep),
+            line_len=len(line),
+            classes=_address(self._classes, keep),
+            classes_len=len(self._classes),
+            buf=_address(self._regs_buf, keep),
+            buf_len=len(self._regs_buf),
+            out=_address(self._out, keep),
+            out_len=len(self._out),
+        )
+        if self._lib.lolacli_core_check_registers(ctypes.addressof(table)):
+            self._regs = None
+            return False
+        self._line, self._regs, self._regs_keep = line, table, keep
+        self._regs_address = ctypes.addressof(table)
+        return True
+
+    def register_frame(self, frame: bytes, t_ns: int) -> tuple[bytearray, tuple[int, ...]] | None:
+        """A frame of APRD/FPRD/APWR/FPWR datagrams of registers that store bytes and the
+        FMMU/SM configuration only, answered as ``Chain._run_slots`` would (through
+        ``Esc.read_addressed``/``write_addressed``): the answer and the datagrams' lengths.
+        ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
+        but for those whose SM or FMMU registers were written (their watchdog time may
+        change): the Esc objects work the configuration out again."""
+        if self._regs is None or t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
+            return None
+        if frame.__class__ is not bytes:
+            frame = bytes(frame)
+        writes = self._registers(self._regs_address, frame, len(frame), t_ns)
+        if writes < 0:
+            return None
+        out, escs = self._out, self.escs
+        for k in range(1, out[0] + 1):
+            entry = out[k]
+            i = entry >> 2
+            if entry & T_RELEASED:
+                escs[i].now_ns = self._words[i * WORDS + F_NOW]
+            elif entry & T_CONFIGURATION:
+                self.release((i,))
+            if entry & T_CONFIGURATION:
+                escs[i].configuration_written()
+        if writes:
+            escs[0].epoch[0] += writes  # as Esc.write_addressed, once a write
+        lengths = tuple(out[OUT_LENGTHS : OUT_LENGTHS + out[OUT_LENGTHS - 1]])
+        return self._regs_buf[: len(frame)], lengths
 
     # ------------------------------------------------------------ ownership
     def acquire(self) -> bool:

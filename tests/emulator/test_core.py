@@ -52,6 +52,7 @@ from lolacli.wire.registers import AlStatusCode
 from lolacli.wire.sdo import SdoUploadRequest, encode_sdo
 from tests.emulator.bus import EXAMPLES, Bus
 from tests.emulator.test_general_path import _random_frame as _register_frame
+from tests.emulator.test_general_path import _single_slave_frame
 from tests.emulator.test_plan import _random_frame
 
 CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
@@ -506,11 +507,14 @@ class Script:
     def register_traffic(self) -> None:
         """Random register frames of every addressing (APxx, FPxx, BRD/BWR/BRW through
         their fast paths, ARMW/FRMW) between cyclic frames the core answers: the general
-        path gives back what the core holds of exactly the slaves each datagram reaches."""
+        path gives back what the core holds of exactly the slaves each datagram reaches;
+        a third of them single-slave register datagrams only, which the core's register
+        path answers with the slaves held."""
         stations = [s.station_address for s in self.eni.slaves]
-        for k in range(200):
+        for k in range(300):
             self.bus.t_ns += self.rng.randrange(1, 300_000)
-            frame = _register_frame(self.rng, len(self.eni.slaves), stations)
+            make = _register_frame if k % 3 else _single_slave_frame  # the core's register path
+            frame = make(self.rng, len(self.eni.slaves), stations)
             self.twin.process(frame, self.bus.t_ns)
             if k % 2 == 0:
                 self.move(1)
@@ -656,6 +660,48 @@ def test_watchdogs_expire_per_slave_when_only_some_outputs_come() -> None:
     codes = [esc.al_status_code for esc in twin.c.slaves]
     assert codes[:3] == [AlStatusCode.NO_ERROR] * 3
     assert codes[10:21] == [AlStatusCode.SYNC_MANAGER_WATCHDOG] * 11
+    twin.same_state()
+
+
+def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
+    """A master clears the watchdog enable of drive 5's output SM in OP, one FPWR that the
+    core's register path takes with the slaves held: the core gives that slave back (its
+    watchdog time changes with the SM), so without outputs drive 5 stays in OP while the
+    drives beside it expire, in both engines."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    twin = Twin(eni, compare_every=0)
+    script = Script(eni, twin, plannable_only=False)
+    bring_up(script.bus, eni, script.outputs, plannable_only=False)
+    for cw in (0x06, 0x07, 0x0F):
+        script.move(1, controlword=cw)
+    script.move(10)
+    core = twin.c._core
+    assert core is not None and not core.released  # the core holds every slave
+    taken = [0]
+    answer = core.register_frame
+
+    def counted(frame: bytes, t_ns: int):  # type: ignore[no-untyped-def]
+        got = answer(frame, t_ns)
+        taken[0] += got is not None
+        return got
+
+    core.register_frame = counted  # type: ignore[method-assign]
+    station = eni.slaves[4].station_address
+    control = 0x0800 + 8 * twin.c._slaves[4].layout.outputs_sm + 4
+    value = script.bus.fprd(station, control, 1)[0]
+    assert value & 0x40  # SM_CONTROL_WATCHDOG
+    script.bus.fpwr(station, control, bytes([value & ~0x40]))
+    assert taken[0] == 2 and core.released == {4}
+    frame = encode_frame(make_frame([Datagram.logical(C.LRD, 0x10000, 8)]))
+    for _ in range(300):  # 150 ms of reads only
+        script.bus.t_ns += PERIOD_NS
+        twin.process(frame, script.bus.t_ns)
+    codes = [esc.al_status_code for esc in twin.c.slaves]
+    assert codes[3:6] == [
+        AlStatusCode.SYNC_MANAGER_WATCHDOG,
+        AlStatusCode.NO_ERROR,
+        AlStatusCode.SYNC_MANAGER_WATCHDOG,
+    ]
     twin.same_state()
 
 
@@ -941,6 +987,37 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
         assert lib.lolacli_core_check_slave(core.address) != 0, name
         setattr(row, name, saved)
     assert lib.lolacli_core_check_slave(core.address) == 0
+
+
+def test_kernel_refuses_register_tables_out_of_bounds() -> None:
+    """The register path's line: more active slaves than tables, a line shorter than
+    them, another classes table, a small answer buffer or out array, a port time or a
+    sync manager count beyond range."""
+    chain, _compiled = _lola_plan()
+    core = chain._core
+    assert core is not None and core._regs is not None
+    lib, table = core._lib, core._regs
+    address = ctypes.addressof(table)
+    assert lib.lolacli_core_check_registers(address) == 0
+    for name, bad in [
+        ("n_active", len(chain._slaves) + 1),
+        ("line_len", 4 * len(chain._slaves) - 1),
+        ("classes_len", 0x0F00),
+        ("buf_len", 15),
+        ("out_len", core_module.OUT_WORDS - 1),
+    ]:
+        saved = getattr(table, name)
+        setattr(table, name, bad)
+        assert lib.lolacli_core_check_registers(address) != 0, name
+        setattr(table, name, saved)
+    for word, bad in [(0, 1 << 62), (3, 17), (3, -1)]:
+        saved = core._line[word]
+        core._line[word] = bad
+        assert lib.lolacli_core_check_registers(address) != 0, word
+        core._line[word] = saved
+    assert lib.lolacli_core_check_registers(address) == 0
+    assert not core.set_line([1 << 62])  # refused: the path is off, frames go to Python
+    assert core.register_frame(bytes(60), 0) is None
 
 
 def test_wrapper_gives_the_reference_what_the_core_cannot_hold() -> None:

@@ -88,6 +88,61 @@ def _random_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
 
 
+_SINGLE = [C.APRD, C.APWR, C.FPRD, C.FPWR]
+
+
+def _single_slave_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes:
+    """Up to 15 APRD/FPRD/APWR/FPWR of registers, as a start-up's SM/FMMU set-up and
+    status polls (the C core's register path): FMMU and SM registers (mailbox SMs too),
+    read-only bytes, registers with side effects, the DC system time, no data, unknown
+    stations and positions past the end."""
+    datagrams = []
+    for _ in range(rng.randrange(1, 16)):
+        cmd = rng.choice(_SINGLE)
+        area = rng.random()
+        if area < 0.35:
+            ado, length = 0x0800 + 8 * rng.randrange(0, 17), rng.choice([1, 2, 8, 8, 16])
+            if rng.random() < 0.2:
+                ado += rng.randrange(0, 8)
+        elif area < 0.6:
+            ado, length = 0x0600 + 16 * rng.randrange(0, 16), rng.choice([16, 16, 4, 32])
+        elif area < 0.7:
+            ado, length = rng.randrange(0, 0x1000), rng.randrange(0, 24)
+        else:
+            ado, length = rng.choice(_REGISTERS) + rng.randrange(0, 4), rng.choice([1, 2, 4, 8])
+        if cmd in (C.APWR, C.FPWR) and 0x0120 <= ado + length and ado <= 0x0121:
+            ado = 0x0F00  # leave the AL state alone: the bring-up decides it
+        if cmd in (C.APWR, C.FPWR) and ado <= 0x0011 < ado + length:
+            ado = 0x0F00  # and the station addresses
+        if 0x0800 <= ado < 0x0880 and cmd in (C.APWR, C.FPWR) and rng.random() < 0.5:
+            data: bytes | int = bytes(length)  # an SM disabled: its mailbox full flag clears
+        else:
+            data = rng.randbytes(length) if cmd in (C.APWR, C.FPWR) else length
+        if cmd in (C.APRD, C.APWR):
+            adp = (-rng.randrange(0, slaves + 2)) & 0xFFFF
+        else:
+            adp = rng.choice(stations + [0x7777, 0])  # 0: the alias, where enabled
+        datagrams.append(Datagram.physical(cmd, adp, ado, data))
+    return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
+
+
+def _count_register_frames(chain: Chain) -> list[int]:
+    """[frames the C core's register path answered] for ``chain``, counted from now."""
+    taken = [0]
+    core = chain._core
+    if core is None:
+        return taken
+    answer = core.register_frame
+
+    def counted(frame: bytes, t_ns: int):  # type: ignore[no-untyped-def]
+        got = answer(frame, t_ns)
+        taken[0] += got is not None
+        return got
+
+    core.register_frame = counted  # type: ignore[method-assign]
+    return taken
+
+
 @pytest.mark.parametrize(
     "engine",
     [
@@ -120,3 +175,78 @@ def test_general_path_answers_like_the_slave_major_reference(name: str, engine: 
             for i, (a, b) in enumerate(zip(fast.slaves, slow.slaves, strict=True)):
                 assert a.mem == b.mem, f"frame {k}, slave {i}"
                 assert a.al_state == b.al_state and a.clock == b.clock, f"frame {k}, slave {i}"
+
+
+@pytest.mark.parametrize(
+    "engine",
+    [
+        "python",
+        pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="no C core")),
+    ],
+)
+@pytest.mark.parametrize("name", ["lola.xml", "ek1100_io.xml"])
+def test_single_slave_register_frames_answer_like_the_slave_major_reference(
+    name: str, engine: str
+) -> None:
+    """Frames of single-slave register datagrams only: with the C core, most of them take
+    its register path (``ChainCore.register_frame``), the rest the Python general path."""
+    eni = load_eni(EXAMPLES / name)
+    fast = build_chain(eni, drift_ppb=10, engine=engine)
+    slow = build_chain(eni, drift_ppb=10, engine="python")
+    fast.plan_after = slow.plan_after = 0
+    rng = random.Random(5)
+    stations = [s.station_address for s in eni.slaves]
+    for chain in (fast, slow):
+        for i, station in enumerate(stations):
+            d = Datagram.physical(C.APWR, (-i) & 0xFFFF, 0x0010, struct.pack("<H", station))
+            chain.process(encode_frame(make_frame([d]), pad=True), 0)
+    taken = _count_register_frames(fast)
+    t_ns = 1_000_000
+    for k in range(1500):
+        frame = _single_slave_frame(rng, len(eni.slaves), stations)
+        t_ns += rng.randrange(1000, 200_000)
+        got, _ = fast.process(frame, t_ns)
+        want = reference_process(slow, frame, t_ns)
+        assert got == want, f"frame {k}: {frame.hex()}"
+        if k % 100 == 0:
+            for i, (a, b) in enumerate(zip(fast.slaves, slow.slaves, strict=True)):
+                assert a.mem == b.mem, f"frame {k}, slave {i}"
+                assert a.al_state == b.al_state and a.clock == b.clock, f"frame {k}, slave {i}"
+    if engine == "c":
+        assert 300 < taken[0] < 1400  # both paths ran
+
+
+@pytest.mark.parametrize(
+    "engine",
+    [
+        "python",
+        pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="no C core")),
+    ],
+)
+def test_a_sync_manager_disabled_forgets_its_full_mailbox_buffer(engine: str) -> None:
+    """A master may make any SM a mailbox: written full, it stays full (the firmware serves
+    the SII's mailbox SMs only) until the master disables it, which the register path
+    does too."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    fast = build_chain(eni, engine=engine)
+    slow = build_chain(eni, engine="python")
+    station = eni.slaves[0].station_address
+    taken = _count_register_frames(fast)
+    sm2 = struct.pack("<HHBBBB", 0x1C00, 4, 0x06, 0, 0x01, 0)  # mailbox, master writes
+    steps = [
+        Datagram.physical(C.APWR, 0, 0x0010, struct.pack("<H", station)),
+        Datagram.physical(C.FPWR, station, 0x0810, sm2),
+        Datagram.physical(C.FPWR, station, 0x1C00, b"\x01\x02\x03\x04"),  # full now
+        Datagram.physical(C.FPRD, station, 0x0815, 1),
+        Datagram.physical(C.FPWR, station, 0x0816, b"\x00"),  # disabled
+        Datagram.physical(C.FPRD, station, 0x0815, 1),
+    ]
+    replies = []
+    for k, d in enumerate(steps):
+        frame = encode_frame(make_frame([d]), pad=True)
+        got, _ = fast.process(frame, 1000 * k)
+        assert got == reference_process(slow, frame, 1000 * k), f"step {k}"
+        replies.append(decode_frame(got).datagrams[0].data)
+    assert (replies[3][0] & 0x08, replies[5][0] & 0x08) == (0x08, 0)
+    if engine == "c":
+        assert taken[0] == 4  # all but the process RAM write

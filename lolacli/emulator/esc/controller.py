@@ -192,6 +192,12 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             self._register_side_effects(plan, ado, end, payload, t_ns)
         return 1
 
+    def configuration_written(self) -> None:
+        """The FMMU or SM registers were written: their decoded configuration and the
+        process-data watchdog time that depends on it are worked out again when next used."""
+        self._cache = None
+        self._watchdog_ns = -1
+
     def _physical(self, cmd: int, ado: int, data: memoryview, t_ns: int, *, addressed: bool) -> int:
         n = len(data)
         if ado + n > r.MEMORY_BYTES:
@@ -256,8 +262,7 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         self, plan: RegisterWrite, start: int, end: int, payload: bytes, t_ns: int
     ) -> None:
         if plan.configuration:
-            self._cache = None
-            self._watchdog_ns = -1
+            self.configuration_written()
         if plan.watchdog:
             self._watchdog_ns = -1
         if plan.addressing:

@@ -71,8 +71,9 @@ class EscMemory:
     # states, topology): the chain's frame plans are valid for one value. A chain
     # shares one cell between its slaves.
     epoch: list[int]
-    # bumped when a station address, alias or alias enable may have changed: the
-    # chain's map of configured addresses is valid for one value (shared like epoch)
+    # bumped when a station address, alias or alias enable, or the SII layout may have
+    # changed: the chain's map of configured addresses and the C core's table of each
+    # slave's mailbox sync managers are valid for one value (shared like epoch)
     addressing: list[int]
     # The slave's firmware side (the PDI): AL control requests and mailbox writes are
     # taken by the ESC at once (the frame is answered) and handled by the firmware
@@ -261,3 +262,28 @@ def register_write(start: int, end: int) -> RegisterWrite:
     return RegisterWrite(
         tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags), span, keep
     )
+
+
+# what a master's write to a register byte does, for the C core's register path
+# (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration, sync manager registers,
+# anything else (the Python path's: AL control, EEPROM, addressing, DC, watchdog, counters)
+REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER, REGISTER_PYTHON = 1, 2, 4, 8
+
+
+@lru_cache(maxsize=1)
+def register_classes() -> bytes:
+    """One class per register byte (0x0000-0x0FFF), from :func:`register_write` of that
+    byte alone: a write's effects are those of its bytes together."""
+    out = bytearray(r.PROCESS_RAM)
+    for a in range(r.PROCESS_RAM):
+        w = register_write.__wrapped__(a, a + 1)
+        c = REGISTER_READONLY if _READONLY[a] else 0
+        if w.configuration:
+            c |= REGISTER_CONFIGURATION
+        if w.sync_managers:
+            c |= REGISTER_SYNC_MANAGER
+        others = (w.watchdog, w.addressing, w.eeprom, w.latch, w.system_time, w.al_control)
+        if w.clear_groups or any(others):
+            c |= REGISTER_PYTHON
+        out[a] = c
+    return bytes(out)
