@@ -524,26 +524,41 @@ void lolacli_core_finish(plan_t *p) {
 
 /* ------------------------------------------------------------------ register frames */
 
-/* A frame whose every datagram is an APRD/FPRD/APWR/FPWR of registers that stores bytes
- * and nothing the Python objects hold (Esc.read_addressed / Esc.write_addressed through
- * Chain._run_slots): answered in r->buf. The classes are register_classes() of
- * lolacli/emulator/esc/memory.py, one per register byte. */
-enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8 };
-enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5 };
+/* A frame whose every datagram is an APRD/FPRD/APWR/FPWR, BRD or BWR of registers that
+ * stores bytes and nothing the Python objects hold, the SM/FMMU configuration of one slave
+ * and EEPROM reads included (Chain._run_slots: Esc.read_addressed, Esc.write_addressed,
+ * broadcast_read, broadcast_write, SiiInterface._eeprom_command): answered in r->buf.
+ * The classes are register_classes() of lolacli/emulator/esc/memory.py, one per register
+ * byte. */
+enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16 };
+enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_BWR = 8 };
 #define REGISTER_BYTES 0x1000
 #define STATION_ADDRESS 0x0010
 #define STATION_ALIAS 0x0012
 #define ALIAS_ENABLE_BYTE 0x0103
+#define SII_CONTROL 0x0502
+#define SII_ADDRESS 0x0504
+#define SII_DATA 0x0508
+#define SII_COMMAND_MASK 0x0700
+#define SII_READ 0x0100
+#define SII_WRITE 0x0200
+#define SII_RELOAD 0x0400
+#define SII_CLEARED 0xA700 /* command, busy, command error */
+#define SII_READ_8_BYTES 0x0040
+#define SII_COMMAND_ERROR 0x2000
 #define SM_REGISTERS 0x0800
 #define SM_BYTES 8
-#define SM_REGISTERS_END (SM_REGISTERS + 16 * SM_BYTES)
 #define SM_STATUS_MAILBOX_FULL 0x08
 #define SM_ACTIVATE_ENABLE 0x01
 #define DC_SYSTEM_TIME 0x0910
 #define MAX_REGISTER_DATAGRAMS 128
-#define LINE_WORDS 4 /* port 0 offset, mailbox out SM, mailbox in SM, sync managers */
-/* out: [touched, MAX_REGISTER_DATAGRAMS entries (position << 2 | T_*), datagrams, lengths] */
-#define OUT_WORDS (2 + 2 * MAX_REGISTER_DATAGRAMS)
+#define ALL_SLAVES (-1)
+/* per active slave: port 0 offset, mailbox out SM, mailbox in SM, sync managers, SII image
+ * address and bytes, 8-byte EEPROM reads */
+#define LINE_WORDS 7
+/* out: [touched, n_slaves entries (position << 2 | T_*), n_slaves marks (entry + 1, 0:
+ * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths] */
+#define OUT_WORDS(n) (2 + 2 * (n) + MAX_REGISTER_DATAGRAMS)
 enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
 
 typedef struct {
@@ -573,11 +588,75 @@ static void sm_range(i64 lo, i64 hi, i64 n_sm, i64 *first, i64 *last) {
     if (*last > n_sm) *last = n_sm;
 }
 
-/* The number of register writes, or -1 (nothing changed) for a frame this path does not
- * take: not an untagged command frame as Chain's _slots reads it, a datagram of another
- * command, of no data, beyond the registers, reading the DC system time, or writing where
- * the write sets off more than the store and the SM/FMMU configuration (a mailbox SM's
- * registers included), or more than MAX_REGISTER_DATAGRAMS datagrams. */
+/* SiiInterface._eeprom_command for what pass 1 lets through: no command, a read, or a
+ * command the ESC refuses */
+static void eeprom_command(uint8_t *m, const i64 *row) {
+    i64 control = m[SII_CONTROL] | m[SII_CONTROL + 1] << 8;
+    i64 command = control & SII_COMMAND_MASK;
+    i64 status = control & ~SII_CLEARED;
+    if (row[6]) status |= SII_READ_8_BYTES;
+    if (command == SII_READ) {
+        const uint8_t *sii = (const uint8_t *)(intptr_t)row[4];
+        i64 from = 2 * (i64)get_le(m + SII_ADDRESS, 4), chunk = row[6] ? 8 : 4;
+        for (i64 b = 0; b < 8; b++)
+            m[SII_DATA + b] = b < chunk && from + b < row[5] ? sii[from + b] : 0xFF;
+    } else if (command) {
+        status |= SII_COMMAND_ERROR;
+    }
+    m[SII_CONTROL] = (uint8_t)status;
+    m[SII_CONTROL + 1] = (uint8_t)(status >> 8);
+}
+
+/* The write of ``length`` bytes at ``ado`` into slave p: stored, its effects run; the
+ * T_* flags it leaves */
+static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 length) {
+    slave_t *s = &r->slaves[p];
+    const i64 *row = r->line + p * LINE_WORDS;
+    int any = 0;
+    for (i64 b = 0; b < length; b++) {
+        uint8_t c = r->classes[ado + b];
+        if (!(c & R_READONLY)) s->mem[ado + b] = data[b];
+        any |= c;
+    }
+    if (any & R_SYNC_MANAGER) {
+        i64 first, last;
+        sm_range(ado, ado + length, row[3], &first, &last);
+        for (i64 i = first; i < last; i++) {
+            uint8_t *sm = s->mem + SM_REGISTERS + SM_BYTES * i;
+            if (!(sm[6] & SM_ACTIVATE_ENABLE)) sm[5] &= (uint8_t)~SM_STATUS_MAILBOX_FULL;
+        }
+    }
+    if (any & R_EEPROM) eeprom_command(s->mem, row);
+    return any & R_CONFIGURATION ? T_CONFIGURATION : 0;
+}
+
+/* slave p took a datagram at frame time t: counted, its time set, noted in out */
+static void touch(const regs_t *r, i64 p, i64 t, i64 flags) {
+    slave_t *s = &r->slaves[p];
+    i64 *out = r->out, *marks = out + 1 + r->n_slaves;
+    s->datagrams += 1;
+    s->now_ns = t + r->line[p * LINE_WORDS];
+    if (!s->owned) flags |= T_RELEASED;
+    if (marks[p]) {
+        out[marks[p]] |= flags;
+    } else {
+        out[1 + out[0]] = p << 2 | flags;
+        marks[p] = 1 + out[0]++;
+    }
+}
+
+static void add_wkc(uint8_t *at, i64 added) {
+    i64 wkc = (at[0] | at[1] << 8) + added;
+    at[0] = (uint8_t)wkc;
+    at[1] = (uint8_t)(wkc >> 8);
+}
+
+/* The number of register writes (one a slave), or -1 (nothing changed) for a frame this
+ * path does not take: not an untagged command frame as Chain's _slots reads it, a datagram
+ * of another command, of no data, beyond the registers, reading the DC system time, a
+ * write that sets off more than the store, one slave's SM/FMMU configuration (not its
+ * mailbox SMs) and an EEPROM read, a broadcast write of the configuration, or more than
+ * MAX_REGISTER_DATAGRAMS datagrams. */
 i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
     if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
     i64 word = frame[14] | frame[15] << 8;
@@ -596,14 +675,22 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         i64 p;
         if (cmd == CMD_APRD || cmd == CMD_APWR) p = (-adp) & 0xFFFF;
         else if (cmd == CMD_FPRD || cmd == CMD_FPWR) p = station_position(r, adp);
+        else if (cmd == CMD_BRD || cmd == CMD_BWR) p = ALL_SLAVES;
         else return -1;
         if (p > r->n_active) p = r->n_active;
-        if (cmd == CMD_APRD || cmd == CMD_FPRD) {
+        if (cmd == CMD_APRD || cmd == CMD_FPRD || cmd == CMD_BRD) {
             if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < ado + length) return -1;
         } else {
             int any = 0;
             for (i64 a = ado; a < ado + length; a++) any |= cls[a];
             if (any & R_PYTHON) return -1;
+            if (p == ALL_SLAVES && any & (R_CONFIGURATION | R_SYNC_MANAGER)) return -1;
+            if (any & R_EEPROM) { /* the command as written: SII writes and reloads in Python */
+                i64 command_byte = SII_CONTROL + 1;
+                if (!(ado <= command_byte && command_byte < ado + length)) return -1;
+                i64 command = (h[10 + command_byte - ado] << 8) & SII_COMMAND_MASK;
+                if (command == SII_WRITE || command == SII_RELOAD) return -1;
+            }
             if ((any & R_SYNC_MANAGER) && p < r->n_active) {
                 const i64 *row = r->line + p * LINE_WORDS;
                 i64 first, last;
@@ -620,56 +707,46 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     uint8_t *buf = r->buf;
     i64 *out = r->out;
     memcpy(buf, frame, (size_t)n);
-    i64 touched = 0, writes = 0;
-    i64 *lengths = out + 2 + MAX_REGISTER_DATAGRAMS;
-    out[1 + MAX_REGISTER_DATAGRAMS] = count;
+    out[0] = 0;
+    i64 writes = 0;
+    i64 *lengths = out + 2 + 2 * r->n_slaves;
+    lengths[-1] = count;
     for (i64 k = 0; k < count; k++) { /* pass 2: datagram by datagram, as the chain does */
         uint8_t *h = buf + at[k];
         i64 cmd = h[0], adp = h[2] | h[3] << 8, ado = h[4] | h[5] << 8;
         i64 length = (h[6] | h[7] << 8) & 0x7FF, p = where[k];
         uint8_t *data = h + 10;
         lengths[k] = length;
-        if (p < r->n_active) {
-            slave_t *s = &r->slaves[p];
-            const i64 *row = r->line + p * LINE_WORDS;
-            i64 flags = s->owned ? 0 : T_RELEASED;
-            s->datagrams += 1;
-            s->now_ns = t + row[0];
+        if (p == ALL_SLAVES) {
+            for (i64 i = 0; i < r->n_active; i++) {
+                const uint8_t *m = r->slaves[i].mem + ado;
+                if (cmd == CMD_BRD) {
+                    for (i64 b = 0; b < length; b++) data[b] |= m[b];
+                    touch(r, i, t, 0);
+                } else {
+                    touch(r, i, t, write_one(r, i, ado, data, length));
+                    writes++;
+                }
+            }
+            add_wkc(data + length, r->n_active);
+        } else if (p < r->n_active) {
             if (cmd == CMD_APRD || cmd == CMD_FPRD) {
-                memcpy(data, s->mem + ado, (size_t)length);
+                memcpy(data, r->slaves[p].mem + ado, (size_t)length);
+                touch(r, p, t, 0);
             } else {
-                int any = 0;
-                for (i64 b = 0; b < length; b++) {
-                    uint8_t c = cls[ado + b];
-                    if (!(c & R_READONLY)) s->mem[ado + b] = data[b];
-                    any |= c;
-                }
-                if (any & R_CONFIGURATION) flags |= T_CONFIGURATION;
-                if (any & R_SYNC_MANAGER) {
-                    i64 first, last;
-                    sm_range(ado, ado + length, row[3], &first, &last);
-                    for (i64 i = first; i < last; i++) {
-                        uint8_t *sm = s->mem + SM_REGISTERS + SM_BYTES * i;
-                        if (!(sm[6] & SM_ACTIVATE_ENABLE)) sm[5] &= (uint8_t)~SM_STATUS_MAILBOX_FULL;
-                    }
-                }
+                touch(r, p, t, write_one(r, p, ado, data, length));
                 writes++;
             }
-            i64 e = 0;
-            while (e < touched && out[1 + e] >> 2 != p) e++;
-            if (e == touched) out[1 + touched++] = p << 2 | flags;
-            else out[1 + e] |= flags;
-            i64 wkc = (data[length] | data[length + 1] << 8) + 1;
-            data[length] = (uint8_t)wkc;
-            data[length + 1] = (uint8_t)(wkc >> 8);
+            add_wkc(data + length, 1);
         }
-        if (cmd == CMD_APRD || cmd == CMD_APWR) {
+        if (cmd != CMD_FPRD && cmd != CMD_FPWR) { /* every slave incremented it */
             adp = (adp + r->n_active) & 0xFFFF;
             h[2] = (uint8_t)adp;
             h[3] = (uint8_t)(adp >> 8);
         }
     }
-    out[0] = touched;
+    i64 *marks = out + 1 + r->n_slaves;
+    for (i64 e = 0; e < out[0]; e++) marks[out[1 + e] >> 2] = 0;
     return writes;
 }
 
@@ -745,10 +822,14 @@ i64 lolacli_core_check_registers(const regs_t *r) {
     if (!r->slaves || r->n_active < 0 || r->n_active > r->n_slaves) return 1;
     if (r->line_len < r->n_active * LINE_WORDS || (r->n_active && !r->line)) return 2;
     if (r->classes_len != REGISTER_BYTES || !r->classes) return 3;
-    if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS) return 4;
+    if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS(r->n_slaves)) return 4;
+    for (i64 i = 0; i < r->n_slaves; i++)
+        if (r->out[1 + r->n_slaves + i]) return 4; /* the marks start cleared */
     for (i64 i = 0; i < r->n_active; i++) {
         const i64 *row = r->line + i * LINE_WORDS;
         if (!bounded(row[0]) || row[3] < 0 || row[3] > 16 || !r->slaves[i].mem) return 5;
+        if (row[5] < 0 || row[5] > LIMIT || (row[5] && !row[4]) || (row[6] != 0 && row[6] != 1))
+            return 6;
     }
     return 0;
 }
@@ -828,7 +909,7 @@ i64 lolacli_core_abi(i64 what) {
     case 3: return (i64)offsetof(slave_t, e);
     case 4: return (i64)sizeof(plan_t);
     case 5: return (i64)sizeof(regs_t);
-    case 6: return OUT_WORDS;
+    case 6: return OUT_WORDS(0);
     }
     return -1;
 }

@@ -152,11 +152,17 @@ class RegisterTable(ctypes.Structure):
 
 
 # register frames (see _ccore.c): line rows, the out array, touched flags
-LINE_WORDS = 4
+LINE_WORDS = 7
 MAX_REGISTER_DATAGRAMS = 128
-OUT_WORDS = 2 + 2 * MAX_REGISTER_DATAGRAMS
-OUT_LENGTHS = 2 + MAX_REGISTER_DATAGRAMS
 T_CONFIGURATION, T_RELEASED = 1, 2
+
+
+def out_words(n_slaves: int) -> int:
+    """The out array's length for ``n_slaves``: touched count and entries, marks, the
+    datagram count and lengths."""
+    return 2 + 2 * n_slaves + MAX_REGISTER_DATAGRAMS
+
+
 REGISTER_FRAME_BYTES = 2048  # the largest frame the register path answers
 
 
@@ -200,7 +206,7 @@ def load_library(path: str) -> ctypes.CDLL | None:
         SlaveTable.e.offset,
         ctypes.sizeof(PlanTable),
         ctypes.sizeof(RegisterTable),
-        OUT_WORDS,
+        out_words(0),
     )
     if tuple(lib.lolacli_core_abi(i) for i in range(len(layout))) != layout:
         return None
@@ -281,7 +287,7 @@ class ChainCore:
         self._line = array("q")
         self._classes = bytearray(register_classes())
         self._regs_buf = bytearray(REGISTER_FRAME_BYTES)
-        self._out = array("q", bytes(8 * OUT_WORDS))
+        self._out = array("q", bytes(8 * out_words(n)))
         self._regs_keep: list[Any] = []
         self._regs: RegisterTable | None = None
         self._regs_address = 0
@@ -295,14 +301,15 @@ class ChainCore:
         its addressing cell moves). False: the register path is off (a value out of range)."""
         n = len(port0_ns)
         line = array("q", bytes(8 * LINE_WORDS * n))
+        keep: list[Any] = []
         for i, (esc, port0) in enumerate(zip(self.escs, port0_ns, strict=False)):
             layout = esc.layout
             row = (port0, layout.mailbox_out_sm, layout.mailbox_in_sm, esc.config.sync_managers)
             if any(v.__class__ is not int or not -VALUE_LIMIT < v < VALUE_LIMIT for v in row):
                 self._regs = None
                 return False
-            line[LINE_WORDS * i : LINE_WORDS * (i + 1)] = array("q", row)
-        keep: list[Any] = []
+            sii = (_address(esc.sii, keep), len(esc.sii), int(esc.config.eeprom_8_byte_reads))
+            line[LINE_WORDS * i : LINE_WORDS * (i + 1)] = array("q", row + sii)
         table = RegisterTable(
             slaves=self.address,
             n_slaves=len(self.escs),
@@ -349,7 +356,8 @@ class ChainCore:
                 escs[i].configuration_written()
         if writes:
             escs[0].epoch[0] += writes  # as Esc.write_addressed, once a write
-        lengths = tuple(out[OUT_LENGTHS : OUT_LENGTHS + out[OUT_LENGTHS - 1]])
+        at = 2 + 2 * len(escs)
+        lengths = tuple(out[at : at + out[at - 1]])
         return self._regs_buf[: len(frame)], lengths
 
     # ------------------------------------------------------------ ownership

@@ -1001,16 +1001,16 @@ def test_kernel_refuses_register_tables_out_of_bounds() -> None:
     assert lib.lolacli_core_check_registers(address) == 0
     for name, bad in [
         ("n_active", len(chain._slaves) + 1),
-        ("line_len", 4 * len(chain._slaves) - 1),
+        ("line_len", core_module.LINE_WORDS * len(chain._slaves) - 1),
         ("classes_len", 0x0F00),
         ("buf_len", 15),
-        ("out_len", core_module.OUT_WORDS - 1),
+        ("out_len", core_module.out_words(len(chain._slaves)) - 1),
     ]:
         saved = getattr(table, name)
         setattr(table, name, bad)
         assert lib.lolacli_core_check_registers(address) != 0, name
         setattr(table, name, saved)
-    for word, bad in [(0, 1 << 62), (3, 17), (3, -1)]:
+    for word, bad in [(0, 1 << 62), (3, 17), (3, -1), (5, -1), (6, 2)]:
         saved = core._line[word]
         core._line[word] = bad
         assert lib.lolacli_core_check_registers(address) != 0, word

@@ -88,18 +88,32 @@ def _random_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
 
 
-_SINGLE = [C.APRD, C.APWR, C.FPRD, C.FPWR]
+_SINGLE = [C.APRD, C.APWR, C.FPRD, C.FPWR, C.APRD, C.APWR, C.FPRD, C.FPWR, C.BRD, C.BWR]
+_WRITES = (C.APWR, C.FPWR, C.BWR)
+
+
+def _eeprom_command(rng: random.Random) -> bytes:
+    """SII control and address as a master writes them to 0x0502: mostly reads (the
+    address inside the image or past it), sometimes no command, a write, a reload, an
+    invalid command."""
+    command = rng.choice([1, 1, 1, 1, 0, 2, 4, 3])
+    address = rng.choice([rng.randrange(0, 0x100), rng.randrange(0, 1 << 32)])
+    return struct.pack("<BBI", rng.randrange(0, 256) & 0x41, command, address)
 
 
 def _single_slave_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes:
-    """Up to 15 APRD/FPRD/APWR/FPWR of registers, as a start-up's SM/FMMU set-up and
-    status polls (the C core's register path): FMMU and SM registers (mailbox SMs too),
-    read-only bytes, registers with side effects, the DC system time, no data, unknown
-    stations and positions past the end."""
+    """Up to 15 APRD/FPRD/APWR/FPWR, BRD and BWR of registers, as a start-up's SM/FMMU
+    set-up, SII reads and status polls (the C core's register path): FMMU and SM registers
+    (mailbox SMs too), EEPROM commands, read-only bytes, registers with side effects, the
+    DC system time, no data, unknown stations and positions past the end."""
     datagrams = []
     for _ in range(rng.randrange(1, 16)):
         cmd = rng.choice(_SINGLE)
         area = rng.random()
+        if cmd in _WRITES and area < 0.15:
+            adp = _adp(rng, cmd, slaves, stations)
+            datagrams.append(Datagram.physical(cmd, adp, 0x0502, _eeprom_command(rng)))
+            continue
         if area < 0.35:
             ado, length = 0x0800 + 8 * rng.randrange(0, 17), rng.choice([1, 2, 8, 8, 16])
             if rng.random() < 0.2:
@@ -110,20 +124,24 @@ def _single_slave_frame(rng: random.Random, slaves: int, stations: list[int]) ->
             ado, length = rng.randrange(0, 0x1000), rng.randrange(0, 24)
         else:
             ado, length = rng.choice(_REGISTERS) + rng.randrange(0, 4), rng.choice([1, 2, 4, 8])
-        if cmd in (C.APWR, C.FPWR) and 0x0120 <= ado + length and ado <= 0x0121:
+        if cmd in _WRITES and 0x0120 <= ado + length and ado <= 0x0121:
             ado = 0x0F00  # leave the AL state alone: the bring-up decides it
-        if cmd in (C.APWR, C.FPWR) and ado <= 0x0011 < ado + length:
+        if cmd in _WRITES and ado <= 0x0011 < ado + length:
             ado = 0x0F00  # and the station addresses
-        if 0x0800 <= ado < 0x0880 and cmd in (C.APWR, C.FPWR) and rng.random() < 0.5:
+        if 0x0800 <= ado < 0x0880 and cmd in _WRITES and rng.random() < 0.5:
             data: bytes | int = bytes(length)  # an SM disabled: its mailbox full flag clears
         else:
-            data = rng.randbytes(length) if cmd in (C.APWR, C.FPWR) else length
-        if cmd in (C.APRD, C.APWR):
-            adp = (-rng.randrange(0, slaves + 2)) & 0xFFFF
-        else:
-            adp = rng.choice(stations + [0x7777, 0])  # 0: the alias, where enabled
-        datagrams.append(Datagram.physical(cmd, adp, ado, data))
+            data = rng.randbytes(length) if cmd in _WRITES else length
+        datagrams.append(Datagram.physical(cmd, _adp(rng, cmd, slaves, stations), ado, data))
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
+
+
+def _adp(rng: random.Random, cmd: int, slaves: int, stations: list[int]) -> int:
+    if cmd in (C.APRD, C.APWR):
+        return (-rng.randrange(0, slaves + 2)) & 0xFFFF
+    if cmd in (C.FPRD, C.FPWR):
+        return rng.choice(stations + [0x7777, 0])  # 0: the alias, where enabled
+    return rng.randrange(0, 3)
 
 
 def _count_register_frames(chain: Chain) -> list[int]:
@@ -250,3 +268,38 @@ def test_a_sync_manager_disabled_forgets_its_full_mailbox_buffer(engine: str) ->
     assert (replies[3][0] & 0x08, replies[5][0] & 0x08) == (0x08, 0)
     if engine == "c":
         assert taken[0] == 4  # all but the process RAM write
+
+
+@pytest.mark.skipif(not core_available(), reason="no C core")
+def test_eeprom_reads_of_four_bytes_in_the_register_path() -> None:
+    """ESCs that read 4 bytes a command (SII status bit 6 clear): the register path's
+    EEPROM reads, single and broadcast, give what the Python path gives."""
+    from lolacli.emulator.esc import Esc
+    from lolacli.emulator.esc.memory import EscConfig
+    from lolacli.emulator.sii import SiiSpec, build_sii
+
+    def chain(engine: str) -> Chain:
+        config = EscConfig(eeprom_8_byte_reads=False)
+        images = [build_sii(SiiSpec(f"s{p}", 2, p, 1, serial=p)) for p in (7, 8)]
+        return Chain([Esc(image, config=config) for image in images], engine=engine)
+
+    fast, slow = chain("c"), chain("python")
+    taken = _count_register_frames(fast)
+    rng = random.Random(3)
+    for k in range(200):
+        cmd = rng.choice([C.APWR, C.BWR])
+        adp = (-rng.randrange(0, 2)) & 0xFFFF if cmd == C.APWR else 0
+        frame = encode_frame(
+            make_frame(
+                [
+                    Datagram.physical(cmd, adp, 0x0502, _eeprom_command(rng)),
+                    Datagram.physical(C.APRD, adp, 0x0502, 14),
+                    Datagram.physical(C.BRD, 0, 0x0508, 8),
+                ]
+            ),
+            pad=True,
+        )
+        got, _ = fast.process(frame, 1000 * k)
+        assert got == slow.process(frame, 1000 * k)[0], f"frame {k}"
+    assert [e.mem for e in fast.slaves] == [e.mem for e in slow.slaves]
+    assert 100 < taken[0] < 200  # writes and reloads go to Python

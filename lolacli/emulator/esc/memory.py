@@ -266,8 +266,10 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
 # what a master's write to a register byte does, for the C core's register path
 # (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration, sync manager registers,
-# anything else (the Python path's: AL control, EEPROM, addressing, DC, watchdog, counters)
-REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER, REGISTER_PYTHON = 1, 2, 4, 8
+# the EEPROM command, anything else (the Python path's: AL control, addressing, DC,
+# watchdog, counters)
+REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
+REGISTER_PYTHON, REGISTER_EEPROM = 8, 16
 
 
 @lru_cache(maxsize=1)
@@ -282,7 +284,9 @@ def register_classes() -> bytes:
             c |= REGISTER_CONFIGURATION
         if w.sync_managers:
             c |= REGISTER_SYNC_MANAGER
-        others = (w.watchdog, w.addressing, w.eeprom, w.latch, w.system_time, w.al_control)
+        if w.eeprom:
+            c |= REGISTER_EEPROM
+        others = (w.watchdog, w.addressing, w.latch, w.system_time, w.al_control)
         if w.clear_groups or any(others):
             c |= REGISTER_PYTHON
         out[a] = c
