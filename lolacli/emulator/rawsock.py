@@ -48,6 +48,7 @@ from lolacli.errors import TransportError
 from lolacli.rawsocket import MAX_FRAME_BYTES, PACKET_OUTGOING, open_socket
 
 DEFAULT_GRACE_S = 100e-6
+GRACE_BUSY_NS = 20_000  # the grace's busy part: then blocked, which leaves the core to others
 DEFAULT_PRIORITY = 10  # SCHED_FIFO priority asked for by default (1..99)
 PR_SET_TIMERSLACK = 29
 TIMER_SLACK_NS = 1000
@@ -162,9 +163,11 @@ class RawSocketServer:
         self._sock: socket.socket | None = None
         self._gc_was_enabled = False
         self._since_gc = 0
+        self._wait: Callable[[int], bool] | None = None
 
     def __enter__(self) -> RawSocketServer:
         self._sock = open_socket(self.iface)
+        self._wait = readable_within(self._sock.fileno())
         try:
             self._sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         except OSError:
@@ -287,15 +290,25 @@ class RawSocketServer:
         return self._poll(self._sock)
 
     def _spin(self, sock: socket.socket) -> bool:
-        """Watch the socket for ``grace_s`` after an answer without sleeping: the master
-        takes the answer meanwhile, and its next frame (in a start-up and a mailbox
-        exchange they come back to back) is answered with no wake-up in between."""
-        deadline = time.monotonic_ns() + self.grace_ns
+        """Watch the socket for ``grace_s`` after an answer: the master takes the answer
+        meanwhile, and its next frame (in a start-up and a mailbox exchange they come back
+        to back) is answered at once. Busy for the first :data:`GRACE_BUSY_NS` (pysoem's
+        next frame comes 5-6 µs after the answer), then blocked on the socket for the
+        rest (``ppoll``, whose timeout is in ns): a master on this core, which a busy
+        real-time loop would hold off for all of the grace, sends meanwhile (KickCAT with
+        a CPU hog on the other core sent each of its back-to-back frames 110 µs after the
+        last answer when the watch was busy throughout)."""
+        now = time.monotonic_ns()
+        busy_until = now + GRACE_BUSY_NS
+        deadline = now + self.grace_ns
         while True:
             if self._poll(sock):
                 return True
-            if time.monotonic_ns() >= deadline:
+            now = time.monotonic_ns()
+            if now >= deadline:
                 return False
+            if now >= busy_until and self._wait is not None:
+                self._wait(deadline - now)
 
     def _firmware(self, sock: socket.socket) -> bool:
         """The slaves' firmware work, a piece at a time while no frame waits (at least
@@ -383,9 +396,39 @@ def cpu_latency_limit_us() -> int | None:
     return struct.unpack("=i", raw)[0] if len(raw) == 4 else None
 
 
+class _PollFd(ctypes.Structure):
+    _fields_ = [("fd", ctypes.c_int), ("events", ctypes.c_short), ("revents", ctypes.c_short)]
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+def readable_within(fd: int) -> Callable[[int], bool] | None:
+    """A wait of at most ``ns`` nanoseconds for ``fd`` to become readable, True if it did
+    (Linux ``ppoll``: poll() and Python's timeouts round up to whole milliseconds);
+    ``None`` where the C library has no ppoll."""
+    try:
+        ppoll = ctypes.CDLL(None, use_errno=True).ppoll
+    except (OSError, AttributeError):
+        return None
+    ppoll.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_void_p, ctypes.c_void_p]
+    ppoll.restype = ctypes.c_int
+    pollfd = _PollFd(fd, select.POLLIN, 0)
+    timeout = _Timespec(0, 0)
+    at_fd, at_timeout = ctypes.addressof(pollfd), ctypes.addressof(timeout)
+
+    def wait(ns: int) -> bool:
+        timeout.tv_sec, timeout.tv_nsec = divmod(max(0, ns), 1_000_000_000)
+        pollfd.revents = 0
+        return bool(ppoll(at_fd, 1, at_timeout, None) > 0)
+
+    return wait
+
+
 def _tight_timers() -> None:
-    """Ask Linux for 1 µs timer slack (default 50 µs), so the grace sleep is as short as
-    asked; elsewhere, or if refused, the sleeps are just longer."""
+    """Ask Linux for 1 µs timer slack (default 50 µs; a SCHED_FIFO task has none), so the
+    grace's wait ends when asked; elsewhere, or if refused, the waits are just longer."""
     if not sys.platform.startswith("linux"):
         return
     try:
