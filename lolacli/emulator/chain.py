@@ -302,13 +302,15 @@ class Chain:
         self.reachable = len(slaves)
         self._epoch = [0]  # one cell for all slaves: any change invalidates the plans
         self._addressing = [0]  # one cell for all slaves: configured addresses changed
+        self._sii_version = [0]  # one cell for all slaves: an SII image or layout replaced
         self._pdi: list[tuple[Callable[..., object], tuple[Any, ...]]] = []  # firmware work
         for esc in slaves:
             esc.epoch = self._epoch
             esc.addressing = self._addressing
+            esc.sii_version = self._sii_version
             esc.pdi = self._pdi
         self._stations_at = -1
-        self._line_at = -1  # the addressing cell's value the C core's line is for
+        self._line_at = -1  # the SII version the C core's line is for (-1: none)
         self._stations_map: dict[int, int] = {}
         self._delays: dict[tuple[tuple[int, ...], int], int] = {}
         self._plans: dict[Key, FramePlan | None] = {}
@@ -343,6 +345,7 @@ class Chain:
         esc = self.slaves[position - 1]
         esc.sii = bytearray(image)
         esc.layout = sii_layout(bytes(image))
+        self._sii_version[0] += 1
         esc.reset()
 
     def _line_changed(self) -> None:
@@ -352,6 +355,7 @@ class Chain:
         self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
         self._port_offsets = self.timing.port_times(0, len(self._active))
+        self._line_at = -1  # the C core's line too
         for i, esc in enumerate(self.slaves):
             esc.set_topology(last=i >= self.reachable - 1)
 
@@ -479,9 +483,9 @@ class Chain:
         its 15-FPRD polls 6 against 21. ``None``: the frame is not one."""
         core = self._core
         assert core is not None
-        if self._line_at != self._addressing[0]:
+        if self._line_at != self._sii_version[0]:
             core.set_line([port.port0_ns for port in self._port_offsets])
-            self._line_at = self._addressing[0]
+            self._line_at = self._sii_version[0]
         if self._deferred_dc:
             self._run_deferred_dc()  # as the general path does before any datagram
         got = core.register_frame(frame, t_ns)

@@ -303,3 +303,37 @@ def test_eeprom_reads_of_four_bytes_in_the_register_path() -> None:
         assert got == slow.process(frame, 1000 * k)[0], f"frame {k}"
     assert [e.mem for e in fast.slaves] == [e.mem for e in slow.slaves]
     assert 100 < taken[0] < 200  # writes and reloads go to Python
+
+
+@pytest.mark.skipif(not core_available(), reason="no C core")
+def test_the_register_path_reads_an_sii_image_given_later() -> None:
+    """``Chain.use_sii`` gives a slave another image: the register path's EEPROM reads
+    (its line of SII images) read the new one, as the Python path does."""
+    from lolacli.emulator.sii import SiiSpec, build_sii
+
+    eni = load_eni(EXAMPLES / "ek1100_io.xml")
+    fast, slow = build_chain(eni, engine="c"), build_chain(eni, engine="python")
+    taken = _count_register_frames(fast)
+
+    def read_word(chain: Chain, word: int) -> bytes:
+        frame = encode_frame(
+            make_frame(
+                [
+                    Datagram.physical(C.APWR, 0xFFFF, 0x0502, struct.pack("<BBI", 0, 1, word)),
+                    Datagram.physical(C.APRD, 0xFFFF, 0x0508, 8),
+                ]
+            ),
+            pad=True,
+        )
+        got, _ = chain.process(frame, 0)
+        return decode_frame(got).datagrams[1].data
+
+    before = read_word(fast, 0x0A)  # product code
+    assert before == read_word(slow, 0x0A)
+    image = build_sii(SiiSpec("other", 2, 0x12345678, 1))
+    for chain in (fast, slow):
+        chain.use_sii(2, image)
+    after = read_word(fast, 0x0A)
+    assert after == read_word(slow, 0x0A) != before
+    assert after[:4] == struct.pack("<I", 0x12345678)
+    assert taken[0] == 2

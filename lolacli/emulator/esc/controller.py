@@ -99,6 +99,7 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         self._last_mailbox_in = None
         self.epoch = [0]
         self.addressing = [0]
+        self.sii_version = [0]
         self.pdi = None
         self._mailbox_write_counter = 0
         self._mailbox_pending = False

@@ -42,7 +42,8 @@ class SiiInterface(EscMemory):
         elif command == _RELOAD:
             self.layout = sii_layout(bytes(self.sii))
             _U16.pack_into(self.mem, r.STATION_ALIAS, self.layout.station_alias)
-            self.addressing[0] += 1  # the alias, and the layout the chain looks up
+            self.addressing[0] += 1  # the alias
+            self.sii_version[0] += 1
         elif command:
             status |= _COMMAND_ERROR
         _U16.pack_into(self.mem, r.SII_CONTROL_STATUS, status & 0xFFFF)

@@ -71,10 +71,13 @@ class EscMemory:
     # states, topology): the chain's frame plans are valid for one value. A chain
     # shares one cell between its slaves.
     epoch: list[int]
-    # bumped when a station address, alias or alias enable, or the SII layout may have
-    # changed: the chain's map of configured addresses and the C core's table of each
-    # slave's mailbox sync managers are valid for one value (shared like epoch)
+    # bumped when a station address, alias or alias enable may have changed: the
+    # chain's map of configured addresses is valid for one value (shared like epoch)
     addressing: list[int]
+    # bumped when the SII image or its layout is replaced (power-on with another image,
+    # an EEPROM reload): the C core's line of SII images and mailbox sync managers is
+    # valid for one value (shared like epoch)
+    sii_version: list[int]
     # The slave's firmware side (the PDI): AL control requests and mailbox writes are
     # taken by the ESC at once (the frame is answered) and handled by the firmware
     # afterwards, as on hardware. ``None``: handled at once; a list (a chain's): work
