@@ -355,7 +355,10 @@ class Chain:
         self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
         self._port_offsets = self.timing.port_times(0, len(self._active))
-        self._line_at = -1  # the C core's line too
+        self._line_at = -1
+        if self._core is not None:  # the C core's line now, not in a frame's answer
+            self._core.set_line([port.port0_ns for port in self._port_offsets])
+            self._line_at = self._sii_version[0]
         for i, esc in enumerate(self.slaves):
             esc.set_topology(last=i >= self.reachable - 1)
 
