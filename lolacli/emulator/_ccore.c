@@ -4,9 +4,11 @@
  * The Python code is the reference and this file follows it statement for statement:
  *   - FramePlan.run and the work it defers (lolacli/emulator/plan.py),
  *   - system_time_loop, Esc.system_time_ns, Esc.check_watchdog, Esc.cycle
- *     (lolacli/emulator/esc.py),
+ *     (lolacli/emulator/esc/),
  *   - Device.cycle / unpack_outputs / pack_inputs (lolacli/devices/base.py), the steps of
- *     Cia402Drive (devices/cia402.py), DigitalIo and AnalogInput (devices/io.py).
+ *     Cia402Drive (devices/cia402.py), DigitalIo and AnalogInput (devices/io.py),
+ *   - Chain._run_slots for frames of register reads and writes that only store bytes
+ *     (lolacli/emulator/chain.py, esc/controller.py, esc/sm.py, esc/eeprom.py).
  * The tables it runs on are built from the Python objects by core.py and
  * lolacli/devices/flat.py; tests/emulator/test_core.py and tests/devices/test_flat.py
  * compare the two implementations bit for bit.

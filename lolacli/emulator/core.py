@@ -1,4 +1,5 @@
-"""The chain's cyclic work compiled: frame plans, DC loops, watchdogs and device cycles in C.
+"""The chain's cyclic work compiled: frame plans, DC loops, watchdogs and device cycles in C,
+and the register frames of a start-up (:meth:`ChainCore.register_frame`).
 
 The C kernel (``_ccore.c``, built at install time when a C compiler is present) runs the
 work of a planned frame (:class:`~lolacli.emulator.plan.FramePlan`: its answer and the
@@ -332,12 +333,13 @@ class ChainCore:
         return True
 
     def register_frame(self, frame: bytes, t_ns: int) -> tuple[bytearray, tuple[int, ...]] | None:
-        """A frame of APRD/FPRD/APWR/FPWR datagrams of registers that store bytes and the
-        FMMU/SM configuration only, answered as ``Chain._run_slots`` would (through
-        ``Esc.read_addressed``/``write_addressed``): the answer and the datagrams' lengths.
-        ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
-        but for those whose SM or FMMU registers were written (their watchdog time may
-        change): the Esc objects work the configuration out again."""
+        """A frame of APRD/FPRD/APWR/FPWR, BRD and BWR datagrams of registers whose writes
+        set off nothing but the store, one slave's FMMU/SM configuration and the EEPROM
+        read command, answered as ``Chain._run_slots`` would (``Esc.read_addressed``/
+        ``write_addressed``, ``broadcast_read``/``broadcast_write``): the answer and the
+        datagrams' lengths. ``None`` (nothing changed) for any other frame. Slaves the
+        kernel holds stay held, but for those whose SM or FMMU registers were written
+        (their watchdog time may change): the Esc objects work the configuration out again."""
         if self._regs is None or t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
             return None
         if frame.__class__ is not bytes:
