@@ -52,7 +52,7 @@ from lolacli.wire.registers import AlStatusCode
 from lolacli.wire.sdo import SdoUploadRequest, encode_sdo
 from tests.emulator.bus import EXAMPLES, Bus
 from tests.emulator.test_general_path import _random_frame as _register_frame
-from tests.emulator.test_general_path import _single_slave_frame
+from tests.emulator.test_general_path import _single_slave_frame, count_register_frames
 from tests.emulator.test_plan import _random_frame
 
 CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
@@ -663,11 +663,9 @@ def test_watchdogs_expire_per_slave_when_only_some_outputs_come() -> None:
     twin.same_state()
 
 
-def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
-    """A master clears the watchdog enable of drive 5's output SM in OP, one FPWR that the
-    core's register path takes with the slaves held: the core gives that slave back (its
-    watchdog time changes with the SM), so without outputs drive 5 stays in OP while the
-    drives beside it expire, in both engines."""
+def _lola_moving() -> tuple[Eni, Twin, Script]:
+    """The twin LOLA chains in OP, every drive enabled and 10 cycles on, the state left
+    with the core (no comparison in between)."""
     eni = load_eni(EXAMPLES / "lola.xml")
     twin = Twin(eni, compare_every=0)
     script = Script(eni, twin, plannable_only=False)
@@ -675,17 +673,18 @@ def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
     for cw in (0x06, 0x07, 0x0F):
         script.move(1, controlword=cw)
     script.move(10)
+    return eni, twin, script
+
+
+def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
+    """A master clears the watchdog enable of drive 5's output SM in OP, one FPWR that the
+    core's register path takes with the slaves held: the core gives that slave back (its
+    watchdog time changes with the SM), so without outputs drive 5 stays in OP while the
+    drives beside it expire, in both engines."""
+    eni, twin, script = _lola_moving()
     core = twin.c._core
     assert core is not None and not core.released  # the core holds every slave
-    taken = [0]
-    answer = core.register_frame
-
-    def counted(frame: bytes, t_ns: int):  # type: ignore[no-untyped-def]
-        got = answer(frame, t_ns)
-        taken[0] += got is not None
-        return got
-
-    core.register_frame = counted  # type: ignore[method-assign]
+    taken = count_register_frames(twin.c)
     station = eni.slaves[4].station_address
     control = 0x0800 + 8 * twin.c._slaves[4].layout.outputs_sm + 4
     value = script.bus.fprd(station, control, 1)[0]
@@ -706,15 +705,10 @@ def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
 
 
 def test_sync_managers_moved_in_op_move_the_process_data() -> None:
-    """A master rewrites a slave's input SM start in OP (a register write, taken in
-    Python): the next cycles put the inputs where the SM now is."""
-    eni = load_eni(EXAMPLES / "lola.xml")
-    twin = Twin(eni, compare_every=0)
-    script = Script(eni, twin, plannable_only=False)
-    bring_up(script.bus, eni, script.outputs, plannable_only=False)
-    for cw in (0x06, 0x07, 0x0F):
-        script.move(1, controlword=cw)
-    script.move(10)
+    """A master rewrites a slave's input SM start in OP (a register write, which the
+    core's register path takes and gives the slave back): the next cycles put the inputs
+    where the SM now is."""
+    eni, twin, script = _lola_moving()
     station = eni.slaves[4].station_address
     for sm in range(2, 4):  # the process data SMs, wherever they are: 0x20 bytes on
         start = struct.unpack("<H", script.bus.fprd(station, 0x0800 + 8 * sm, 2))[0]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import random
 import struct
+from collections.abc import Callable
 
 import pytest
 
@@ -144,7 +145,7 @@ def _adp(rng: random.Random, cmd: int, slaves: int, stations: list[int]) -> int:
     return rng.randrange(0, 3)
 
 
-def _count_register_frames(chain: Chain) -> list[int]:
+def count_register_frames(chain: Chain) -> list[int]:
     """[frames the C core's register path answered] for ``chain``, counted from now."""
     taken = [0]
     core = chain._core
@@ -172,19 +173,31 @@ def _count_register_frames(chain: Chain) -> list[int]:
 def test_general_path_answers_like_the_slave_major_reference(name: str, engine: str) -> None:
     """(With the C core holding the slaves between cyclic frames: tests/emulator/test_core.py,
     ``register_traffic``.)"""
+    _against_the_reference(name, engine, random.Random(11), _random_frame)
+
+
+def _against_the_reference(
+    name: str,
+    engine: str,
+    rng: random.Random,
+    make: Callable[[random.Random, int, list[int]], bytes],
+) -> int:
+    """1500 frames of ``make`` through a chain of ``engine`` and the slave-major reference,
+    after station addresses as a master gives them: the same replies, and every 100 frames
+    the same memories, AL states and clocks. The frames the C core's register path took."""
     eni = load_eni(EXAMPLES / name)
     fast = build_chain(eni, drift_ppb=10, engine=engine)
     slow = build_chain(eni, drift_ppb=10, engine="python")
     fast.plan_after = slow.plan_after = 0
-    rng = random.Random(11)
     stations = [s.station_address for s in eni.slaves]
     for chain in (fast, slow):  # station addresses first, as a master gives them
         for i, station in enumerate(stations):
             d = Datagram.physical(C.APWR, (-i) & 0xFFFF, 0x0010, struct.pack("<H", station))
             chain.process(encode_frame(make_frame([d]), pad=True), 0)
+    taken = count_register_frames(fast)
     t_ns = 1_000_000
     for k in range(1500):
-        frame = _random_frame(rng, len(eni.slaves), stations)
+        frame = make(rng, len(eni.slaves), stations)
         t_ns += rng.randrange(1000, 200_000)
         got, _ = fast.process(frame, t_ns)
         want = reference_process(slow, frame, t_ns)
@@ -193,6 +206,7 @@ def test_general_path_answers_like_the_slave_major_reference(name: str, engine: 
             for i, (a, b) in enumerate(zip(fast.slaves, slow.slaves, strict=True)):
                 assert a.mem == b.mem, f"frame {k}, slave {i}"
                 assert a.al_state == b.al_state and a.clock == b.clock, f"frame {k}, slave {i}"
+    return taken[0]
 
 
 @pytest.mark.parametrize(
@@ -208,30 +222,9 @@ def test_single_slave_register_frames_answer_like_the_slave_major_reference(
 ) -> None:
     """Frames of single-slave register datagrams only: with the C core, most of them take
     its register path (``ChainCore.register_frame``), the rest the Python general path."""
-    eni = load_eni(EXAMPLES / name)
-    fast = build_chain(eni, drift_ppb=10, engine=engine)
-    slow = build_chain(eni, drift_ppb=10, engine="python")
-    fast.plan_after = slow.plan_after = 0
-    rng = random.Random(5)
-    stations = [s.station_address for s in eni.slaves]
-    for chain in (fast, slow):
-        for i, station in enumerate(stations):
-            d = Datagram.physical(C.APWR, (-i) & 0xFFFF, 0x0010, struct.pack("<H", station))
-            chain.process(encode_frame(make_frame([d]), pad=True), 0)
-    taken = _count_register_frames(fast)
-    t_ns = 1_000_000
-    for k in range(1500):
-        frame = _single_slave_frame(rng, len(eni.slaves), stations)
-        t_ns += rng.randrange(1000, 200_000)
-        got, _ = fast.process(frame, t_ns)
-        want = reference_process(slow, frame, t_ns)
-        assert got == want, f"frame {k}: {frame.hex()}"
-        if k % 100 == 0:
-            for i, (a, b) in enumerate(zip(fast.slaves, slow.slaves, strict=True)):
-                assert a.mem == b.mem, f"frame {k}, slave {i}"
-                assert a.al_state == b.al_state and a.clock == b.clock, f"frame {k}, slave {i}"
+    taken = _against_the_reference(name, engine, random.Random(5), _single_slave_frame)
     if engine == "c":
-        assert 300 < taken[0] < 1400  # both paths ran
+        assert 300 < taken < 1400  # both paths ran
 
 
 @pytest.mark.parametrize(
@@ -249,7 +242,7 @@ def test_a_sync_manager_disabled_forgets_its_full_mailbox_buffer(engine: str) ->
     fast = build_chain(eni, engine=engine)
     slow = build_chain(eni, engine="python")
     station = eni.slaves[0].station_address
-    taken = _count_register_frames(fast)
+    taken = count_register_frames(fast)
     sm2 = struct.pack("<HHBBBB", 0x1C00, 4, 0x06, 0, 0x01, 0)  # mailbox, master writes
     steps = [
         Datagram.physical(C.APWR, 0, 0x0010, struct.pack("<H", station)),
@@ -284,7 +277,7 @@ def test_eeprom_reads_of_four_bytes_in_the_register_path() -> None:
         return Chain([Esc(image, config=config) for image in images], engine=engine)
 
     fast, slow = chain("c"), chain("python")
-    taken = _count_register_frames(fast)
+    taken = count_register_frames(fast)
     rng = random.Random(3)
     for k in range(200):
         cmd = rng.choice([C.APWR, C.BWR])
@@ -313,7 +306,7 @@ def test_the_register_path_reads_an_sii_image_given_later() -> None:
 
     eni = load_eni(EXAMPLES / "ek1100_io.xml")
     fast, slow = build_chain(eni, engine="c"), build_chain(eni, engine="python")
-    taken = _count_register_frames(fast)
+    taken = count_register_frames(fast)
 
     def read_word(chain: Chain, word: int) -> bytes:
         frame = encode_frame(
