@@ -355,10 +355,8 @@ class Chain:
         self._active = self.slaves[: self.reachable]
         # when the frame reaches each slave, relative to its start: fixed for a line
         self._port_offsets = self.timing.port_times(0, len(self._active))
-        self._line_at = -1
         if self._core is not None:  # the C core's line now, not in a frame's answer
-            self._core.set_line([port.port0_ns for port in self._port_offsets])
-            self._line_at = self._sii_version[0]
+            self._set_core_line(self._core)
         for i, esc in enumerate(self.slaves):
             esc.set_topology(last=i >= self.reachable - 1)
 
@@ -487,8 +485,7 @@ class Chain:
         core = self._core
         assert core is not None
         if self._line_at != self._sii_version[0]:
-            core.set_line([port.port0_ns for port in self._port_offsets])
-            self._line_at = self._sii_version[0]
+            self._set_core_line(core)
         if self._deferred_dc:
             self._run_deferred_dc()  # as the general path does before any datagram
         got = core.register_frame(frame, t_ns)
@@ -501,6 +498,10 @@ class Chain:
         buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         return bytes(buf), self._delay_ns(lengths)
+
+    def _set_core_line(self, core: ChainCore) -> None:
+        core.set_line([port.port0_ns for port in self._port_offsets])
+        self._line_at = self._sii_version[0]
 
     def _run_slots(
         self, buf: bytearray, slots: list[_Slot], t_ns: int, damaged: int | None
