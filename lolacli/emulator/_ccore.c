@@ -532,12 +532,14 @@ void lolacli_core_finish(plan_t *p) {
  * broadcast_read, broadcast_write, SiiInterface._eeprom_command): answered in r->buf.
  * The classes are register_classes() of lolacli/emulator/esc/memory.py, one per register
  * byte. */
-enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16 };
+enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16,
+       R_AL_CONTROL = 32 };
 enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_BWR = 8 };
 #define REGISTER_BYTES 0x1000
 #define STATION_ADDRESS 0x0010
 #define STATION_ALIAS 0x0012
 #define ALIAS_ENABLE_BYTE 0x0103
+#define AL_CONTROL 0x0120
 #define SII_CONTROL 0x0502
 #define SII_ADDRESS 0x0504
 #define SII_DATA 0x0508
@@ -559,8 +561,10 @@ enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_
  * address and bytes, 8-byte EEPROM reads */
 #define LINE_WORDS 7
 /* out: [touched, n_slaves entries (position << 2 | T_*), n_slaves marks (entry + 1, 0:
- * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths] */
-#define OUT_WORDS(n) (2 + 2 * (n) + MAX_REGISTER_DATAGRAMS)
+ * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths, AL control
+ * requests, FIRMWARE_CAP(n) of them (position << 8 | the byte written), in order] */
+#define FIRMWARE_CAP(n) (2 * (n) + MAX_REGISTER_DATAGRAMS)
+#define OUT_WORDS(n) (3 + 2 * (n) + MAX_REGISTER_DATAGRAMS + FIRMWARE_CAP(n))
 enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
 
 typedef struct {
@@ -629,6 +633,10 @@ static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 l
         }
     }
     if (any & R_EEPROM) eeprom_command(s->mem, row);
+    if (any & R_AL_CONTROL) { /* Esc.al_control_written: queued by the wrapper, in order */
+        i64 *requests = r->out + 2 + 2 * r->n_slaves + MAX_REGISTER_DATAGRAMS;
+        requests[1 + requests[0]++] = p << 8 | s->mem[AL_CONTROL];
+    }
     return any & R_CONFIGURATION ? T_CONFIGURATION : 0;
 }
 
@@ -665,7 +673,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     i64 end = 16 + (word & 0x7FF);
     if (word >> 12 != 1 || end > n) return -1;
     i64 at[MAX_REGISTER_DATAGRAMS], where[MAX_REGISTER_DATAGRAMS];
-    i64 count = 0, pos = 16;
+    i64 count = 0, pos = 16, requests = 0;
     const uint8_t *cls = r->classes;
     for (;;) { /* pass 1: the frame is this path's, nothing written */
         if (pos + 10 > end || count == MAX_REGISTER_DATAGRAMS) return -1;
@@ -687,6 +695,10 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
             for (i64 a = ado; a < ado + length; a++) any |= cls[a];
             if (any & R_PYTHON) return -1;
             if (p == ALL_SLAVES && any & (R_CONFIGURATION | R_SYNC_MANAGER)) return -1;
+            if (any & R_AL_CONTROL) {
+                requests += p == ALL_SLAVES ? r->n_active : 1;
+                if (requests > FIRMWARE_CAP(r->n_slaves)) return -1;
+            }
             if (any & R_EEPROM) { /* the command as written: SII writes and reloads in Python */
                 i64 command_byte = SII_CONTROL + 1;
                 if (!(ado <= command_byte && command_byte < ado + length)) return -1;
@@ -710,6 +722,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     i64 *out = r->out;
     memcpy(buf, frame, (size_t)n);
     out[0] = 0;
+    out[2 + 2 * r->n_slaves + MAX_REGISTER_DATAGRAMS] = 0;
     i64 writes = 0;
     i64 *lengths = out + 2 + 2 * r->n_slaves;
     lengths[-1] = count;

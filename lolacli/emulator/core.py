@@ -160,8 +160,8 @@ T_CONFIGURATION, T_RELEASED = 1, 2
 
 def out_words(n_slaves: int) -> int:
     """The out array's length for ``n_slaves``: touched count and entries, marks, the
-    datagram count and lengths."""
-    return 2 + 2 * n_slaves + MAX_REGISTER_DATAGRAMS
+    datagram count and lengths, the AL control requests' count and requests."""
+    return 3 + 4 * n_slaves + 2 * MAX_REGISTER_DATAGRAMS
 
 
 REGISTER_FRAME_BYTES = 2048  # the largest frame the register path answers
@@ -361,6 +361,10 @@ class ChainCore:
             escs[0].epoch[0] += writes  # as Esc.write_addressed, once a write
         at = 2 + 2 * len(escs)
         lengths = tuple(out[at : at + out[at - 1]])
+        at += MAX_REGISTER_DATAGRAMS
+        for k in range(at + 1, at + 1 + out[at]):  # the firmware's work, in the frame's order
+            request = out[k]
+            escs[request >> 8].al_control_written(request & 0xFF)
         return self._regs_buf[: len(frame)], lengths
 
     # ------------------------------------------------------------ ownership

@@ -9,6 +9,7 @@ same frame included.
 
 from __future__ import annotations
 
+import functools
 import random
 import struct
 from collections.abc import Callable
@@ -102,11 +103,14 @@ def _eeprom_command(rng: random.Random) -> bytes:
     return struct.pack("<BBI", rng.randrange(0, 256) & 0x41, command, address)
 
 
-def _single_slave_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes:
+def _single_slave_frame(
+    rng: random.Random, slaves: int, stations: list[int], *, al_control: bool = False
+) -> bytes:
     """Up to 15 APRD/FPRD/APWR/FPWR, BRD and BWR of registers, as a start-up's SM/FMMU
     set-up, SII reads and status polls (the C core's register path): FMMU and SM registers
     (mailbox SMs too), EEPROM commands, read-only bytes, registers with side effects, the
-    DC system time, no data, unknown stations and positions past the end."""
+    DC system time, no data, unknown stations and positions past the end; with
+    ``al_control``, AL state requests too."""
     datagrams = []
     for _ in range(rng.randrange(1, 16)):
         cmd = rng.choice(_SINGLE)
@@ -114,6 +118,11 @@ def _single_slave_frame(rng: random.Random, slaves: int, stations: list[int]) ->
         if cmd in _WRITES and area < 0.15:
             adp = _adp(rng, cmd, slaves, stations)
             datagrams.append(Datagram.physical(cmd, adp, 0x0502, _eeprom_command(rng)))
+            continue
+        if al_control and cmd in _WRITES and area < 0.22:  # a state request, acknowledged or not
+            adp = _adp(rng, cmd, slaves, stations)
+            request = rng.choice([1, 2, 4, 8, 3, 0x11, 0x12, 0x14, 0])
+            datagrams.append(Datagram.physical(cmd, adp, 0x0120, bytes([request, 0])))
             continue
         if area < 0.35:
             ado, length = 0x0800 + 8 * rng.randrange(0, 17), rng.choice([1, 2, 8, 8, 16])
@@ -225,6 +234,10 @@ def test_single_slave_register_frames_answer_like_the_slave_major_reference(
     taken = _against_the_reference(name, engine, random.Random(5), _single_slave_frame)
     if engine == "c":
         assert 300 < taken < 1400  # both paths ran
+    with_requests = functools.partial(_single_slave_frame, al_control=True)
+    taken = _against_the_reference(name, engine, random.Random(6), with_requests)
+    if engine == "c":
+        assert 300 < taken < 1400
 
 
 @pytest.mark.parametrize(

@@ -193,6 +193,11 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             self._register_side_effects(plan, ado, end, payload, t_ns)
         return 1
 
+    def al_control_written(self, control: int) -> None:
+        """The master wrote ``control`` into AL control: the request goes to the firmware
+        as written (see ``AlStateMachine._al_control_written``)."""
+        self.hand_to_firmware(self._al_control_written, control)
+
     def configuration_written(self) -> None:
         """The FMMU or SM registers were written: their decoded configuration and the
         process-data watchdog time that depends on it are worked out again when next used."""
@@ -278,8 +283,8 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
             self._system_time_written(start, end, payload, t_ns)
         if plan.sync_managers:
             self._sm_registers_written(start, end)
-        if plan.al_control:  # the request as written: see AlStateMachine._al_control_written
-            self.hand_to_firmware(self._al_control_written, self.mem[r.AL_CONTROL])
+        if plan.al_control:
+            self.al_control_written(self.mem[r.AL_CONTROL])
 
     def cycle(self, t_ns: int) -> None:
         """One application cycle: outputs from the output SM to the device, inputs back."""

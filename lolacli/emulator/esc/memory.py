@@ -269,10 +269,10 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
 # what a master's write to a register byte does, for the C core's register path
 # (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration, sync manager registers,
-# the EEPROM command, anything else (the Python path's: AL control, addressing, DC,
-# watchdog, counters)
+# the EEPROM command, anything else (the Python path's: addressing, DC, watchdog,
+# counters), the AL control request
 REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
-REGISTER_PYTHON, REGISTER_EEPROM = 8, 16
+REGISTER_PYTHON, REGISTER_EEPROM, REGISTER_AL_CONTROL = 8, 16, 32
 
 
 @lru_cache(maxsize=1)
@@ -289,7 +289,9 @@ def register_classes() -> bytes:
             c |= REGISTER_SYNC_MANAGER
         if w.eeprom:
             c |= REGISTER_EEPROM
-        others = (w.watchdog, w.addressing, w.latch, w.system_time, w.al_control)
+        if w.al_control:
+            c |= REGISTER_AL_CONTROL
+        others = (w.watchdog, w.addressing, w.latch, w.system_time)
         if w.clear_groups or any(others):
             c |= REGISTER_PYTHON
         out[a] = c
