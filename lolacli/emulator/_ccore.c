@@ -35,7 +35,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 5
+#define ABI_VERSION 6
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -533,7 +533,7 @@ void lolacli_core_finish(plan_t *p) {
  * The classes are register_classes() of lolacli/emulator/esc/memory.py, one per register
  * byte. */
 enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16,
-       R_AL_CONTROL = 32 };
+       R_AL_CONTROL = 32, R_ADDRESSING = 64 };
 enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_BWR = 8 };
 #define REGISTER_BYTES 0x1000
 #define STATION_ADDRESS 0x0010
@@ -562,9 +562,12 @@ enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_
 #define LINE_WORDS 7
 /* out: [touched, n_slaves entries (position << 2 | T_*), n_slaves marks (entry + 1, 0:
  * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths, AL control
- * requests, FIRMWARE_CAP(n) of them (position << 8 | the byte written), in order] */
+ * requests, FIRMWARE_CAP(n) of them (position << 8 | the byte written), in order, the
+ * station address or alias enable written (1) or not (0)] */
 #define FIRMWARE_CAP(n) (2 * (n) + MAX_REGISTER_DATAGRAMS)
-#define OUT_WORDS(n) (3 + 2 * (n) + MAX_REGISTER_DATAGRAMS + FIRMWARE_CAP(n))
+#define OUT_WORDS(n) (4 + 2 * (n) + MAX_REGISTER_DATAGRAMS + FIRMWARE_CAP(n))
+#define OUT_REQUESTS(r) ((r)->out + 2 + 2 * (r)->n_slaves + MAX_REGISTER_DATAGRAMS)
+#define OUT_ADDRESSING(r) (OUT_REQUESTS(r) + 1 + FIRMWARE_CAP((r)->n_slaves))
 enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
 
 typedef struct {
@@ -634,9 +637,10 @@ static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 l
     }
     if (any & R_EEPROM) eeprom_command(s->mem, row);
     if (any & R_AL_CONTROL) { /* Esc.al_control_written: queued by the wrapper, in order */
-        i64 *requests = r->out + 2 + 2 * r->n_slaves + MAX_REGISTER_DATAGRAMS;
+        i64 *requests = OUT_REQUESTS(r);
         requests[1 + requests[0]++] = p << 8 | s->mem[AL_CONTROL];
     }
+    if (any & R_ADDRESSING) *OUT_ADDRESSING(r) = 1; /* the wrapper bumps Esc.addressing */
     return any & R_CONFIGURATION ? T_CONFIGURATION : 0;
 }
 
@@ -665,15 +669,16 @@ static void add_wkc(uint8_t *at, i64 added) {
  * path does not take: not an untagged command frame as Chain's _slots reads it, a datagram
  * of another command, of no data, beyond the registers, reading the DC system time, a
  * write that sets off more than the store, one slave's SM/FMMU configuration (not its
- * mailbox SMs) and an EEPROM read, a broadcast write of the configuration, or more than
- * MAX_REGISTER_DATAGRAMS datagrams. */
+ * mailbox SMs), an EEPROM read, an AL control request and a station address or alias
+ * enable, an FPRD/FPWR after such an addressing write, a broadcast write of the
+ * configuration, or more than MAX_REGISTER_DATAGRAMS datagrams. */
 i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
     if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
     i64 word = frame[14] | frame[15] << 8;
     i64 end = 16 + (word & 0x7FF);
     if (word >> 12 != 1 || end > n) return -1;
     i64 at[MAX_REGISTER_DATAGRAMS], where[MAX_REGISTER_DATAGRAMS];
-    i64 count = 0, pos = 16, requests = 0;
+    i64 count = 0, pos = 16, requests = 0, addressed = 0;
     const uint8_t *cls = r->classes;
     for (;;) { /* pass 1: the frame is this path's, nothing written */
         if (pos + 10 > end || count == MAX_REGISTER_DATAGRAMS) return -1;
@@ -684,7 +689,10 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         if (length == 0 || ado + length > REGISTER_BYTES) return -1;
         i64 p;
         if (cmd == CMD_APRD || cmd == CMD_APWR) p = (-adp) & 0xFFFF;
-        else if (cmd == CMD_FPRD || cmd == CMD_FPWR) p = station_position(r, adp);
+        else if (cmd == CMD_FPRD || cmd == CMD_FPWR) {
+            if (addressed) return -1; /* its station as an earlier datagram left it: Python */
+            p = station_position(r, adp);
+        }
         else if (cmd == CMD_BRD || cmd == CMD_BWR) p = ALL_SLAVES;
         else return -1;
         if (p > r->n_active) p = r->n_active;
@@ -695,6 +703,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
             for (i64 a = ado; a < ado + length; a++) any |= cls[a];
             if (any & R_PYTHON) return -1;
             if (p == ALL_SLAVES && any & (R_CONFIGURATION | R_SYNC_MANAGER)) return -1;
+            if (any & R_ADDRESSING) addressed = 1;
             if (any & R_AL_CONTROL) {
                 requests += p == ALL_SLAVES ? r->n_active : 1;
                 if (requests > FIRMWARE_CAP(r->n_slaves)) return -1;
@@ -722,7 +731,8 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     i64 *out = r->out;
     memcpy(buf, frame, (size_t)n);
     out[0] = 0;
-    out[2 + 2 * r->n_slaves + MAX_REGISTER_DATAGRAMS] = 0;
+    *OUT_REQUESTS(r) = 0;
+    *OUT_ADDRESSING(r) = 0;
     i64 writes = 0;
     i64 *lengths = out + 2 + 2 * r->n_slaves;
     lengths[-1] = count;

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 5
+ABI_VERSION = 6
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -160,8 +160,9 @@ T_CONFIGURATION, T_RELEASED = 1, 2
 
 def out_words(n_slaves: int) -> int:
     """The out array's length for ``n_slaves``: touched count and entries, marks, the
-    datagram count and lengths, the AL control requests' count and requests."""
-    return 3 + 4 * n_slaves + 2 * MAX_REGISTER_DATAGRAMS
+    datagram count and lengths, the AL control requests' count and requests, the
+    addressing flag."""
+    return 4 + 4 * n_slaves + 2 * MAX_REGISTER_DATAGRAMS
 
 
 REGISTER_FRAME_BYTES = 2048  # the largest frame the register path answers
@@ -334,12 +335,14 @@ class ChainCore:
 
     def register_frame(self, frame: bytes, t_ns: int) -> tuple[bytearray, tuple[int, ...]] | None:
         """A frame of APRD/FPRD/APWR/FPWR, BRD and BWR datagrams of registers whose writes
-        set off nothing but the store, one slave's FMMU/SM configuration and the EEPROM
-        read command, answered as ``Chain._run_slots`` would (``Esc.read_addressed``/
-        ``write_addressed``, ``broadcast_read``/``broadcast_write``): the answer and the
-        datagrams' lengths. ``None`` (nothing changed) for any other frame. Slaves the
-        kernel holds stay held, but for those whose SM or FMMU registers were written
-        (their watchdog time may change): the Esc objects work the configuration out again."""
+        set off nothing but the store, one slave's FMMU/SM configuration, the EEPROM read
+        command, an AL control request (queued for the firmware) and a station address or
+        alias enable (no FPRD/FPWR after it in the frame), answered as
+        ``Chain._run_slots`` would (``Esc.read_addressed``/``write_addressed``,
+        ``broadcast_read``/``broadcast_write``): the answer and the datagrams' lengths.
+        ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
+        but for those whose SM or FMMU registers were written (their watchdog time may
+        change): the Esc objects work the configuration out again."""
         if self._regs is None or t_ns.__class__ is not int or not -VALUE_LIMIT < t_ns < VALUE_LIMIT:
             return None
         if frame.__class__ is not bytes:
@@ -365,6 +368,8 @@ class ChainCore:
         for k in range(at + 1, at + 1 + out[at]):  # the firmware's work, in the frame's order
             request = out[k]
             escs[request >> 8].al_control_written(request & 0xFF)
+        if out[at + 1 + 2 * len(escs) + MAX_REGISTER_DATAGRAMS]:
+            escs[0].addressing[0] += 1  # a station address or alias enable written
         return self._regs_buf[: len(frame)], lengths
 
     # ------------------------------------------------------------ ownership

@@ -104,13 +104,20 @@ def _eeprom_command(rng: random.Random) -> bytes:
 
 
 def _single_slave_frame(
-    rng: random.Random, slaves: int, stations: list[int], *, al_control: bool = False
+    rng: random.Random,
+    slaves: int,
+    stations: list[int],
+    *,
+    al_control: bool = False,
+    addressing: bool = False,
 ) -> bytes:
     """Up to 15 APRD/FPRD/APWR/FPWR, BRD and BWR of registers, as a start-up's SM/FMMU
     set-up, SII reads and status polls (the C core's register path): FMMU and SM registers
     (mailbox SMs too), EEPROM commands, read-only bytes, registers with side effects, the
     DC system time, no data, unknown stations and positions past the end; with
-    ``al_control``, AL state requests too."""
+    ``al_control``, AL state requests too; with ``addressing``, station addresses, aliases
+    and the alias enable written (stations of the list given to other slaves, twice, or
+    none), FPxx after them in the same frame."""
     datagrams = []
     for _ in range(rng.randrange(1, 16)):
         cmd = rng.choice(_SINGLE)
@@ -124,6 +131,19 @@ def _single_slave_frame(
             request = rng.choice([1, 2, 4, 8, 3, 0x11, 0x12, 0x14, 0])
             datagrams.append(Datagram.physical(cmd, adp, 0x0120, bytes([request, 0])))
             continue
+        if addressing and cmd in _WRITES and area < 0.3:
+            adp = _adp(rng, cmd, slaves, stations)
+            ado = rng.choice([0x0010, 0x0010, 0x0012, 0x0103, 0x0100, 0x0011])
+            value = rng.choice(stations + [0x7777, 0])
+            data = {
+                0x0010: struct.pack("<H", value),
+                0x0012: struct.pack("<H", value),
+                0x0103: bytes([rng.randrange(0, 2)]),
+                0x0100: bytes(rng.randrange(0, 2) for _ in range(4)),  # DL control
+                0x0011: bytes([value & 0xFF]),
+            }[ado]
+            datagrams.append(Datagram.physical(cmd, adp, ado, data))
+            continue
         if area < 0.35:
             ado, length = 0x0800 + 8 * rng.randrange(0, 17), rng.choice([1, 2, 8, 8, 16])
             if rng.random() < 0.2:
@@ -136,7 +156,7 @@ def _single_slave_frame(
             ado, length = rng.choice(_REGISTERS) + rng.randrange(0, 4), rng.choice([1, 2, 4, 8])
         if cmd in _WRITES and 0x0120 <= ado + length and ado <= 0x0121:
             ado = 0x0F00  # leave the AL state alone: the bring-up decides it
-        if cmd in _WRITES and ado <= 0x0011 < ado + length:
+        if cmd in _WRITES and ado <= 0x0011 < ado + length and not addressing:
             ado = 0x0F00  # and the station addresses
         if 0x0800 <= ado < 0x0880 and cmd in _WRITES and rng.random() < 0.5:
             data: bytes | int = bytes(length)  # an SM disabled: its mailbox full flag clears
@@ -238,6 +258,10 @@ def test_single_slave_register_frames_answer_like_the_slave_major_reference(
     taken = _against_the_reference(name, engine, random.Random(6), with_requests)
     if engine == "c":
         assert 300 < taken < 1400
+    readdressed = functools.partial(_single_slave_frame, addressing=True)
+    taken = _against_the_reference(name, engine, random.Random(7), readdressed)
+    if engine == "c":
+        assert 300 < taken < 1400
 
 
 @pytest.mark.parametrize(
@@ -273,7 +297,7 @@ def test_a_sync_manager_disabled_forgets_its_full_mailbox_buffer(engine: str) ->
         replies.append(decode_frame(got).datagrams[0].data)
     assert (replies[3][0] & 0x08, replies[5][0] & 0x08) == (0x08, 0)
     if engine == "c":
-        assert taken[0] == 4  # all but the process RAM write
+        assert taken[0] == 5  # all but the process RAM write
 
 
 @pytest.mark.skipif(not core_available(), reason="no C core")

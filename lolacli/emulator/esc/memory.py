@@ -269,10 +269,10 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
 # what a master's write to a register byte does, for the C core's register path
 # (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration, sync manager registers,
-# the EEPROM command, anything else (the Python path's: addressing, DC, watchdog,
-# counters), the AL control request
+# the EEPROM command, anything else (the Python path's: DC, watchdog, counters), the AL
+# control request, the station address and alias enable
 REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
-REGISTER_PYTHON, REGISTER_EEPROM, REGISTER_AL_CONTROL = 8, 16, 32
+REGISTER_PYTHON, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
 
 
 @lru_cache(maxsize=1)
@@ -291,7 +291,9 @@ def register_classes() -> bytes:
             c |= REGISTER_EEPROM
         if w.al_control:
             c |= REGISTER_AL_CONTROL
-        others = (w.watchdog, w.addressing, w.latch, w.system_time)
+        if w.addressing:
+            c |= REGISTER_ADDRESSING
+        others = (w.watchdog, w.latch, w.system_time)
         if w.clear_groups or any(others):
             c |= REGISTER_PYTHON
         out[a] = c
