@@ -606,6 +606,17 @@ class Chain:
             self._stations_at = self._addressing[0]
         return self._stations_map.get(address, len(self._active))
 
+    def keep_warm(self) -> None:
+        """Bring what the first frame after a quiet spell reads back into the CPU's caches,
+        changing nothing: the slaves' register memories (a byte a cache line) and the wire
+        delays of short single-datagram frames, a start-up's first. For a quiet server
+        (``keep_warm_with``, run.py): pysoem's first frame to LOLA, caches evicted, 47 ->
+        18 µs in process."""
+        for esc in self._slaves:
+            esc.mem[0:PROCESS_RAM:64]
+        for length in (1, 2):
+            self._delay_ns((length,))
+
     def _delay_ns(self, lengths: tuple[int, ...]) -> int:
         key = (lengths, len(self._active))
         delay = self._delays.get(key)

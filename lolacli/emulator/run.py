@@ -185,13 +185,13 @@ def warm_up(scratch: Chain) -> None:
             scratch.run_deferred_cycles()
 
 
-def keep_warm_with(scratch: Chain) -> Callable[[], None]:
+def keep_warm_with(scratch: Chain, served: Chain | None = None) -> Callable[[], None]:
     """Work for a quiet server (:class:`RawSocketServer` ``keep_warm``): a few register
     frames through ``scratch`` (the :func:`warm_up` chain, never the one served), so the
-    code and data a frame needs stay in the caches while the master is silent. A session's
-    first frame after an idle second (veth, LOLA, BRD probe of
-    ``benchmarks/emulate_latency.py``): 260-410 µs without, 140-310 with; a plain echo
-    server's 110-190."""
+    code and data a frame needs stay in the caches while the master is silent, and
+    ``served``'s own memories read (:meth:`Chain.keep_warm`). A session's first frame
+    after an idle second (veth, LOLA, BRD probe of ``benchmarks/emulate_latency.py``):
+    260-410 µs without, 140-310 with; a plain echo server's 110-190."""
     from lolacli.wire.commands import Command
     from lolacli.wire.frame import Datagram, encode_frame, make_frame
 
@@ -206,6 +206,8 @@ def keep_warm_with(scratch: Chain) -> Callable[[], None]:
             clock[0] += 10_000_000
             scratch.process(frame, clock[0], defer_cycles=True)
         scratch.run_firmware()
+        if served is not None:
+            served.keep_warm()
 
     return warm
 
@@ -234,7 +236,7 @@ def serve(
     keep_warm = None
     if scratch is not None:
         warm_up(scratch)
-        keep_warm = keep_warm_with(scratch)
+        keep_warm = keep_warm_with(scratch, chain)
     with RawSocketServer(
         iface,
         chain,

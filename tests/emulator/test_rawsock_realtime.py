@@ -59,10 +59,12 @@ def test_the_server_holds_the_cpus_awake_while_it_serves_and_lets_go_after() -> 
 @pytest.mark.skipif(os.geteuid() != 0, reason="raw sockets need root")
 def test_a_quiet_server_keeps_warm_on_a_chain_of_its_own() -> None:
     """While no frame comes, the server runs the keep-warm work every WARM_EVERY_MS (not
-    more often): frames through the scratch chain, never through the chain it serves."""
+    more often): frames through the scratch chain, never through the chain it serves, whose
+    memories it only reads."""
     eni = load_eni(EXAMPLES / "single_drive.xml")
     chain, scratch = build_chain(eni), build_chain(eni)
-    warm = keep_warm_with(scratch)
+    before = [bytes(esc.mem) for esc in chain.slaves]
+    warm = keep_warm_with(scratch, chain)
     calls: list[float] = []
 
     def counted() -> None:
@@ -78,6 +80,7 @@ def test_a_quiet_server_keeps_warm_on_a_chain_of_its_own() -> None:
     assert min(gaps) >= 0.9 * WARM_EVERY_MS / 1000, gaps
     assert scratch.stats.frames == 3 * len(calls)
     assert chain.stats.frames == 0
+    assert [bytes(esc.mem) for esc in chain.slaves] == before
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="a veth pair and SCHED_FIFO need root")
