@@ -35,7 +35,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 6
+#define ABI_VERSION 7
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -527,13 +527,15 @@ void lolacli_core_finish(plan_t *p) {
 /* ------------------------------------------------------------------ register frames */
 
 /* A frame whose every datagram is an APRD/FPRD/APWR/FPWR, BRD or BWR of registers that
- * stores bytes and nothing the Python objects hold, the SM/FMMU configuration of one slave
- * and EEPROM reads included (Chain._run_slots: Esc.read_addressed, Esc.write_addressed,
- * broadcast_read, broadcast_write, SiiInterface._eeprom_command): answered in r->buf.
+ * stores bytes and nothing the Python objects hold but what the wrapper is told (the SM/FMMU
+ * configuration or watchdog times written, AL control requests, addressing), EEPROM reads
+ * and error counter clearing included (Chain._run_slots: Esc.read_addressed,
+ * Esc.write_addressed, broadcast_read, broadcast_write, SiiInterface._eeprom_command):
+ * answered in r->buf.
  * The classes are register_classes() of lolacli/emulator/esc/memory.py, one per register
  * byte. */
 enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16,
-       R_AL_CONTROL = 32, R_ADDRESSING = 64 };
+       R_AL_CONTROL = 32, R_ADDRESSING = 64, R_CLEAR = 128 };
 enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_BWR = 8 };
 #define REGISTER_BYTES 0x1000
 #define STATION_ADDRESS 0x0010
@@ -577,6 +579,7 @@ typedef struct {
     const uint8_t *classes; i64 classes_len;
     uint8_t *buf; i64 buf_len;     /* the answer */
     i64 *out; i64 out_len;
+    const i64 *groups; i64 groups_len; /* registers cleared together: [lo, hi) pairs */
 } regs_t;
 
 /* Chain._station_position: the first active slave answering a configured address */
@@ -635,6 +638,11 @@ static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 l
             if (!(sm[6] & SM_ACTIVATE_ENABLE)) sm[5] &= (uint8_t)~SM_STATUS_MAILBOX_FULL;
         }
     }
+    if (any & R_CLEAR) /* a write into a group clears all of it */
+        for (i64 g = 0; g + 1 < r->groups_len; g += 2) {
+            i64 lo = r->groups[g], hi = r->groups[g + 1];
+            if (ado < hi && lo < ado + length) memset(s->mem + lo, 0, (size_t)(hi - lo));
+        }
     if (any & R_EEPROM) eeprom_command(s->mem, row);
     if (any & R_AL_CONTROL) { /* Esc.al_control_written: queued by the wrapper, in order */
         i64 *requests = OUT_REQUESTS(r);
@@ -668,10 +676,10 @@ static void add_wkc(uint8_t *at, i64 added) {
 /* The number of register writes (one a slave), or -1 (nothing changed) for a frame this
  * path does not take: not an untagged command frame as Chain's _slots reads it, a datagram
  * of another command, of no data, beyond the registers, reading the DC system time, a
- * write that sets off more than the store, one slave's SM/FMMU configuration (not its
- * mailbox SMs), an EEPROM read, an AL control request and a station address or alias
- * enable, an FPRD/FPWR after such an addressing write, a broadcast write of the
- * configuration, or more than MAX_REGISTER_DATAGRAMS datagrams. */
+ * write that sets off more than the store, the SM/FMMU configuration and watchdog times
+ * (not of a mailbox SM), an EEPROM read, an AL control request, a station address or alias
+ * enable and the error counters' clearing, an FPRD/FPWR after such an addressing write, or
+ * more than MAX_REGISTER_DATAGRAMS datagrams. */
 i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
     if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
     i64 word = frame[14] | frame[15] << 8;
@@ -702,7 +710,6 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
             int any = 0;
             for (i64 a = ado; a < ado + length; a++) any |= cls[a];
             if (any & R_PYTHON) return -1;
-            if (p == ALL_SLAVES && any & (R_CONFIGURATION | R_SYNC_MANAGER)) return -1;
             if (any & R_ADDRESSING) addressed = 1;
             if (any & R_AL_CONTROL) {
                 requests += p == ALL_SLAVES ? r->n_active : 1;
@@ -714,12 +721,15 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
                 i64 command = (h[10 + command_byte - ado] << 8) & SII_COMMAND_MASK;
                 if (command == SII_WRITE || command == SII_RELOAD) return -1;
             }
-            if ((any & R_SYNC_MANAGER) && p < r->n_active) {
-                const i64 *row = r->line + p * LINE_WORDS;
-                i64 first, last;
-                sm_range(ado, ado + length, row[3], &first, &last);
-                for (i64 i = first; i < last; i++)
-                    if (i == row[1] || i == row[2]) return -1; /* the mailbox's own work */
+            if (any & R_SYNC_MANAGER) { /* the slaves' mailbox SMs: the mailbox's own work */
+                i64 q0 = p == ALL_SLAVES ? 0 : p, q1 = p == ALL_SLAVES ? r->n_active : p + 1;
+                for (i64 q = q0; q < q1 && q < r->n_active; q++) {
+                    const i64 *row = r->line + q * LINE_WORDS;
+                    i64 first, last;
+                    sm_range(ado, ado + length, row[3], &first, &last);
+                    for (i64 i = first; i < last; i++)
+                        if (i == row[1] || i == row[2]) return -1;
+                }
             }
         }
         at[count] = pos;
@@ -848,6 +858,10 @@ i64 lolacli_core_check_registers(const regs_t *r) {
     if (r->line_len < r->n_active * LINE_WORDS || (r->n_active && !r->line)) return 2;
     if (r->classes_len != REGISTER_BYTES || !r->classes) return 3;
     if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS(r->n_slaves)) return 4;
+    if (r->groups_len < 0 || r->groups_len % 2 || (r->groups_len && !r->groups)) return 7;
+    for (i64 g = 0; g < r->groups_len; g += 2)
+        if (r->groups[g] < 0 || r->groups[g] >= r->groups[g + 1] || r->groups[g + 1] > REGISTER_BYTES)
+            return 7;
     for (i64 i = 0; i < r->n_slaves; i++)
         if (r->out[1 + r->n_slaves + i]) return 4; /* the marks start cleared */
     for (i64 i = 0; i < r->n_active; i++) {

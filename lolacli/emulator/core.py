@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
+from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
 from lolacli.emulator.plan import FramePlan, _Brd, _DcDistribution, _Logical
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 6
+ABI_VERSION = 7
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -149,6 +150,8 @@ class RegisterTable(ctypes.Structure):
         ("buf_len", _I64),
         ("out", _VP),
         ("out_len", _I64),
+        ("groups", _VP),
+        ("groups_len", _I64),
     ]
 
 
@@ -288,6 +291,7 @@ class ChainCore:
 
         self._line = array("q")
         self._classes = bytearray(register_classes())
+        self._groups = array("q", [a for group in COUNTER_CLEAR_GROUPS for a in group])
         self._regs_buf = bytearray(REGISTER_FRAME_BYTES)
         self._out = array("q", bytes(8 * out_words(n)))
         self._regs_keep: list[Any] = []
@@ -325,6 +329,8 @@ class ChainCore:
             buf_len=len(self._regs_buf),
             out=_address(self._out, keep),
             out_len=len(self._out),
+            groups=_address(self._groups, keep),
+            groups_len=len(self._groups),
         )
         if self._lib.lolacli_core_check_registers(ctypes.addressof(table)):
             self._regs = None

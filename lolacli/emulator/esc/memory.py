@@ -268,11 +268,13 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
 
 # what a master's write to a register byte does, for the C core's register path
-# (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration, sync manager registers,
-# the EEPROM command, anything else (the Python path's: DC, watchdog, counters), the AL
-# control request, the station address and alias enable
+# (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration or watchdog times (both
+# worked out again, Esc.configuration_written), sync manager registers, anything else (the
+# Python path's: DC), the EEPROM command, the AL control request, the station address and
+# alias enable, an error counter group cleared (COUNTER_CLEAR_GROUPS)
 REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
 REGISTER_PYTHON, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
+REGISTER_CLEAR = 128
 
 
 @lru_cache(maxsize=1)
@@ -283,7 +285,7 @@ def register_classes() -> bytes:
     for a in range(r.PROCESS_RAM):
         w = register_write.__wrapped__(a, a + 1)
         c = REGISTER_READONLY if _READONLY[a] else 0
-        if w.configuration:
+        if w.configuration or w.watchdog:
             c |= REGISTER_CONFIGURATION
         if w.sync_managers:
             c |= REGISTER_SYNC_MANAGER
@@ -293,8 +295,9 @@ def register_classes() -> bytes:
             c |= REGISTER_AL_CONTROL
         if w.addressing:
             c |= REGISTER_ADDRESSING
-        others = (w.watchdog, w.latch, w.system_time)
-        if w.clear_groups or any(others):
+        if w.clear_groups:
+            c |= REGISTER_CLEAR
+        if w.latch or w.system_time:
             c |= REGISTER_PYTHON
         out[a] = c
     return bytes(out)
