@@ -35,7 +35,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 7
+#define ABI_VERSION 8
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -565,11 +565,14 @@ enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_
 /* out: [touched, n_slaves entries (position << 2 | T_*), n_slaves marks (entry + 1, 0:
  * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths, AL control
  * requests, FIRMWARE_CAP(n) of them (position << 8 | the byte written), in order, the
- * station address or alias enable written (1) or not (0)] */
+ * station address or alias enable written (1) or not (0), mailbox SMs written,
+ * MAILBOX_CAP(n) of them (position << 8 | SM), in order] */
 #define FIRMWARE_CAP(n) (2 * (n) + MAX_REGISTER_DATAGRAMS)
-#define OUT_WORDS(n) (4 + 2 * (n) + MAX_REGISTER_DATAGRAMS + FIRMWARE_CAP(n))
+#define MAILBOX_CAP(n) (2 * ((n) + MAX_REGISTER_DATAGRAMS))
+#define OUT_WORDS(n) (5 + 2 * (n) + MAX_REGISTER_DATAGRAMS + FIRMWARE_CAP(n) + MAILBOX_CAP(n))
 #define OUT_REQUESTS(r) ((r)->out + 2 + 2 * (r)->n_slaves + MAX_REGISTER_DATAGRAMS)
 #define OUT_ADDRESSING(r) (OUT_REQUESTS(r) + 1 + FIRMWARE_CAP((r)->n_slaves))
+#define OUT_MAILBOX(r) (OUT_ADDRESSING(r) + 1)
 enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
 
 typedef struct {
@@ -636,6 +639,10 @@ static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 l
         for (i64 i = first; i < last; i++) {
             uint8_t *sm = s->mem + SM_REGISTERS + SM_BYTES * i;
             if (!(sm[6] & SM_ACTIVATE_ENABLE)) sm[5] &= (uint8_t)~SM_STATUS_MAILBOX_FULL;
+            if (i == row[1] || i == row[2]) { /* SyncManagers.mailbox_sm_written, after */
+                i64 *written = OUT_MAILBOX(r);
+                written[1 + written[0]++] = p << 8 | i;
+            }
         }
     }
     if (any & R_CLEAR) /* a write into a group clears all of it */
@@ -676,10 +683,11 @@ static void add_wkc(uint8_t *at, i64 added) {
 /* The number of register writes (one a slave), or -1 (nothing changed) for a frame this
  * path does not take: not an untagged command frame as Chain's _slots reads it, a datagram
  * of another command, of no data, beyond the registers, reading the DC system time, a
- * write that sets off more than the store, the SM/FMMU configuration and watchdog times
- * (not of a mailbox SM), an EEPROM read, an AL control request, a station address or alias
- * enable and the error counters' clearing, an FPRD/FPWR after such an addressing write, or
- * more than MAX_REGISTER_DATAGRAMS datagrams. */
+ * write that sets off more than the store, the SM/FMMU configuration and watchdog times,
+ * an EEPROM read, an AL control request, a station address or alias enable and the error
+ * counters' clearing, an FPRD/FPWR after such an addressing write, a datagram reaching a
+ * slave whose mailbox SM registers an earlier one wrote, or more than
+ * MAX_REGISTER_DATAGRAMS datagrams. */
 i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
     if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
     i64 word = frame[14] | frame[15] << 8;
@@ -687,6 +695,8 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     if (word >> 12 != 1 || end > n) return -1;
     i64 at[MAX_REGISTER_DATAGRAMS], where[MAX_REGISTER_DATAGRAMS];
     i64 count = 0, pos = 16, requests = 0, addressed = 0;
+    i64 mailboxes[MAX_REGISTER_DATAGRAMS], n_mailboxes = 0; /* slaves whose mailbox SMs a
+        datagram wrote: no later datagram may reach them (their mailbox work runs after) */
     const uint8_t *cls = r->classes;
     for (;;) { /* pass 1: the frame is this path's, nothing written */
         if (pos + 10 > end || count == MAX_REGISTER_DATAGRAMS) return -1;
@@ -704,6 +714,9 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         else if (cmd == CMD_BRD || cmd == CMD_BWR) p = ALL_SLAVES;
         else return -1;
         if (p > r->n_active) p = r->n_active;
+        for (i64 k = 0; k < n_mailboxes; k++)
+            if (mailboxes[k] == ALL_SLAVES || (p == ALL_SLAVES ? r->n_active > 0 : mailboxes[k] == p))
+                return -1;
         if (cmd == CMD_APRD || cmd == CMD_FPRD || cmd == CMD_BRD) {
             if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < ado + length) return -1;
         } else {
@@ -721,15 +734,16 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
                 i64 command = (h[10 + command_byte - ado] << 8) & SII_COMMAND_MASK;
                 if (command == SII_WRITE || command == SII_RELOAD) return -1;
             }
-            if (any & R_SYNC_MANAGER) { /* the slaves' mailbox SMs: the mailbox's own work */
+            if (any & R_SYNC_MANAGER) { /* a slave's mailbox SMs: their work runs after */
                 i64 q0 = p == ALL_SLAVES ? 0 : p, q1 = p == ALL_SLAVES ? r->n_active : p + 1;
+                int mailbox = 0;
                 for (i64 q = q0; q < q1 && q < r->n_active; q++) {
                     const i64 *row = r->line + q * LINE_WORDS;
                     i64 first, last;
                     sm_range(ado, ado + length, row[3], &first, &last);
-                    for (i64 i = first; i < last; i++)
-                        if (i == row[1] || i == row[2]) return -1;
+                    for (i64 i = first; i < last; i++) mailbox |= i == row[1] || i == row[2];
                 }
+                if (mailbox) mailboxes[n_mailboxes++] = p;
             }
         }
         at[count] = pos;
@@ -743,6 +757,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     out[0] = 0;
     *OUT_REQUESTS(r) = 0;
     *OUT_ADDRESSING(r) = 0;
+    *OUT_MAILBOX(r) = 0;
     i64 writes = 0;
     i64 *lengths = out + 2 + 2 * r->n_slaves;
     lengths[-1] = count;

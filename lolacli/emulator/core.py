@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 7
+ABI_VERSION = 8
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -164,8 +164,8 @@ T_CONFIGURATION, T_RELEASED = 1, 2
 def out_words(n_slaves: int) -> int:
     """The out array's length for ``n_slaves``: touched count and entries, marks, the
     datagram count and lengths, the AL control requests' count and requests, the
-    addressing flag."""
-    return 4 + 4 * n_slaves + 2 * MAX_REGISTER_DATAGRAMS
+    addressing flag, the mailbox SM writes' count and writes."""
+    return 5 + 6 * n_slaves + 4 * MAX_REGISTER_DATAGRAMS
 
 
 REGISTER_FRAME_BYTES = 2048  # the largest frame the register path answers
@@ -342,8 +342,10 @@ class ChainCore:
     def register_frame(self, frame: bytes, t_ns: int) -> tuple[bytearray, tuple[int, ...]] | None:
         """A frame of APRD/FPRD/APWR/FPWR, BRD and BWR datagrams of registers whose writes
         set off nothing but the store, one slave's FMMU/SM configuration, the EEPROM read
-        command, an AL control request (queued for the firmware) and a station address or
-        alias enable (no FPRD/FPWR after it in the frame), answered as
+        command, an AL control request (queued for the firmware), a station address or
+        alias enable (no FPRD/FPWR after it in the frame), the error counters' clearing,
+        the watchdog times and a mailbox SM's registers (its work done after the frame; no
+        later datagram may reach the slave), answered as
         ``Chain._run_slots`` would (``Esc.read_addressed``/``write_addressed``,
         ``broadcast_read``/``broadcast_write``): the answer and the datagrams' lengths.
         ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
@@ -374,8 +376,12 @@ class ChainCore:
         for k in range(at + 1, at + 1 + out[at]):  # the firmware's work, in the frame's order
             request = out[k]
             escs[request >> 8].al_control_written(request & 0xFF)
-        if out[at + 1 + 2 * len(escs) + MAX_REGISTER_DATAGRAMS]:
+        at += 1 + 2 * len(escs) + MAX_REGISTER_DATAGRAMS
+        if out[at]:
             escs[0].addressing[0] += 1  # a station address or alias enable written
+        for k in range(at + 2, at + 2 + out[at + 1]):  # the mailbox SMs' work, in order
+            written = out[k]
+            escs[written >> 8].mailbox_sm_written(written & 0xFF)
         return self._regs_buf[: len(frame)], lengths
 
     # ------------------------------------------------------------ ownership

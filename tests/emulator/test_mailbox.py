@@ -16,6 +16,9 @@ from __future__ import annotations
 import struct
 from dataclasses import replace
 
+import pytest
+
+from lolacli.emulator.core import core_available
 from lolacli.emulator.slave import build_chain
 from lolacli.files import load_eni
 from lolacli.wire.commands import Command as C
@@ -23,6 +26,7 @@ from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
 from lolacli.wire.mailbox import MailboxType, decode_mailbox, encode_mailbox, make_mailbox
 from lolacli.wire.sdo import SdoUploadRequest, SdoUploadResponse, decode_sdo, encode_sdo
 from tests.emulator.bus import EXAMPLES, Bus
+from tests.emulator.test_general_path import count_register_frames
 
 ENI = load_eni(EXAMPLES / "single_drive.xml")
 SLAVE = ENI.slaves[0]
@@ -37,8 +41,8 @@ FULL = 0x08
 class Master:
     """Frames as a master sends them, through the chain as the server runs it."""
 
-    def __init__(self) -> None:
-        self.chain = build_chain(ENI)
+    def __init__(self, engine: str | None = None) -> None:
+        self.chain = build_chain(ENI, engine=engine)
         bus = Bus(self.chain)
         bus.transition(ENI, "IP")  # mailboxes configured, PREOP
         self.t_ns = bus.t_ns
@@ -126,17 +130,27 @@ def test_counter_zero_is_never_a_repeat() -> None:
     assert m.esc.counters.mailbox_requests == 3
 
 
-def test_the_repeat_request_puts_the_last_answer_in_the_mailbox_again() -> None:
+@pytest.mark.parametrize(
+    "engine",
+    [
+        "python",
+        pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="no C core")),
+    ],
+)
+def test_the_repeat_request_puts_the_last_answer_in_the_mailbox_again(engine: str) -> None:
     """The master's read of the answer came back damaged: it toggles SM1's repeat bit
-    (0x080E bit 1), waits for the PDI acknowledge (0x080F bit 1) and reads again."""
-    m = Master()
+    (0x080E bit 1), waits for the PDI acknowledge (0x080F bit 1) and reads again. With the
+    C core, the toggle takes its register path, which has the mailbox's work done after."""
+    m = Master(engine)
     assert m.send(C.FPWR, OUT[0], m.write_box(5, 0x1018, 1)).wkc == 1
     m.firmware()
     first = m.read_box()
     assert first.wkc == 1 and not m.status(SM1_STATUS) & FULL  # read: the slave forgets
     activate = m.send(C.FPRD, 0x080E, 2).data
     toggled = bytes([activate[0] ^ 0x02, activate[1]])
+    taken = count_register_frames(m.chain)
     assert m.send(C.FPWR, 0x080E, toggled).wkc == 1
+    assert taken[0] == (engine == "c")
     m.firmware()
     assert m.send(C.FPRD, 0x080F, 1).data[0] & 0x02 == toggled[0] & 0x02  # acknowledged
     assert m.status(SM1_STATUS) & FULL

@@ -130,6 +130,8 @@ class SyncManagers(EscMemory):
             self.mem[addr] &= ~r.SM_STATUS_MAILBOX_FULL
 
     def _sm_registers_written(self, start: int, end: int) -> None:
+        """The master wrote the SM registers in ``[start, end)``: a disabled SM forgets its
+        buffer, the mailbox's SMs do their work (:meth:`mailbox_sm_written`)."""
         first = max(0, (start - r.SM) // r.SYNC_MANAGER_BYTES)
         last = min(
             self.config.sync_managers, (end - 1 - r.SM) // r.SYNC_MANAGER_BYTES + 1
@@ -141,10 +143,21 @@ class SyncManagers(EscMemory):
             base = _SM_BASE + _SM_BYTES * i
             if not mem[base + 6] & 1:
                 mem[base + 5] &= _NOT_FULL  # a disabled SM forgets its buffer
-                if i == mailbox_out:
-                    self._write_mailbox_disabled()
-            elif i == mailbox_in:
-                self._repeat_request(base)
+            if i == mailbox_out or i == mailbox_in:
+                self.mailbox_sm_written(i)
+
+    def mailbox_sm_written(self, index: int) -> None:
+        """The master wrote the registers of mailbox SM ``index``: disabled, the write
+        mailbox drops its pending message; enabled, the read mailbox answers a repeat
+        request. The C core's register path, which stores the bytes and clears the full
+        flags itself, has this run after the frame (no later datagram of the frame
+        reaches the slave)."""
+        base = _SM_BASE + _SM_BYTES * index
+        if not self.mem[base + 6] & 1:
+            if index == self.layout.mailbox_out_sm:
+                self._write_mailbox_disabled()
+        elif index == self.layout.mailbox_in_sm:
+            self._repeat_request(base)
 
     def _sm_written(self, start: int, end: int) -> None:
         for sm in self._active_sms():
