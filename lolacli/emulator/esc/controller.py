@@ -7,7 +7,13 @@ import struct
 
 from lolacli.emulator import registers as r
 from lolacli.emulator.esc.counters import ErrorCounters, EscCounters
-from lolacli.emulator.esc.dc import DcClock, DistributedClock, PortTimes
+from lolacli.emulator.esc.dc import (
+    DcClock,
+    DistributedClock,
+    PortTimes,
+    system_time_loop,
+    system_time_written,
+)
 from lolacli.emulator.esc.eeprom import SiiInterface
 from lolacli.emulator.esc.fmmu import Fmmus
 from lolacli.emulator.esc.memory import EscApplication, EscConfig, RegisterWrite, register_write
@@ -352,6 +358,18 @@ def broadcast_write(
     plan = register_write(ado, end)
     bits = plan.writable_bits(payload)
     effects = plan.effects
+    if plan.system_time_only:  # one step of the time control loop for all: LOLA 70 -> 37 µs
+        loop = []
+        for esc, port in zip(escs, ports, strict=False):
+            esc.counters.datagrams += 1
+            esc.now_ns = t_ns + port.port0_ns
+            esc.epoch[0] += 1
+            plan.store_bits(esc.mem, ado, bits)
+            esc.frame_t_ns = t_ns
+            esc.port_offsets = port
+            loop.append((esc.mem, esc.clock, port.port0_ns, esc.dc_offset_minus_delay_ns()))
+        system_time_loop(loop, *system_time_written(ado, end, payload), t_ns)
+        return len(escs)
     for esc, port in zip(escs, ports, strict=False):
         t = t_ns + port.port0_ns
         esc.counters.datagrams += 1

@@ -67,11 +67,7 @@ class DistributedClock(EscMemory):
 
     def _system_time_written(self, start: int, end: int, payload: bytes, t_ns: int) -> None:
         """A write to 0x0910 feeds the time control loop (ETG.1000.4 §6.8, ET1100 §9.2)."""
-        lo = max(start, r.DC_SYSTEM_TIME)
-        hi = min(end, r.DC_SYSTEM_TIME + 8)
-        raw = bytearray(8)
-        raw[lo - r.DC_SYSTEM_TIME : hi - r.DC_SYSTEM_TIME] = payload[lo - start : hi - start]
-        self.system_time_received(int.from_bytes(raw, "little"), 8 * (hi - r.DC_SYSTEM_TIME), t_ns)
+        self.system_time_received(*system_time_written(start, end, payload), t_ns)
 
     def system_time_received(self, value: int, width_bits: int, t_ns: int) -> None:
         """The time control loop's step for a received system time of ``width_bits``."""
@@ -87,6 +83,16 @@ class DistributedClock(EscMemory):
     @property
     def system_time_difference_ns(self) -> int:
         return decode_system_time_difference(memoryview(self.mem), r.DC_SYSTEM_TIME_DIFFERENCE)
+
+
+def system_time_written(start: int, end: int, payload: bytes) -> tuple[int, int]:
+    """The system time a write of ``payload`` to ``[start, end)`` gives the time control
+    loop, and its width in bits (from 0x0910 to the write's last byte of it)."""
+    lo = max(start, r.DC_SYSTEM_TIME)
+    hi = min(end, r.DC_SYSTEM_TIME + 8)
+    raw = bytearray(8)
+    raw[lo - r.DC_SYSTEM_TIME : hi - r.DC_SYSTEM_TIME] = payload[lo - start : hi - start]
+    return int.from_bytes(raw, "little"), 8 * (hi - r.DC_SYSTEM_TIME)
 
 
 def system_time_loop(

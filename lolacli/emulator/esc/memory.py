@@ -196,6 +196,18 @@ class RegisterWrite:
     keep: int = 0
 
     @property
+    def system_time_only(self) -> bool:
+        """Whether the write's one effect is the DC time control loop's step (a master's
+        BWR of the system time to every slave)."""
+        others = (self.configuration, self.watchdog, self.addressing, self.eeprom, self.latch)
+        return (
+            self.system_time
+            and not self.clear_groups
+            and not any(others)
+            and not (self.sync_managers or self.al_control)
+        )
+
+    @property
     def memory_only(self) -> bool:
         """Whether the write leaves the ESC's clock, watchdog and decoded FMMU/SM
         configuration alone: it changes memory, and what the firmware does with it (an AL
