@@ -714,9 +714,10 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         else if (cmd == CMD_BRD || cmd == CMD_BWR) p = ALL_SLAVES;
         else return -1;
         if (p > r->n_active) p = r->n_active;
-        for (i64 k = 0; k < n_mailboxes; k++)
-            if (mailboxes[k] == ALL_SLAVES || (p == ALL_SLAVES ? r->n_active > 0 : mailboxes[k] == p))
-                return -1;
+        for (i64 k = 0; k < n_mailboxes; k++) {
+            if (mailboxes[k] == ALL_SLAVES || mailboxes[k] == p) return -1;
+            if (p == ALL_SLAVES && r->n_active > 0) return -1;
+        }
         if (cmd == CMD_APRD || cmd == CMD_FPRD || cmd == CMD_BRD) {
             if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < ado + length) return -1;
         } else {
@@ -874,9 +875,10 @@ i64 lolacli_core_check_registers(const regs_t *r) {
     if (r->classes_len != REGISTER_BYTES || !r->classes) return 3;
     if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS(r->n_slaves)) return 4;
     if (r->groups_len < 0 || r->groups_len % 2 || (r->groups_len && !r->groups)) return 7;
-    for (i64 g = 0; g < r->groups_len; g += 2)
-        if (r->groups[g] < 0 || r->groups[g] >= r->groups[g + 1] || r->groups[g + 1] > REGISTER_BYTES)
-            return 7;
+    for (i64 g = 0; g < r->groups_len; g += 2) {
+        i64 lo = r->groups[g], hi = r->groups[g + 1];
+        if (lo < 0 || lo >= hi || hi > REGISTER_BYTES) return 7;
+    }
     for (i64 i = 0; i < r->n_slaves; i++)
         if (r->out[1 + r->n_slaves + i]) return 4; /* the marks start cleared */
     for (i64 i = 0; i < r->n_active; i++) {

@@ -986,7 +986,7 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
 def test_kernel_refuses_register_tables_out_of_bounds() -> None:
     """The register path's line: more active slaves than tables, a line shorter than
     them, another classes table, a small answer buffer or out array, a port time or a
-    sync manager count beyond range."""
+    sync manager count beyond range, counter groups beyond the registers or not pairs."""
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None and core._regs is not None
@@ -999,6 +999,7 @@ def test_kernel_refuses_register_tables_out_of_bounds() -> None:
         ("classes_len", 0x0F00),
         ("buf_len", 15),
         ("out_len", core_module.out_words(len(chain._slaves)) - 1),
+        ("groups_len", len(core._groups) - 1),
     ]:
         saved = getattr(table, name)
         setattr(table, name, bad)
@@ -1009,6 +1010,11 @@ def test_kernel_refuses_register_tables_out_of_bounds() -> None:
         core._line[word] = bad
         assert lib.lolacli_core_check_registers(address) != 0, word
         core._line[word] = saved
+    for word, bad in [(0, -1), (1, 0x1001), (1, core._groups[0])]:
+        saved = core._groups[word]
+        core._groups[word] = bad
+        assert lib.lolacli_core_check_registers(address) != 0, word
+        core._groups[word] = saved
     assert lib.lolacli_core_check_registers(address) == 0
     assert not core.set_line([1 << 62])  # refused: the path is off, frames go to Python
     assert core.register_frame(bytes(60), 0) is None
