@@ -685,8 +685,8 @@ static void add_wkc(uint8_t *at, i64 added) {
  * of another command, of no data, beyond the registers, reading the DC system time, a
  * write that sets off more than the store, the SM/FMMU configuration and watchdog times,
  * an EEPROM read, an AL control request, a station address or alias enable and the error
- * counters' clearing, an FPRD/FPWR after such an addressing write, a datagram reaching a
- * slave whose mailbox SM registers an earlier one wrote, or more than
+ * counters' clearing, an FPRD/FPWR after such an addressing write, a datagram reaching the
+ * SM registers of a slave whose mailbox SM registers an earlier one wrote, or more than
  * MAX_REGISTER_DATAGRAMS datagrams. */
 i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) {
     if (n < 16 || n > r->buf_len || frame[12] != 0x88 || frame[13] != 0xA4) return -1;
@@ -696,7 +696,8 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
     i64 at[MAX_REGISTER_DATAGRAMS], where[MAX_REGISTER_DATAGRAMS];
     i64 count = 0, pos = 16, requests = 0, addressed = 0;
     i64 mailboxes[MAX_REGISTER_DATAGRAMS], n_mailboxes = 0; /* slaves whose mailbox SMs a
-        datagram wrote: no later datagram may reach them (their mailbox work runs after) */
+        datagram wrote: their mailbox work runs after the frame, so no later datagram may
+        reach their SM registers */
     const uint8_t *cls = r->classes;
     for (;;) { /* pass 1: the frame is this path's, nothing written */
         if (pos + 10 > end || count == MAX_REGISTER_DATAGRAMS) return -1;
@@ -714,10 +715,11 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         else if (cmd == CMD_BRD || cmd == CMD_BWR) p = ALL_SLAVES;
         else return -1;
         if (p > r->n_active) p = r->n_active;
-        for (i64 k = 0; k < n_mailboxes; k++) {
-            if (mailboxes[k] == ALL_SLAVES || mailboxes[k] == p) return -1;
-            if (p == ALL_SLAVES && r->n_active > 0) return -1;
-        }
+        if (ado < SM_REGISTERS + 16 * SM_BYTES && SM_REGISTERS < ado + length)
+            for (i64 k = 0; k < n_mailboxes; k++) {
+                if (mailboxes[k] == ALL_SLAVES || mailboxes[k] == p) return -1;
+                if (p == ALL_SLAVES && r->n_active > 0) return -1;
+            }
         if (cmd == CMD_APRD || cmd == CMD_FPRD || cmd == CMD_BRD) {
             if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < ado + length) return -1;
         } else {

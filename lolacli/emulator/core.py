@@ -345,7 +345,7 @@ class ChainCore:
         command, an AL control request (queued for the firmware), a station address or
         alias enable (no FPRD/FPWR after it in the frame), the error counters' clearing,
         the watchdog times and a mailbox SM's registers (its work done after the frame; no
-        later datagram may reach the slave), answered as
+        later datagram may reach the slave's SM registers), answered as
         ``Chain._run_slots`` would (``Esc.read_addressed``/``write_addressed``,
         ``broadcast_read``/``broadcast_write``): the answer and the datagrams' lengths.
         ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,

@@ -151,7 +151,7 @@ class SyncManagers(EscMemory):
         mailbox drops its pending message; enabled, the read mailbox answers a repeat
         request. The C core's register path, which stores the bytes and clears the full
         flags itself, has this run after the frame (no later datagram of the frame
-        reaches the slave)."""
+        reaches the slave's SM registers)."""
         base = _SM_BASE + _SM_BYTES * index
         if not self.mem[base + 6] & 1:
             if index == self.layout.mailbox_out_sm:
