@@ -217,6 +217,17 @@ def _pct(values: list[int], p: float) -> float:
 
 
 # ------------------------------------------------------------------ the run
+def steal_ms() -> float | None:
+    """CPU time the hypervisor took from this VM's CPUs so far (the ``steal`` column of
+    /proc/stat, all CPUs, in ms), or None where the kernel does not count it. A stall
+    the emulator cannot help shows up here."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+        return int(fields[8]) * 1000 / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def _ip(*args: str) -> None:
     subprocess.run(["ip", *args], check=True, capture_output=True)
 
@@ -254,7 +265,9 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
                "--cycles", str(args.cycles)]  # fmt: skip
         if args.master_nice:
             cmd = ["nice", "-n", str(args.master_nice), *cmd]
+        stolen = steal_ms()
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.cycles / 100 + 300)
+        stolen_after = steal_ms()
         lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
         result: dict[str, object] = (
             json.loads(lines[-1]) if lines else {"error": (done.stderr or done.stdout)[-300:]}
@@ -277,6 +290,7 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         master=master,
         hog=hog,
         capture=str(pcap),
+        steal_ms=None if stolen is None or stolen_after is None else stolen_after - stolen,
         emulator=" ".join(emu_log.read_text().split()).partition("reply time:")[2],
         pairs=report["pairs"],
         lost_frames=report["lost_frames"],
@@ -359,6 +373,9 @@ def print_table(result: dict[str, object]) -> None:
             f"{s['over_line_p99_us']:9.1f}  {'ok' if ok else 'MISSED'}"
         )
     print(f"emulator's own reply time: {result['emulator']}")
+    if result.get("steal_ms") is not None:
+        print(f"time the hypervisor took from this VM's CPUs during the master's run "
+              f"(steal, /proc/stat): {result['steal_ms']:.0f} ms")  # fmt: skip
     base = result.get("host_baseline")
     if isinstance(base, dict) and base:
         worst = max(s["max_us"] for s in by_command.values())
