@@ -341,11 +341,11 @@ class ChainCore:
 
     def register_frame(self, frame: bytes, t_ns: int) -> tuple[bytearray, tuple[int, ...]] | None:
         """A frame of APRD/FPRD/APWR/FPWR, BRD and BWR datagrams of registers whose writes
-        set off nothing but the store, one slave's FMMU/SM configuration, the EEPROM read
-        command, an AL control request (queued for the firmware), a station address or
-        alias enable (no FPRD/FPWR after it in the frame), the error counters' clearing,
-        the watchdog times and a mailbox SM's registers (its work done after the frame; no
-        later datagram may reach the slave's SM registers), answered as
+        set off nothing but the store, the FMMU/SM configuration and watchdog times (worked
+        out again), the EEPROM read command, an AL control request (queued for the
+        firmware), a station address or alias enable (no FPRD/FPWR after it in the frame),
+        the error counters' clearing and a mailbox SM's registers (its work done here after
+        the frame; no later datagram may reach the slave's SM registers), answered as
         ``Chain._run_slots`` would (``Esc.read_addressed``/``write_addressed``,
         ``broadcast_read``/``broadcast_write``): the answer and the datagrams' lengths.
         ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
