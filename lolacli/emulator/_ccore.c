@@ -596,6 +596,15 @@ static i64 station_position(const regs_t *r, i64 adp) {
     return r->n_active;
 }
 
+/* Byte b of slave q's SM i registers as the datagram at h (a write of length bytes at
+ * ado) leaves it: the datagram's byte over the slave's memory, read-only bytes kept */
+static i64 sm_byte_after(const regs_t *r, i64 q, i64 i, i64 b, const uint8_t *h, i64 ado,
+                         i64 length) {
+    i64 a = SM_REGISTERS + SM_BYTES * i + b;
+    int given = ado <= a && a < ado + length && !(r->classes[a] & R_READONLY);
+    return given ? h[10 + a - ado] : r->slaves[q].mem[a];
+}
+
 /* SyncManagers._sm_registers_written's range of sync managers for a write [lo, hi) */
 static void sm_range(i64 lo, i64 hi, i64 n_sm, i64 *first, i64 *last) {
     *first = lo < SM_REGISTERS ? 0 : (lo - SM_REGISTERS) / SM_BYTES;
@@ -744,7 +753,15 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
                     const i64 *row = r->line + q * LINE_WORDS;
                     i64 first, last;
                     sm_range(ado, ado + length, row[3], &first, &last);
-                    for (i64 i = first; i < last; i++) mailbox |= i == row[1] || i == row[2];
+                    for (i64 i = first; i < last; i++) {
+                        mailbox |= i == row[1] || i == row[2];
+                        /* the read mailbox's work (a repeat, when enabled) stores and reads
+                         * its buffer: one the master put among the registers goes to Python */
+                        if (i == row[2] && (sm_byte_after(r, q, i, 6, h, ado, length) & 1) &&
+                            (sm_byte_after(r, q, i, 0, h, ado, length) |
+                             sm_byte_after(r, q, i, 1, h, ado, length) << 8) < REGISTER_BYTES)
+                            return -1;
+                    }
                 }
                 if (mailbox) mailboxes[n_mailboxes++] = p;
             }

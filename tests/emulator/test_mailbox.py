@@ -175,3 +175,29 @@ def test_init_forgets_the_counter() -> None:
     assert m.send(C.FPWR, OUT[0], m.write_box(1, 0x1018, 1)).wkc == 1
     m.firmware()
     assert _answer(m.read_box()).index == 0x1018
+
+
+@pytest.mark.skipif(not core_available(), reason="no C core")
+def test_a_repeat_into_a_read_mailbox_among_the_registers_answers_as_the_reference() -> None:
+    """A master may put the read mailbox's buffer among the registers (0x0F00 here) and
+    toggle its repeat bit in the same write: the repeat stores the last answer there at
+    once, so a read of it later in the frame sees it. The C core's register path, which
+    does the mailbox's work after the frame, leaves such a frame to the Python path."""
+    replies = []
+    for engine in ("c", "python"):
+        m = Master(engine)
+        assert m.send(C.FPWR, OUT[0], m.write_box(5, 0x1018, 1)).wkc == 1
+        m.firmware()
+        assert m.read_box().wkc == 1
+        sm1 = bytearray(m.send(C.FPRD, 0x0808, 8).data)
+        struct.pack_into("<HH", sm1, 0, 0x0F00, 16)  # the buffer among the registers
+        sm1[6] ^= 0x02  # and the repeat requested
+        datagrams = [
+            Datagram.physical(C.FPWR, STATION, 0x0808, bytes(sm1[:7])),
+            Datagram.physical(C.FPRD, STATION, 0x0F00, 16),
+        ]
+        m.t_ns += 20_000
+        reply, _ = m.chain.process(encode_frame(make_frame(datagrams), pad=True), m.t_ns)
+        replies.append((reply, [bytes(esc.mem) for esc in m.chain.slaves]))
+        assert decode_frame(reply).datagrams[1].data != bytes(16)  # the answer, again
+    assert replies[0] == replies[1]
