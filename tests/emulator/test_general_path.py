@@ -239,6 +239,9 @@ def _against_the_reference(
             for i, (a, b) in enumerate(zip(fast.slaves, slow.slaves, strict=True)):
                 assert a.mem == b.mem, f"frame {k}, slave {i}"
                 assert a.al_state == b.al_state and a.clock == b.clock, f"frame {k}, slave {i}"
+                mailbox = ("_mailbox_pending", "_mailbox_queue", "_last_mailbox_in")
+                assert [getattr(a, m) for m in mailbox] == [getattr(b, m) for m in mailbox]
+                assert a.current_watchdog_timeout_ns() == b.current_watchdog_timeout_ns()
     return taken[0]
 
 
