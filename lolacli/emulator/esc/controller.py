@@ -358,18 +358,9 @@ def broadcast_write(
     plan = register_write(ado, end)
     bits = plan.writable_bits(payload)
     effects = plan.effects
-    if plan.system_time_only:  # one step of the time control loop for all: LOLA 70 -> 37 µs
-        loop = []
-        for esc, port in zip(escs, ports, strict=False):
-            esc.counters.datagrams += 1
-            esc.now_ns = t_ns + port.port0_ns
-            esc.epoch[0] += 1
-            plan.store_bits(esc.mem, ado, bits)
-            esc.frame_t_ns = t_ns
-            esc.port_offsets = port
-            loop.append((esc.mem, esc.clock, port.port0_ns, esc.dc_offset_minus_delay_ns()))
-        system_time_loop(loop, *system_time_written(ado, end, payload), t_ns)
-        return len(escs)
+    # a write of the system time alone: one step of the time control loop for all slaves
+    # after the stores, not one a slave (LOLA 70 -> 37 µs)
+    loop: list[tuple[bytearray, DcClock, int, int]] | None = [] if plan.system_time_only else None
     for esc, port in zip(escs, ports, strict=False):
         t = t_ns + port.port0_ns
         esc.counters.datagrams += 1
@@ -379,5 +370,10 @@ def broadcast_write(
         if effects:
             esc.frame_t_ns = t_ns
             esc.port_offsets = port
-            esc._register_side_effects(plan, ado, end, payload, t)
+            if loop is not None:
+                loop.append((esc.mem, esc.clock, port.port0_ns, esc.dc_offset_minus_delay_ns()))
+            else:
+                esc._register_side_effects(plan, ado, end, payload, t)
+    if loop:
+        system_time_loop(loop, *system_time_written(ado, end, payload), t_ns)
     return len(escs)

@@ -199,13 +199,9 @@ class RegisterWrite:
     def system_time_only(self) -> bool:
         """Whether the write's one effect is the DC time control loop's step (a master's
         BWR of the system time to every slave)."""
-        others = (self.configuration, self.watchdog, self.addressing, self.eeprom, self.latch)
-        return (
-            self.system_time
-            and not self.clear_groups
-            and not any(others)
-            and not (self.sync_managers or self.al_control)
-        )
+        others = (self.configuration, self.watchdog, self.addressing, self.eeprom, self.latch,
+                  self.sync_managers, self.al_control, self.clear_groups)  # fmt: skip
+        return self.system_time and not any(others)
 
     @property
     def memory_only(self) -> bool:
