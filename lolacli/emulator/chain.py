@@ -46,8 +46,10 @@ from lolacli.emulator.plan import (
     Deferred,
     FramePlan,
     Key,
+    Pieces,
     layout_key,
     make_plan,
+    plan_pieces,
 )
 from lolacli.emulator.registers import (
     AL_STATUS,
@@ -322,6 +324,8 @@ class Chain:
         self._held: int | None = None  # a late application cycle's time
         self._held_from = 0  # ... and the position it goes on from
         self._plan_later: Key | None = None  # a plan to make after the answer
+        # ... being made in pieces between frames: its layout, the epoch it is for, the work
+        self._plan_job: tuple[Key, int, Pieces] | None = None
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
         self._line_changed()
 
@@ -772,11 +776,53 @@ class Chain:
             if stopped is not None:
                 self._held, self._held_from = t_ns, stopped
                 return False
-        if self._plan_later is not None:
-            key, self._plan_later = self._plan_later, None
-            if key not in self._plans or self._plan_epoch != self._epoch[0]:
-                self._make_plan(key)
-        return True
+        return self._plan_work(should_yield)
+
+    def _plan_work(self, should_yield: Callable[[], bool] | None) -> bool:
+        """Make the plan :meth:`_plan` left for after the answer, a piece at a time while
+        ``should_yield`` says no frame waits (at least one piece a call): LOLA's cyclic
+        frame takes ~250 µs to plan, which a frame that comes meanwhile (pysoem's AL
+        status poll after its first frame in OP) would otherwise wait for. The plan is
+        used from the frame after the last piece on; a plan begun in an epoch that has
+        ended meanwhile is dropped (the slaves it read may have changed: the layout's
+        next frame asks for it again). True when nothing is left to do."""
+        if self._plan_job is None:
+            key = self._plan_later
+            if key is None:
+                return True
+            self._plan_later = None
+            if key in self._plans and self._plan_epoch == self._epoch[0]:
+                return True
+            self._plan_job = (key, self._epoch[0], self._plan_pieces(key))
+        key, epoch, pieces = self._plan_job
+        while True:
+            if epoch != self._epoch[0]:
+                self._plan_job = None
+                return True
+            try:
+                next(pieces)
+            except StopIteration:
+                self._plan_job = None
+                return True
+            if should_yield is not None and should_yield():
+                return False
+
+    def _plan_pieces(self, key: Key) -> Pieces:
+        """:meth:`_make_plan` in pieces: the plan and its program, then both kept."""
+        lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
+        delay_ns = self.timing.round_trip_ns(lengths, len(self._active))
+        epoch = self._epoch[0]
+        plan = yield from plan_pieces(
+            key, self._active, self._port_offsets, epoch, delay_ns, self._deferred_dc
+        )
+        if plan is not None and self._core is not None:
+            plan.compiled = yield from self._core.compile_pieces(plan)
+        if self._plan_epoch != epoch:
+            self._plans.clear()
+            self._plan_epoch = epoch
+        if len(self._plans) >= PLAN_CACHE_SIZE:
+            self._plans.clear()
+        self._plans[key] = self._last_plan = plan
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending

@@ -38,7 +38,7 @@ from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
 from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
-from lolacli.emulator.plan import FramePlan, _Brd, _DcDistribution, _Logical
+from lolacli.emulator.plan import FramePlan, Pieces, _Brd, _DcDistribution, _Logical, finish
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
 
 if TYPE_CHECKING:
@@ -709,10 +709,17 @@ class ChainCore:
     def compile(self, plan: FramePlan) -> CompiledPlan | None:
         """The plan as a kernel program, or ``None`` when the kernel does not run it (the
         chain runs ``plan.run``)."""
+        return finish(self.compile_pieces(plan))  # type: ignore[no-any-return]
+
+    def compile_pieces(self, plan: FramePlan) -> Pieces:
+        """:meth:`compile` in pieces (a slave's part of a logical datagram each), as
+        :func:`~lolacli.emulator.plan.plan_pieces`; it returns what :meth:`compile` does."""
+        compiled = CompiledPlan.__new__(CompiledPlan)
         try:
-            return CompiledPlan(self, plan)
+            yield from compiled._pieces(self, plan)
         except _NotCompiled:
             return None
+        return compiled
 
 
 def _device_of(app: object) -> Device | None:
@@ -732,13 +739,16 @@ class CompiledPlan:
     """One FramePlan as a kernel program with its buffers."""
 
     def __init__(self, core: ChainCore, plan: FramePlan) -> None:
+        finish(self._pieces(core, plan))
+
+    def _pieces(self, core: ChainCore, plan: FramePlan) -> Pieces:
         self.core = core
         self.plan = plan
         self._lib = core._lib
         self._snap_len = 0
         self._pend_len = PEND_FIRST_SLOT
         self._slots: list[tuple[int, list[int]]] = []  # per op: snapshot offset, DC slots
-        program = self._program(plan)
+        program = yield from self._program(plan)
         self.buf = bytearray(len(plan.buf))
         self.snap = bytearray(self._snap_len)
         self.pend = array("q", bytes(8 * self._pend_len))
@@ -810,7 +820,7 @@ class CompiledPlan:
                         system_time_loop(others, value, 8 * op.length, t_ns)
 
     # ------------------------------------------------------------- compiling
-    def _program(self, plan: FramePlan) -> array[int]:
+    def _program(self, plan: FramePlan) -> Pieces:
         index = self.core._index
         prog = array("q", bytes(8 * H_WORDS))
         prog[H_MAGIC] = MAGIC
@@ -828,8 +838,9 @@ class CompiledPlan:
             prog.extend((at, adp))
         prog[H_OPS], prog[H_N_OPS] = len(prog), len(plan.ops)
         for op in plan.ops:
+            yield
             if isinstance(op, _Logical):
-                record = self._logical(op)
+                record = yield from self._logical(op)
             elif isinstance(op, _Brd):
                 record = self._brd(op, counted)
             elif isinstance(op, _DcDistribution):
@@ -839,13 +850,14 @@ class CompiledPlan:
             prog.extend(record)
         return prog
 
-    def _logical(self, op: _Logical) -> list[int]:
+    def _logical(self, op: _Logical) -> Pieces:
         if op.ordered or any(esc.pending_op for esc, _, _ in op.events):
             raise _NotCompiled  # slave-major order, or an outputs event that enters OP
         index = self.core._index
         writes: list[int] = []
         reads: list[int] = []
         for step in op.steps:
+            yield
             i = index[id(step.esc)]
             for (_t, _s, a, b), (p, _q) in zip(step.writes or (), step.write_memory, strict=True):
                 writes += (i, p, a, b - a)
