@@ -35,7 +35,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 8
+#define ABI_VERSION 9
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -534,7 +534,7 @@ void lolacli_core_finish(plan_t *p) {
  * answered in r->buf.
  * The classes are register_classes() of lolacli/emulator/esc/memory.py, one per register
  * byte. */
-enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_PYTHON = 8, R_EEPROM = 16,
+enum { R_READONLY = 1, R_CONFIGURATION = 2, R_SYNC_MANAGER = 4, R_DC = 8, R_EEPROM = 16,
        R_AL_CONTROL = 32, R_ADDRESSING = 64, R_CLEAR = 128 };
 enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_BWR = 8 };
 #define REGISTER_BYTES 0x1000
@@ -557,12 +557,16 @@ enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_
 #define SM_STATUS_MAILBOX_FULL 0x08
 #define SM_ACTIVATE_ENABLE 0x01
 #define DC_SYSTEM_TIME 0x0910
+#define DC_RECEIVE_TIME_PORT0 0x0900
+#define DC_RECEIVE_TIME_PORT1 0x0904
+#define DC_RECEIVE_TIME_PU 0x0918
+#define DC_SYSTEM_TIME_DELAY 0x0928
 #define MAX_REGISTER_DATAGRAMS 128
 #define ALL_SLAVES (-1)
 /* per active slave: port 0 offset, mailbox out SM, mailbox in SM, sync managers, SII image
- * address and bytes, 8-byte EEPROM reads */
-#define LINE_WORDS 7
-/* out: [touched, n_slaves entries (position << 2 | T_*), n_slaves marks (entry + 1, 0:
+ * address and bytes, 8-byte EEPROM reads, port 1 offset (-1: none, the last in line) */
+#define LINE_WORDS 8
+/* out: [touched, n_slaves entries (position << 3 | T_*), n_slaves marks (entry + 1, 0:
  * none; all 0 between calls), datagrams, MAX_REGISTER_DATAGRAMS lengths, AL control
  * requests, FIRMWARE_CAP(n) of them (position << 8 | the byte written), in order, the
  * station address or alias enable written (1) or not (0), mailbox SMs written,
@@ -573,7 +577,7 @@ enum { CMD_APRD = 1, CMD_APWR = 2, CMD_FPRD = 4, CMD_FPWR = 5, CMD_BRD = 7, CMD_
 #define OUT_REQUESTS(r) ((r)->out + 2 + 2 * (r)->n_slaves + MAX_REGISTER_DATAGRAMS)
 #define OUT_ADDRESSING(r) (OUT_REQUESTS(r) + 1 + FIRMWARE_CAP((r)->n_slaves))
 #define OUT_MAILBOX(r) (OUT_ADDRESSING(r) + 1)
-enum { T_CONFIGURATION = 1, T_RELEASED = 2 };
+enum { T_CONFIGURATION = 1, T_RELEASED = 2, T_CLOCK = 4 };
 
 typedef struct {
     slave_t *slaves; i64 n_slaves;
@@ -583,6 +587,8 @@ typedef struct {
     uint8_t *buf; i64 buf_len;     /* the answer */
     i64 *out; i64 out_len;
     const i64 *groups; i64 groups_len; /* registers cleared together: [lo, hi) pairs */
+    i64 clocks; /* 1: every active slave's table has its clock (the wrapper gave the clocks of
+                   those it does not hold), 0: only the held ones */
 } regs_t;
 
 /* Chain._station_position: the first active slave answering a configured address */
@@ -631,9 +637,42 @@ static void eeprom_command(uint8_t *m, const i64 *row) {
     m[SII_CONTROL + 1] = (uint8_t)(status >> 8);
 }
 
+/* DcClock.local_ns, mod 2^64 */
+static u64 local_time(const slave_t *s, i64 t) {
+    i128 drift = s->clk_drift ? floordiv((i128)t * s->clk_drift, NS_PER_S) : 0;
+    return (u64)t + (u64)drift + (u64)s->clk_start + (u64)s->clk_corr;
+}
+
+/* What a write of the DC registers sets off in the slave of line row ``row`` (the frame
+ * left the master at t): DistributedClock._latch_receive_times for a write into 0x0900-3
+ * (receive times of ports 0 and 1, and port 0's as the processing unit's), and the time
+ * control loop's step for a write into the system time 0x0910-7 (_system_time_written:
+ * the value from 0x0910 up to the write's last byte of it, lower bytes not written 0) */
+static void dc_written(slave_t *s, const i64 *row, i64 ado, const uint8_t *data, i64 length,
+                       i64 t) {
+    i64 end = ado + length;
+    if (ado < DC_RECEIVE_TIME_PORT0 + 4 && DC_RECEIVE_TIME_PORT0 < end) {
+        u64 local0 = local_time(s, t + row[0]);
+        put_le(s->mem + DC_RECEIVE_TIME_PORT0, 4, local0);
+        if (row[7] >= 0) put_le(s->mem + DC_RECEIVE_TIME_PORT1, 4, local_time(s, t + row[7]));
+        put_le(s->mem + DC_RECEIVE_TIME_PU, 8, local0);
+    }
+    if (ado < DC_SYSTEM_TIME + 8 && DC_SYSTEM_TIME < end) {
+        i64 lo = ado > DC_SYSTEM_TIME ? ado : DC_SYSTEM_TIME;
+        i64 hi = end < DC_SYSTEM_TIME + 8 ? end : DC_SYSTEM_TIME + 8;
+        u64 value = 0;
+        for (i64 a = hi - 1; a >= lo; a--) value = value << 8 | data[a - ado];
+        value <<= 8 * (lo - DC_SYSTEM_TIME);
+        u64 registers = get_le(s->mem + DC_SYSTEM_TIME_OFFSET, 8) -
+                        get_le(s->mem + DC_SYSTEM_TIME_DELAY, 4);
+        i64 step[OTHER_WORDS] = {0, row[0], (i64)registers};
+        time_loop(s, step, 1, value, 8 * (hi - DC_SYSTEM_TIME), t);
+    }
+}
+
 /* The write of ``length`` bytes at ``ado`` into slave p: stored, its effects run; the
  * T_* flags it leaves */
-static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 length) {
+static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 length, i64 t) {
     slave_t *s = &r->slaves[p];
     const i64 *row = r->line + p * LINE_WORDS;
     int any = 0;
@@ -665,6 +704,10 @@ static i64 write_one(const regs_t *r, i64 p, i64 ado, const uint8_t *data, i64 l
         requests[1 + requests[0]++] = p << 8 | s->mem[AL_CONTROL];
     }
     if (any & R_ADDRESSING) *OUT_ADDRESSING(r) = 1; /* the wrapper bumps Esc.addressing */
+    if (any & R_DC) {
+        dc_written(s, row, ado, data, length, t);
+        return T_CLOCK | (any & R_CONFIGURATION ? T_CONFIGURATION : 0);
+    }
     return any & R_CONFIGURATION ? T_CONFIGURATION : 0;
 }
 
@@ -678,7 +721,7 @@ static void touch(const regs_t *r, i64 p, i64 t, i64 flags) {
     if (marks[p]) {
         out[marks[p]] |= flags;
     } else {
-        out[1 + out[0]] = p << 2 | flags;
+        out[1 + out[0]] = p << 3 | flags;
         marks[p] = 1 + out[0]++;
     }
 }
@@ -734,7 +777,11 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         } else {
             int any = 0;
             for (i64 a = ado; a < ado + length; a++) any |= cls[a];
-            if (any & R_PYTHON) return -1;
+            if ((any & R_DC) && !r->clocks) { /* the clocks of the slaves it reaches */
+                i64 q0 = p == ALL_SLAVES ? 0 : p, q1 = p == ALL_SLAVES ? r->n_active : p + 1;
+                for (i64 q = q0; q < q1 && q < r->n_active; q++)
+                    if (!r->slaves[q].owned) return -2;
+            }
             if (any & R_ADDRESSING) addressed = 1;
             if (any & R_AL_CONTROL) {
                 requests += p == ALL_SLAVES ? r->n_active : 1;
@@ -794,7 +841,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
                     for (i64 b = 0; b < length; b++) data[b] |= m[b];
                     touch(r, i, t, 0);
                 } else {
-                    touch(r, i, t, write_one(r, i, ado, data, length));
+                    touch(r, i, t, write_one(r, i, ado, data, length, t));
                     writes++;
                 }
             }
@@ -804,7 +851,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
                 memcpy(data, r->slaves[p].mem + ado, (size_t)length);
                 touch(r, p, t, 0);
             } else {
-                touch(r, p, t, write_one(r, p, ado, data, length));
+                touch(r, p, t, write_one(r, p, ado, data, length, t));
                 writes++;
             }
             add_wkc(data + length, 1);
@@ -816,7 +863,7 @@ i64 lolacli_core_registers(const regs_t *r, const uint8_t *frame, i64 n, i64 t) 
         }
     }
     i64 *marks = out + 1 + r->n_slaves;
-    for (i64 e = 0; e < out[0]; e++) marks[out[1 + e] >> 2] = 0;
+    for (i64 e = 0; e < out[0]; e++) marks[out[1 + e] >> 3] = 0;
     return writes;
 }
 
@@ -894,6 +941,7 @@ i64 lolacli_core_check_registers(const regs_t *r) {
     if (r->classes_len != REGISTER_BYTES || !r->classes) return 3;
     if (!r->buf || r->buf_len < 16 || !r->out || r->out_len < OUT_WORDS(r->n_slaves)) return 4;
     if (r->groups_len < 0 || r->groups_len % 2 || (r->groups_len && !r->groups)) return 7;
+    if (r->clocks != 0 && r->clocks != 1) return 8;
     for (i64 g = 0; g < r->groups_len; g += 2) {
         i64 lo = r->groups[g], hi = r->groups[g + 1];
         if (lo < 0 || lo >= hi || hi > REGISTER_BYTES) return 7;
@@ -905,6 +953,7 @@ i64 lolacli_core_check_registers(const regs_t *r) {
         if (!bounded(row[0]) || row[3] < 0 || row[3] > 16 || !r->slaves[i].mem) return 5;
         if (row[5] < 0 || row[5] > LIMIT || (row[5] && !row[4]) || (row[6] != 0 && row[6] != 1))
             return 6;
+        if (row[7] < -1 || !bounded(row[7])) return 5;
     }
     return 0;
 }

@@ -504,7 +504,8 @@ class Chain:
         return bytes(buf), self._delay_ns(lengths)
 
     def _set_core_line(self, core: ChainCore) -> None:
-        core.set_line([port.port0_ns for port in self._port_offsets])
+        ports = self._port_offsets
+        core.set_line([port.port0_ns for port in ports], [port.port1_ns for port in ports])
         self._line_at = self._sii_version[0]
 
     def _run_slots(

@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 8
+ABI_VERSION = 9
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -152,13 +152,14 @@ class RegisterTable(ctypes.Structure):
         ("out_len", _I64),
         ("groups", _VP),
         ("groups_len", _I64),
+        ("clocks", _I64),
     ]
 
 
 # register frames (see _ccore.c): line rows, the out array, touched flags
-LINE_WORDS = 7
+LINE_WORDS = 8
 MAX_REGISTER_DATAGRAMS = 128
-T_CONFIGURATION, T_RELEASED = 1, 2
+T_CONFIGURATION, T_RELEASED, T_CLOCK = 1, 2, 4
 
 
 def out_words(n_slaves: int) -> int:
@@ -300,23 +301,32 @@ class ChainCore:
         self._registers = lib.lolacli_core_registers
 
     # ------------------------------------------------------------ register frames
-    def set_line(self, port0_ns: list[int]) -> bool:
+    def set_line(self, port0_ns: list[int], port1_ns: list[int | None] | None = None) -> bool:
         """The slaves the frames reach (the first ``len(port0_ns)``, each reached that long
-        after the frame's start) for :meth:`register_frame`, with their mailbox sync
+        after the frame's start, and on the way back ``port1_ns``, ``None`` for the last
+        in line: the DC receive times) for :meth:`register_frame`, with their mailbox sync
         managers and SII images as they are now (the chain sets the line again when the
         line changes or an SII image or layout is replaced: ~60 µs for LOLA). False: the
         register path is off (a value out of range)."""
         n = len(port0_ns)
+        back = port1_ns if port1_ns is not None else [None] * n
         line = array("q", bytes(8 * LINE_WORDS * n))
         keep: list[Any] = []
-        for i, (esc, port0) in enumerate(zip(self.escs, port0_ns, strict=False)):
+        for i, (esc, port0, port1) in enumerate(zip(self.escs, port0_ns, back, strict=False)):
             layout = esc.layout
             row = (port0, layout.mailbox_out_sm, layout.mailbox_in_sm, esc.config.sync_managers)
-            if any(v.__class__ is not int or not -VALUE_LIMIT < v < VALUE_LIMIT for v in row):
+            returned = -1 if port1 is None else port1
+            if (
+                any(
+                    v.__class__ is not int or not -VALUE_LIMIT < v < VALUE_LIMIT
+                    for v in (*row, returned)
+                )
+                or returned < -1
+            ):
                 self._regs = None
                 return False
             sii = (_address(esc.sii, keep), len(esc.sii), int(esc.config.eeprom_8_byte_reads))
-            line[LINE_WORDS * i : LINE_WORDS * (i + 1)] = array("q", row + sii)
+            line[LINE_WORDS * i : LINE_WORDS * (i + 1)] = array("q", (*row, *sii, returned))
         table = RegisterTable(
             slaves=self.address,
             n_slaves=len(self.escs),
@@ -344,8 +354,10 @@ class ChainCore:
         set off nothing but the store, the FMMU/SM configuration and watchdog times (worked
         out again), the EEPROM read command, an AL control request (queued for the
         firmware), a station address or alias enable (no FPRD/FPWR after it in the frame),
-        the error counters' clearing and a mailbox SM's registers (its work done here after
-        the frame; no later datagram may reach the slave's SM registers), answered as
+        the error counters' clearing, a mailbox SM's registers (its work done here after
+        the frame; no later datagram may reach the slave's SM registers) and the DC
+        receive-time latch and system time (the clocks of the slaves the kernel does not
+        hold given to it for the frame, their corrections taken back), answered as
         ``Chain._run_slots`` would (``Esc.read_addressed``/``write_addressed``,
         ``broadcast_read``/``broadcast_write``): the answer and the datagrams' lengths.
         ``None`` (nothing changed) for any other frame. Slaves the kernel holds stay held,
@@ -356,14 +368,22 @@ class ChainCore:
         if frame.__class__ is not bytes:
             frame = bytes(frame)
         writes = self._registers(self._regs_address, frame, len(frame), t_ns)
+        if writes == -2:  # DC registers written: the clocks of the slaves Python holds
+            if not self._lend_clocks():
+                return None
+            self._regs.clocks = 1
+            writes = self._registers(self._regs_address, frame, len(frame), t_ns)
+            self._regs.clocks = 0
         if writes < 0:
             return None
-        out, escs = self._out, self.escs
+        out, escs, words = self._out, self.escs, self._words
         for k in range(1, out[0] + 1):
             entry = out[k]
-            i = entry >> 2
+            i = entry >> 3
             if entry & T_RELEASED:
-                escs[i].now_ns = self._words[i * WORDS + F_NOW]
+                escs[i].now_ns = words[i * WORDS + F_NOW]
+                if entry & T_CLOCK:
+                    escs[i].clock.correction_ns = words[i * WORDS + F_CLK_CORR]
             elif entry & T_CONFIGURATION:
                 self.release((i,))
             if entry & T_CONFIGURATION:
@@ -383,6 +403,28 @@ class ChainCore:
             written = out[k]
             escs[written >> 8].mailbox_sm_written(written & 0xFF)
         return self._regs_buf[: len(frame)], lengths
+
+    def _lend_clocks(self) -> bool:
+        """The DC clocks of the slaves the frames reach that the kernel does not hold, into
+        their tables for one register frame (their Esc objects keep them: the kernel's
+        corrections are taken back after it); False where one is out of its range."""
+        w, escs, limit = self._words, self.escs, VALUE_LIMIT
+        n = self._regs.n_active if self._regs is not None else 0
+        for i in self.released:
+            if i >= n:
+                continue
+            clock = escs[i].clock
+            start, drift, correction = clock.start_ns, clock.drift_ppb, clock.correction_ns
+            if not (
+                -limit < start < limit and -limit < drift < limit and -limit < correction < limit
+            ):
+                return False
+            b = i * WORDS
+            try:  # an int of the array's range, or TypeError/OverflowError
+                w[b + F_CLK_START], w[b + F_CLK_DRIFT], w[b + F_CLK_CORR] = start, drift, correction
+            except (TypeError, OverflowError):
+                return False
+        return True
 
     # ------------------------------------------------------------ ownership
     def acquire(self) -> bool:

@@ -51,8 +51,12 @@ from lolacli.wire.mailbox import MailboxType, encode_mailbox, make_mailbox
 from lolacli.wire.registers import AlStatusCode
 from lolacli.wire.sdo import SdoUploadRequest, encode_sdo
 from tests.emulator.bus import EXAMPLES, Bus
+from tests.emulator.test_general_path import (
+    _dc_frame,
+    _single_slave_frame,
+    count_register_frames,
+)
 from tests.emulator.test_general_path import _random_frame as _register_frame
-from tests.emulator.test_general_path import _single_slave_frame, count_register_frames
 from tests.emulator.test_plan import _random_frame
 
 CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
@@ -513,7 +517,8 @@ class Script:
         stations = [s.station_address for s in self.eni.slaves]
         for k in range(300):
             self.bus.t_ns += self.rng.randrange(1, 300_000)
-            make = _register_frame if k % 3 else _single_slave_frame  # the core's register path
+            # a third of them for the core's register path, DC set-ups among them
+            make = _register_frame if k % 3 else (_single_slave_frame, _dc_frame)[k % 2]
             frame = make(self.rng, len(self.eni.slaves), stations)
             self.twin.process(frame, self.bus.t_ns)
             if k % 2 == 0:

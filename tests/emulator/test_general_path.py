@@ -167,6 +167,41 @@ def _single_slave_frame(
     return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
 
 
+def _dc_frame(rng: random.Random, slaves: int, stations: list[int]) -> bytes:
+    """Up to 6 datagrams of a master's DC set-up, as SOEM's and KickCAT's: the receive-time
+    latch (a write into 0x0900-0x0903, by BWR to all or to one slave), the receive times
+    and local times read back, the system time offset and delay written (small values and
+    any 64-bit ones), the system time written to one or all (1-8 bytes, from 0x0910 or
+    into it), writes across several of these at once, and other registers among them."""
+    datagrams = []
+    for _ in range(rng.randrange(1, 7)):
+        cmd = rng.choice([C.BWR, C.BWR, C.APWR, C.FPWR, C.FPRD, C.APRD, C.BRD])
+        kind = rng.random()
+        if cmd in _WRITES:
+            if kind < 0.3:
+                ado, length = 0x0900 + rng.randrange(0, 4), rng.choice([1, 2, 4, 4])
+                if rng.random() < 0.1:
+                    ado, length = 0x08FE, 4  # from an SM's last registers into the latch
+            elif kind < 0.6:
+                ado = 0x0910 + rng.choice([0, 0, 0, 1, 4, 7])
+                length = rng.choice([1, 2, 4, 4, 8, 8])
+            elif kind < 0.85:
+                ado, length = rng.choice([(0x0920, 8), (0x0928, 4), (0x0920, 12), (0x0924, 4)])
+            else:
+                ado, length = rng.choice([(0x0900, 48), (0x0910, 32), (0x08F8, 32)])
+            value = rng.choice([rng.randbytes(length), bytes(length), b"\xff" * length])
+            if ado <= 0x0920 < ado + length and rng.random() < 0.7:  # an offset of a few ms
+                offset = struct.pack("<q", rng.randrange(-5_000_000, 5_000_000))
+                at = 0x0920 - ado
+                value = value[:at] + offset[: length - at] + value[at + 8 :]
+            data: bytes | int = value[:length]
+        else:
+            ado, length = rng.choice([(0x0900, 16), (0x0918, 8), (0x092C, 4), (0x0920, 12)])
+            data = length
+        datagrams.append(Datagram.physical(cmd, _adp(rng, cmd, slaves, stations), ado, data))
+    return encode_frame(make_frame(datagrams), pad=rng.random() < 0.5)
+
+
 def _adp(rng: random.Random, cmd: int, slaves: int, stations: list[int]) -> int:
     if cmd in (C.APRD, C.APWR):
         return (-rng.randrange(0, slaves + 2)) & 0xFFFF
@@ -269,6 +304,24 @@ def test_single_slave_register_frames_answer_like_the_slave_major_reference(
     taken = _against_the_reference(name, engine, random.Random(7), readdressed)
     if engine == "c":
         assert 300 < taken < 1400
+
+
+@pytest.mark.parametrize(
+    "engine",
+    [
+        "python",
+        pytest.param("c", marks=pytest.mark.skipif(not core_available(), reason="no C core")),
+    ],
+)
+@pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml"])
+def test_dc_register_frames_answer_like_the_slave_major_reference(name: str, engine: str) -> None:
+    """A master's DC set-up (latch, receive times, offsets and delays, system time written
+    to one or all): with the C core, the register path answers the frames of them with
+    the clocks of the slaves Python holds given to it and their corrections taken back
+    (the slaves it holds: tests/emulator/test_core.py, ``register_traffic``)."""
+    taken = _against_the_reference(name, engine, random.Random(9), _dc_frame)
+    if engine == "c":
+        assert taken > 1200  # all but the rare frame with a read of the system time
 
 
 @pytest.mark.parametrize(

@@ -277,11 +277,12 @@ def register_write(start: int, end: int) -> RegisterWrite:
 
 # what a master's write to a register byte does, for the C core's register path
 # (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration or watchdog times (both
-# worked out again, Esc.configuration_written), sync manager registers, anything else (the
-# Python path's: DC), the EEPROM command, the AL control request, the station address and
-# alias enable, an error counter group cleared (COUNTER_CLEAR_GROUPS)
+# worked out again, Esc.configuration_written), sync manager registers, the DC
+# receive-time latch or system time (the kernel tells them apart by address), the EEPROM
+# command, the AL control request, the station address and alias enable, an error counter
+# group cleared (COUNTER_CLEAR_GROUPS)
 REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
-REGISTER_PYTHON, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
+REGISTER_DC, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
 REGISTER_CLEAR = 128
 
 
@@ -306,6 +307,6 @@ def register_classes() -> bytes:
         if w.clear_groups:
             c |= REGISTER_CLEAR
         if w.latch or w.system_time:
-            c |= REGISTER_PYTHON
+            c |= REGISTER_DC
         out[a] = c
     return bytes(out)
