@@ -20,11 +20,12 @@ core only while it answers. While it serves it also holds the CPUs' wake-up late
 (Linux PM QoS, ``/dev/cpu_dma_latency``, as cyclictest does): an idle core then polls
 instead of halting, so a frame that arrives after a quiet spell (a start-up's first
 frame, a master cycling every 5 ms) does not wait for the core to wake; the hold ends with
-the server; and while no frame comes it runs its keep-warm work (a few frames through a
-chain of its own) every :data:`WARM_EVERY_MS`, so the first frame after a quiet spell finds
-the answer path in the caches. :attr:`RawSocketServer.scheduling` says which it got. The
-collector is off while serving (the chain makes little cyclic garbage); young objects are
-collected in idle moments.
+the server; and every :data:`WARM_EVERY_MS` it runs its keep-warm work (a few frames through
+a chain of its own, giving way to a frame that comes), while no frame comes and after a
+frame's work is done, so the first frame after a quiet spell, or a start-up's or mailbox
+frame among cyclic ones, finds the answer path in the caches.
+:attr:`RawSocketServer.scheduling` says which it got. The collector is off while serving
+(the chain makes little cyclic garbage); young objects are collected in idle moments.
 
 :class:`ServerStats` keeps, per frame, the time from the kernel's receive timestamp to the
 server holding the frame (``wake``), and from there to the answer sent (``service``).
@@ -134,7 +135,8 @@ class RawSocketServer:
     ``keep_cpus_awake``: hold the CPUs' wake-up latency at 0 while serving where permitted
     (root); False leaves the CPUs' idle states alone. ``keep_warm``: called every
     :data:`WARM_EVERY_MS` while no frame comes (work that keeps the answer path's code and
-    data in the caches; it must not touch the chain served)."""
+    data in the caches; it must not touch the chain served), given ``should_yield``
+    (``None``: run it all) to ask between its pieces."""
 
     def __init__(
         self,
@@ -144,7 +146,7 @@ class RawSocketServer:
         grace_s: float = DEFAULT_GRACE_S,
         realtime_priority: int | None = None,
         keep_cpus_awake: bool = True,
-        keep_warm: Callable[[], None] | None = None,
+        keep_warm: Callable[[Callable[[], bool] | None], object] | None = None,
     ) -> None:
         self.iface = iface
         self.keep_warm = keep_warm
@@ -164,6 +166,7 @@ class RawSocketServer:
         self._gc_was_enabled = False
         self._since_gc = 0
         self._wait: Callable[[int], bool] | None = None
+        self._next_warm_ns = 0  # keep-warm work is due from then on
 
     def __enter__(self) -> RawSocketServer:
         self._sock = open_socket(self.iface)
@@ -227,7 +230,8 @@ class RawSocketServer:
         if self._next is None and not self._poll(sock):
             if not self._poller.poll(WARM_EVERY_MS if self.keep_warm else self._poll_ms):
                 if self.keep_warm is not None:
-                    self.keep_warm()
+                    self.keep_warm(None)
+                    self._next_warm_ns = time.monotonic_ns() + WARM_EVERY_MS * 1_000_000
                 self.chain.run_deferred_cycles()  # nothing may wait while the master is silent
                 self.chain.tick(time.monotonic_ns())  # watchdogs run while it is silent
                 gc.collect()
@@ -324,6 +328,13 @@ class RawSocketServer:
         return False
 
     def _idle(self) -> None:
+        """After a frame's work, while no frame waits: keep-warm work when due (the
+        master may be sending only its cyclic frame, whose path stays warm, for long),
+        now and then a collection of young objects."""
+        if self.keep_warm is not None and time.monotonic_ns() >= self._next_warm_ns:
+            if not self.keep_warm(self._frame_waiting):
+                return  # a frame waits
+            self._next_warm_ns = time.monotonic_ns() + WARM_EVERY_MS * 1_000_000
         self._since_gc += 1
         if self._since_gc >= GC_EVERY_FRAMES:
             self._since_gc = 0

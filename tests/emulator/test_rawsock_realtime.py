@@ -4,7 +4,9 @@ the CPUs held awake while it serves."""
 from __future__ import annotations
 
 import os
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -67,9 +69,9 @@ def test_a_quiet_server_keeps_warm_on_a_chain_of_its_own() -> None:
     warm = keep_warm_with(scratch, chain)
     calls: list[float] = []
 
-    def counted() -> None:
+    def counted(should_yield: Callable[[], bool] | None) -> bool:
         calls.append(time.monotonic())
-        warm()
+        return warm(should_yield)
 
     # until five calls (a loaded machine or a garbage collection may delay one), at most 5 s
     deadline = time.monotonic() + 5.0
@@ -81,6 +83,72 @@ def test_a_quiet_server_keeps_warm_on_a_chain_of_its_own() -> None:
     assert scratch.stats.frames == 3 * len(calls)
     assert chain.stats.frames == 0
     assert [bytes(esc.mem) for esc in chain.slaves] == before
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="a veth pair needs root")
+def test_the_server_keeps_warm_between_cyclic_frames() -> None:
+    """A master that sends a frame every millisecond never leaves the server quiet for
+    WARM_EVERY_MS: the keep-warm work then runs after a frame's work, as often as when
+    quiet and no more, and every frame is answered (pysoem's closing BWR after 10,000
+    LOLA cycles: 80 µs in process without, 33 with)."""
+    from lolacli.rawsocket import PACKET_OUTGOING, open_socket
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+    from tests.live import inside, make_bus, remove_bus
+
+    eni = load_eni(EXAMPLES / "single_drive.xml")
+    chain, scratch = build_chain(eni), build_chain(eni)
+    warm = keep_warm_with(scratch, chain)
+    calls: list[float] = []
+
+    def counted(should_yield: Callable[[], bool] | None) -> bool:
+        began = time.monotonic()
+        done = warm(should_yield)
+        if done:  # one that gave way to a frame runs again after that frame's work
+            calls.append(began)
+        return done
+
+    frame = encode_frame(make_frame([Datagram.physical(Command.BRD, 0, 0x0130, 2)]), pad=True)
+    bus = make_bus("w")
+    ready, stop = threading.Event(), threading.Event()
+
+    def server() -> None:
+        with inside(bus), RawSocketServer(
+            bus.emulator, chain, realtime_priority=0, keep_cpus_awake=False, keep_warm=counted
+        ) as served:
+            ready.set()
+            served.serve(stop.is_set)
+
+    thread = threading.Thread(target=server)
+    thread.start()
+    try:
+        assert ready.wait(10)
+        with inside(bus):
+            sock = open_socket(bus.master)
+        sock.settimeout(1.0)
+        answered = 0
+        start = time.monotonic()
+        calls.clear()  # from the first frame on
+        next_t = start
+        while time.monotonic() - start < 0.3:
+            sock.send(frame)
+            while True:
+                data, address = sock.recvfrom(2048)
+                if address[2] != PACKET_OUTGOING and data[6] & 0x02:
+                    answered += 1
+                    break
+            next_t += 0.001
+            time.sleep(max(0.0, next_t - time.monotonic()))
+        sock.close()
+    finally:
+        stop.set()
+        thread.join(10)
+        remove_bus(bus)
+    assert answered >= 200
+    during = [t for t in calls if t < start + 0.3]
+    assert len(during) >= 10, f"{len(during)} keep-warm runs in 300 ms of frames"
+    gaps = [b - a for a, b in zip(during, during[1:], strict=False)]
+    assert min(gaps) >= 0.9 * WARM_EVERY_MS / 1000, gaps
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="a veth pair and SCHED_FIFO need root")
