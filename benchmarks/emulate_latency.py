@@ -18,6 +18,12 @@ emulator's worst reply to the host's worst wake-up. Per command type, the same f
 real port sends them): "line p99", and the p99 of the emulator's reply minus the line's,
 "over line". First of all (``--no-first-frames`` to skip), a probe of a session's first
 frames against the emulator and against a plain echo server on the same kind of veth pair.
+With ``--witness`` (root, tracefs and a C compiler), ``vcpu_witness.py`` traces during each
+master's run when the VM's CPUs were not run at all, and each reply later than 1 ms is
+printed with the stretch of a vCPU not run that covers it, if one does (the host's, which
+no emulator can answer through). The witness costs each CPU about 4% and wakes every
+500 µs above the emulator, which shows in the start-up's p99 (KickCAT's FPRD 47-49 ->
+160-172 µs here): a run to attribute the maxima, not one for the table.
 
     sudo python benchmarks/emulate_latency.py                      # LOLA, both masters
     sudo python benchmarks/emulate_latency.py --masters pysoem --cycles 2000 --loads idle
@@ -42,10 +48,15 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from vcpu_witness import VcpuWitness, available  # noqa: E402
+
 DEFAULT_ENI = ROOT / "lolacli" / "eni_examples" / "lola.xml"
 BUDGET_US = 2000.0  # SOEM EC_TIMEOUTRET, KickCAT default link timeout
 TARGET_P99_US = 150.0
@@ -151,7 +162,7 @@ MASTERS = {"pysoem": run_pysoem, "kickcat": run_kickcat}
 
 # ------------------------------------------------------------- the capture
 def per_command_latency(
-    path: Path, slaves: int = 0
+    path: Path, slaves: int = 0, late: list[tuple[str, int, int]] | None = None
 ) -> tuple[dict[str, list[int]], int, dict[str, list[int]]]:
     """Reply latency (ns) per command type from a master-side capture; unanswered count;
     and per command type, what a 100 Mbit line of ``slaves`` slaves would take for the
@@ -162,7 +173,9 @@ def per_command_latency(
     A frame is the echo of the pending one with the same command/index/length sequence
     when the source MAC's locally administered bit differs (DESIGN.md "Direction") or,
     where the master's own MAC has that bit set (KickCAT), when a working counter or an
-    ADP changed on the way; otherwise it is the master sending the frame again."""
+    ADP changed on the way; otherwise it is the master sending the frame again.
+    ``late`` gets (command type, request time in ns of the capture's clock, latency ns) of
+    every reply later than :data:`TARGET_MAX_US`."""
     from lolacli.capture.reader import iter_frames
     from lolacli.emulator.chain import ChainTiming
     from lolacli.errors import WireError
@@ -191,6 +204,8 @@ def per_command_latency(
             if bit_differs or fields != first[3]:
                 del pending[key]
                 out[first[1]].append(frame.timestamp_ns - first[0])
+                if late is not None and frame.timestamp_ns - first[0] > TARGET_MAX_US * 1000:
+                    late.append((first[1], first[0], frame.timestamp_ns - first[0]))
                 line[first[1]].append(sent.pop(key))
                 continue
             unanswered += 1  # sent again: the first copy had no answer
@@ -266,7 +281,11 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         if args.master_nice:
             cmd = ["nice", "-n", str(args.master_nice), *cmd]
         stolen = steal_ms()
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=args.cycles / 100 + 300)
+        realtime_minus_mono = time.time_ns() - time.monotonic_ns()  # the capture's clock
+        with _witness(args) as witness:
+            done = subprocess.run(
+                cmd, capture_output=True, text=True, timeout=args.cycles / 100 + 300
+            )
         stolen_after = steal_ms()
         lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
         result: dict[str, object] = (
@@ -285,7 +304,9 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
 
     report = analyze_file(pcap).to_dict()
     slaves = len(load_eni(args.eni).slaves)
-    latency, unanswered, line = per_command_latency(pcap, slaves)
+    late: list[tuple[str, int, int]] = []
+    latency, unanswered, line = per_command_latency(pcap, slaves, late)
+    result.update(witness_report(witness, late, realtime_minus_mono))
     result.update(
         master=master,
         hog=hog,
@@ -310,6 +331,42 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         },
     )
     return result
+
+
+@contextmanager
+def _witness(args: argparse.Namespace) -> Iterator[VcpuWitness | None]:
+    """The vCPU witness around a master's run (None: off or not possible here)."""
+    if not args.witness or available() is not None:
+        yield None
+        return
+    with VcpuWitness() as witness:
+        yield witness
+
+
+def witness_report(
+    witness: VcpuWitness | None, late: list[tuple[str, int, int]], realtime_minus_mono: int
+) -> dict[str, object]:
+    """What the witness saw during the run, and each reply later than 1 ms with the vCPU
+    stall that covers it (or none)."""
+    if witness is None:
+        why = available() or "off (--witness traces when the VM's CPUs were not run)"
+        return {"witness": f"vCPU witness: {why}", "late": []}
+    trace = witness.trace
+    rows = []
+    for kind, t_ns, latency_ns in late:
+        start = t_ns - realtime_minus_mono
+        stall = trace.explain(start, start + latency_ns)
+        rows.append(
+            {
+                "command": kind,
+                "latency_us": latency_ns / 1000,
+                "stall": None
+                if stall is None
+                else {"cpu": stall.cpu, "us": stall.us, "running": stall.running,
+                      "host": stall.host},
+            }
+        )  # fmt: skip
+    return {"witness": trace.summary(), "late": rows}
 
 
 def _hog() -> subprocess.Popen[bytes]:
@@ -373,6 +430,22 @@ def print_table(result: dict[str, object]) -> None:
             f"{s['over_line_p99_us']:9.1f}  {'ok' if ok else 'MISSED'}"
         )
     print(f"emulator's own reply time: {result['emulator']}")
+    print(result["witness"])
+    late = result.get("late") or []
+    assert isinstance(late, list)
+    if late:
+        host = sum(1 for r in late if r["stall"] is not None and r["stall"]["host"])
+        print(f"replies over {TARGET_MAX_US / 1000:g} ms: {len(late)}; covered by a stretch in "
+              f"which a vCPU was not run: {host}")  # fmt: skip
+        for r in late[:10]:
+            st = r["stall"]
+            why = (
+                "no vCPU stall covers it"
+                if st is None
+                else f"cpu {st['cpu']} {'not run' if st['host'] else 'in a kernel thread'} "
+                f"for {st['us']:.0f} µs ({st['running']} on it)"
+            )
+            print(f"  {r['command']} {r['latency_us']:.0f} µs: {why}")
     if result.get("steal_ms") is not None:
         print(f"time the hypervisor took from this VM's CPUs during the master's run "
               f"(steal, /proc/stat): {result['steal_ms']:.0f} ms")  # fmt: skip
@@ -518,6 +591,11 @@ def main() -> None:
     parser.add_argument(
         "--first-frames", action=argparse.BooleanOptionalAction, default=True,
         help="first the probe of a session's first frames, emulator and plain echo server",
+    )  # fmt: skip
+    parser.add_argument(
+        "--witness", action=argparse.BooleanOptionalAction, default=False,
+        help="trace when the VM's CPUs were not run during each master's run "
+        "(benchmarks/vcpu_witness.py; costs each CPU ~4%%)",
     )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="also print the results as JSON")
     parser.add_argument("--run-master", choices=sorted(MASTERS), help=argparse.SUPPRESS)
