@@ -47,8 +47,8 @@ from lolacli.emulator.plan import (
     FramePlan,
     Key,
     Pieces,
+    finish,
     layout_key,
-    make_plan,
     plan_pieces,
 )
 from lolacli.emulator.registers import (
@@ -663,20 +663,8 @@ class Chain:
         return self._make_plan(key)
 
     def _make_plan(self, key: Key) -> FramePlan | None:
-        if self._plan_epoch != self._epoch[0]:
-            self._plans.clear()
-            self._plan_epoch = self._epoch[0]
-        if len(self._plans) >= PLAN_CACHE_SIZE:
-            self._plans.clear()
-        lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
-        delay_ns = self.timing.round_trip_ns(lengths, len(self._active))
-        plan = make_plan(
-            key, self._active, self._port_offsets, self._epoch[0], delay_ns, self._deferred_dc
-        )
-        self._plans[key] = self._last_plan = plan
-        if plan is not None and self._core is not None:
-            self._compiled(plan)  # with the plan (after the answer, where it is made then)
-        return plan
+        """The plan of ``key`` made now, whole, and kept (:meth:`_plan_pieces`)."""
+        return finish(self._plan_pieces(key))  # type: ignore[no-any-return]
 
     def _run_plan(
         self, plan: FramePlan, frame: bytes, t_ns: int, defer_cycles: bool
@@ -809,7 +797,8 @@ class Chain:
                 return False
 
     def _plan_pieces(self, key: Key) -> Pieces:
-        """:meth:`_make_plan` in pieces: the plan and its program, then both kept."""
+        """The plan of ``key`` and its C program in pieces, then both kept; it returns the
+        plan (``None``: the layout takes the general path)."""
         lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
         delay_ns = self.timing.round_trip_ns(lengths, len(self._active))
         epoch = self._epoch[0]
@@ -824,6 +813,7 @@ class Chain:
         if len(self._plans) >= PLAN_CACHE_SIZE:
             self._plans.clear()
         self._plans[key] = self._last_plan = plan
+        return plan
 
     def hold_deferred_cycle(self) -> None:
         """The master's next frame is already here: let it be answered before the pending

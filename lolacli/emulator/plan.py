@@ -146,24 +146,6 @@ DcRow = tuple[bytearray, DcClock, int, int]
 Deferred = list[tuple[Callable[..., None], tuple[Any, ...]]]  # work left for after the answer
 
 
-def make_plan(
-    key: Key,
-    slaves: list[Esc],
-    offsets: list[PortTimes],
-    epoch: int,
-    delay_ns: int,
-    deferred: Deferred | None = None,
-) -> FramePlan | None:
-    """The plan of a frame layout, or ``None`` when the frame takes the general path.
-
-    With ``deferred``, work that changes nothing in the returning frame is appended
-    there instead of run, when nothing later in the frame reads what it changes: the DC
-    time control loops of the slaves that only take the reference time, and a logical
-    datagram's writes into the slaves' memories with their outputs events. The chain
-    runs it after the answer is sent, and before anything else touches the slaves."""
-    return finish(plan_pieces(key, slaves, offsets, epoch, delay_ns, deferred))  # type: ignore[no-any-return]
-
-
 def plan_pieces(
     key: Key,
     slaves: list[Esc],
@@ -172,11 +154,17 @@ def plan_pieces(
     delay_ns: int,
     deferred: Deferred | None = None,
 ) -> Pieces:
-    """:func:`make_plan` in pieces (one slave's part of a datagram each, 5-10 µs for a
-    LOLA drive): a real-time server answers a frame that comes meanwhile between two of
-    them instead of after the whole plan (~250 µs for LOLA's cyclic frame). The slaves
-    must not change while it runs (the chain drops it when the epoch moves on); its
-    return value is the plan or ``None``."""
+    """The plan of a frame layout, or ``None`` when the frame takes the general path, made
+    in pieces (one slave's part of a datagram each, 5-10 µs for a LOLA drive; ``finish``
+    runs them all): a real-time server answers a frame that comes meanwhile between two
+    of them instead of after the whole plan (~250 µs for LOLA's cyclic frame). The slaves
+    must not change while it runs (the chain drops it when the epoch moves on).
+
+    With ``deferred``, work that changes nothing in the returning frame is appended
+    there instead of run, when nothing later in the frame reads what it changes: the DC
+    time control loops of the slaves that only take the reference time, and a logical
+    datagram's writes into the slaves' memories with their outputs events. The chain
+    runs it after the answer is sent, and before anything else touches the slaves."""
     if not slaves or any(key[i] not in PLANNABLE for i in range(2, len(key), 4)):
         return None
     plan = FramePlan.__new__(FramePlan)
