@@ -121,16 +121,24 @@ class Trace:
         return [s for s in self.stalls if s.host and s.us >= min_us]
 
     def explain(self, start_ns: int, end_ns: int) -> Stall | None:
-        """The stall that covers the stretch ``[start_ns, end_ns]`` (a late reply on the
-        wire, CLOCK_MONOTONIC) but for :data:`EXPLAINED_SLACK_NS`, or None."""
-        best: tuple[int, Stall] | None = None
+        """The longest stall on the CPU whose stalls cover most of ``[start_ns, end_ns]``
+        (a late reply on the wire, CLOCK_MONOTONIC), when they cover all of it but for
+        :data:`EXPLAINED_SLACK_NS` (a reply may wait for several); else None."""
+        covered: dict[int, int] = {}
+        longest: dict[int, tuple[int, Stall]] = {}
         for s in self.stalls:
             overlap = min(end_ns, s.end_ns) - max(start_ns, s.start_ns)
-            if overlap > 0 and (best is None or overlap > best[0]):
-                best = (overlap, s)
-        if best is None or best[0] < (end_ns - start_ns) - EXPLAINED_SLACK_NS:
+            if overlap <= 0:
+                continue
+            covered[s.cpu] = covered.get(s.cpu, 0) + overlap
+            if s.cpu not in longest or overlap > longest[s.cpu][0]:
+                longest[s.cpu] = (overlap, s)
+        if not covered:
             return None
-        return best[1]
+        cpu = max(covered, key=lambda c: covered[c])
+        if covered[cpu] < (end_ns - start_ns) - EXPLAINED_SLACK_NS:
+            return None
+        return longest[cpu][1]
 
     def summary(self, min_us: float = 1000) -> str:
         host = self.host_stalls(min_us)
