@@ -123,6 +123,7 @@ def simulate(
         app.enable()
         app.first_cycle = master.stats.cycles
         interrupted = _run(master, options, progress, should_stop, wall0)
+        app.last_cycle = master.stats.cycles
         master.drain()
         states = _final_states(master)
         wall_s = time.perf_counter() - wall0
@@ -235,6 +236,7 @@ def _live(
             wakes: list[int] = []
             transport.wake_lateness_ns = wakes
             interrupted = _run(master, options, progress, should_stop, wall0)
+            app.last_cycle = master.stats.cycles
             transport.wake_lateness_ns = None
             clock.active = False
             cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
@@ -327,6 +329,9 @@ class _Application:
         self.homes: dict[int, int] = {}
         self.t_enable_ns = 0
         self.first_cycle = 0
+        # the cycle count when the run's own cycles ended (a live run's closing reads of
+        # the AL states go on cycling, and those cycles are not the run's)
+        self.last_cycle: int | None = None
         image = master.image
         for name in options.watch:
             self.watch[name] = image.link(name, variable_for(image.find(name)))
@@ -536,7 +541,7 @@ def _report(
         if s is not None:
             sections[name] = {"thread": thread, **s.to_dict(scale=1e-3)}
             software_ns += s.mean
-    run_cycles = stats.cycles - first
+    run_cycles = (stats.cycles if app.last_cycle is None else app.last_cycle) - first
     simulated_s = run_cycles * master.cycle_time_ns / 1e9
     emulation = summarize_array(master.bus_emulation_ns[timed_from:])
     rt_mean = rt.mean if rt is not None else None
