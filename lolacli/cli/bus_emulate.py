@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Annotated
@@ -79,6 +80,16 @@ def emulate_cmd(
             "wait for an idle core to wake, as cyclictest does.",
         ),
     ] = True,
+    cpu: Annotated[
+        str,
+        typer.Option(
+            "--cpu",
+            metavar="follow|any|N",
+            help="Where the emulator runs: 'follow' moves it to the CPU the master's frames "
+            "arrive on (the master's own on a veth pair), so each exchange runs on one "
+            "core; 'any' leaves it to the OS; a number pins it to that CPU.",
+        ),
+    ] = "follow",
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
     drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
@@ -96,6 +107,17 @@ def emulate_cmd(
     from lolacli.errors import UsageError
     from lolacli.files import load_eni, load_esi
 
+    placement: int | str = cpu
+    if cpu not in ("follow", "any"):
+        if not cpu.isdigit():
+            raise typer.BadParameter(
+                f"{cpu!r}: expected follow, any or a CPU number", param_hint="--cpu"
+            )
+        placement = int(cpu)
+        if placement not in os.sched_getaffinity(0):
+            raise typer.BadParameter(
+                f"CPU {placement} is not one this process may run on", param_hint="--cpu"
+            )
     if not 0.0 <= corrupt_p <= 1.0:
         raise typer.BadParameter(f"{corrupt_p} is not in [0, 1]", param_hint="--corrupt-p")
     try:
@@ -167,6 +189,7 @@ def emulate_cmd(
         realtime_priority=realtime_priority,
         scratch=scratch,
         keep_cpus_awake=keep_cpus_awake,
+        cpu=placement,
     )
     status(stats)
     drops = "" if stats.socket_drops is None else f", {stats.socket_drops} dropped at the socket"
@@ -175,6 +198,12 @@ def emulate_cmd(
     )
     if stats.answered:
         console.print(_latency_line(stats), highlight=False, soft_wrap=True)
+    if stats.moves or stats.backoffs:
+        console.print(
+            f"placement: moved to the CPU of the master's frames {stats.moves} times, "
+            f"left it to the OS {stats.backoffs} times (frames held there)",
+            highlight=False,
+        )
 
 
 def _latency_line(stats: object) -> str:

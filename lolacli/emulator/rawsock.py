@@ -60,6 +60,13 @@ _TIMESPEC = struct.Struct("qq")
 YIELD_CHECK_NS = 20_000  # deferred device work looks for a waiting frame this often
 GC_EVERY_FRAMES = 4096  # a young-generation collection in an idle moment after this many
 WARM_EVERY_MS = 10  # a quiet server runs its keep-warm work this often
+FOLLOW = "follow"  # placement: on the CPU where the master's frames arrive
+ANY = "any"  # placement: where the OS puts it
+PACKET_FANOUT = 18  # Linux packet socket option: join a fanout group
+PACKET_FANOUT_CPU = 2  # the group's member of the CPU the packet arrived on
+FOLLOW_LATE_NS = 500_000  # a frame held this long after it arrived, on the master's CPU...
+FOLLOW_LATE_FRAMES = 3  # ...this many times in a row: the master keeps that CPU to itself
+FOLLOW_BACKOFF_NS = 1_000_000_000  # then the OS places the server for this long
 
 
 class LatencyHistogram:
@@ -108,6 +115,10 @@ class ServerStats:
     max_service_ns: int = 0
     #: frames the kernel dropped at this socket (PACKET_STATISTICS), None: not told
     socket_drops: int | None = None
+    #: times the server moved to the CPU of the master's frames (placement "follow")
+    moves: int = 0
+    #: times it left that CPU because its frames waited there (FOLLOW_LATE_FRAMES)
+    backoffs: int = 0
     wake: LatencyHistogram = field(default_factory=LatencyHistogram)  # kernel rx -> server
     service: LatencyHistogram = field(default_factory=LatencyHistogram)  # server -> sent
 
@@ -136,7 +147,21 @@ class RawSocketServer:
     (root); False leaves the CPUs' idle states alone. ``keep_warm``: called every
     :data:`WARM_EVERY_MS` while no frame comes (work that keeps the answer path's code and
     data in the caches; it must not touch the chain served), given ``should_yield``
-    (``None``: run it all) to ask between its pieces."""
+    (``None``: run it all) to ask between its pieces.
+
+    ``cpu``: where the server runs. :data:`FOLLOW` (the default): on the CPU the master's
+    frames arrive on, which is the master's own on a veth pair (a socket per CPU in a
+    ``PACKET_FANOUT_CPU`` group says which; the server moves there after answering the
+    first frame from a new CPU, within the CPUs it was allowed at the start). The whole
+    exchange then runs on one CPU: the master's send wakes the server on its core, the
+    answer is in the master's socket before the master looks, and a CPU the hypervisor
+    does not run for a while holds up master and emulator alike, never one waiting for
+    the other (KickCAT's single drive, 10,000 cycles with a 500 µs timeout, other core
+    idle: 9-122 time-outs a run with the OS's placement, none in 4 runs with both on one
+    CPU). A master that keeps that CPU (a real-time priority above the server's and never
+    sleeping) holds the frames there: after :data:`FOLLOW_LATE_FRAMES` frames in a row
+    held over :data:`FOLLOW_LATE_NS` the OS places the server again for
+    :data:`FOLLOW_BACKOFF_NS`. :data:`ANY`: the OS places it. A number: pinned to that CPU."""
 
     def __init__(
         self,
@@ -147,36 +172,47 @@ class RawSocketServer:
         realtime_priority: int | None = None,
         keep_cpus_awake: bool = True,
         keep_warm: Callable[[Callable[[], bool] | None], object] | None = None,
+        cpu: int | str = FOLLOW,
     ) -> None:
+        if not (cpu in (FOLLOW, ANY) or (isinstance(cpu, int) and cpu >= 0)):
+            raise ValueError(f"cpu: expected {FOLLOW!r}, {ANY!r} or a CPU number, not {cpu!r}")
         self.iface = iface
         self.keep_warm = keep_warm
         self.keep_cpus_awake = keep_cpus_awake
+        self.cpu = cpu
         self._latency_hold: int | None = None
         self.chain = chain
         self.grace_s = grace_s
         self.grace_ns = round(grace_s * 1e9)
-        self._next: tuple[bytes, list[tuple[int, int, bytes]]] | None = None
+        self._next: tuple[bytes, list[tuple[int, int, bytes]], int] | None = None
         self._poller = select.poll()
         self._poll_ms = 100
         self._next_check_ns = 0
         self.realtime_priority = realtime_priority
         self.stats = ServerStats()
         self.scheduling = "normal"
-        self._sock: socket.socket | None = None
+        self._sock: socket.socket | None = None  # the one the answers go out on
+        self._socks: list[socket.socket] = []  # a frame on the i-th arrived on CPU i
         self._gc_was_enabled = False
         self._since_gc = 0
         self._wait: Callable[[int], bool] | None = None
         self._next_warm_ns = 0  # keep-warm work is due from then on
+        self._allowed: set[int] = set()  # the CPUs the server may run on
+        self._follow = False
+        self._on_cpu: int | None = None  # the master's CPU the server is on (FOLLOW)
+        self._late = 0  # frames in a row held over FOLLOW_LATE_NS there
+        self._backoff_until_ns = 0
 
     def __enter__(self) -> RawSocketServer:
-        self._sock = open_socket(self.iface)
-        self._wait = readable_within(self._sock.fileno())
         try:
-            self._sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-        except OSError:
-            pass  # no receive timestamps: the wake-up figures stay empty
+            self._open()
+        except BaseException:
+            self._close_sockets()
+            raise
+        self._wait = readable_within([s.fileno() for s in self._socks])
         _tight_timers()
         self.scheduling = _scheduling(self.realtime_priority)
+        self.scheduling += self._placement()
         if self.keep_cpus_awake:
             self._latency_hold = hold_cpu_latency(0)
             self.scheduling += (
@@ -190,16 +226,67 @@ class RawSocketServer:
         gc.disable()  # no collection in the middle of an answer; see _idle
         return self
 
+    def _open(self) -> None:
+        """The sockets: one, or one per CPU in a fanout group when following the master."""
+        self._allowed = _allowed_cpus()
+        if isinstance(self.cpu, int) and self._allowed and self.cpu not in self._allowed:
+            raise TransportError(
+                f"CPU {self.cpu} is not one this process may run on "
+                f"({_cpu_list(self._allowed)})"
+            )
+        self._socks = [open_socket(self.iface)]
+        if self.cpu == FOLLOW and len(self._allowed) > 1:
+            count = max(os.cpu_count() or 1, max(self._allowed) + 1)
+            self._socks += [open_socket(self.iface) for _ in range(count - 1)]
+            group = (os.getpid() ^ id(self)) & 0xFFFF
+            try:
+                for sock in self._socks:
+                    sock.setsockopt(
+                        _SOL_PACKET, PACKET_FANOUT, group | (PACKET_FANOUT_CPU << 16)
+                    )
+                self._follow = True
+            except OSError:
+                for sock in self._socks[1:]:
+                    sock.close()
+                # a socket that did join a group has left it only when closed: a fresh one
+                self._socks[0].close()
+                self._socks = [open_socket(self.iface)]
+        for sock in self._socks:
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            except OSError:
+                pass  # no receive timestamps: the wake-up figures stay empty
+        self._sock = self._socks[0]
+
+    def _placement(self) -> str:
+        """Apply a pinned CPU; the placement in words."""
+        if isinstance(self.cpu, int):
+            _set_cpus({self.cpu})
+            return f", on CPU {self.cpu}"
+        if self._follow:
+            return ", on the CPU of the master's frames"
+        return ""
+
     def __exit__(self, *exc: object) -> None:
         if self._gc_was_enabled:
             gc.enable()
         if self._latency_hold is not None:
             os.close(self._latency_hold)  # closing the file ends the request
             self._latency_hold = None
-        if self._sock is not None:
-            self.stats.socket_drops = _socket_drops(self._sock)
-            self._sock.close()
-            self._sock = None
+        if self._socks:
+            drops = [_socket_drops(sock) for sock in self._socks]
+            known = [d for d in drops if d is not None]
+            self.stats.socket_drops = sum(known) if known else None
+        self._close_sockets()
+        if self._on_cpu is not None or isinstance(self.cpu, int):
+            _set_cpus(self._allowed)  # the library caller's thread as it was
+            self._on_cpu = None
+
+    def _close_sockets(self) -> None:
+        for sock in self._socks:
+            sock.close()
+        self._socks = []
+        self._sock = None
 
     def serve(
         self,
@@ -210,24 +297,24 @@ class RawSocketServer:
         poll_s: float = 0.1,
     ) -> ServerStats:
         """Serve until ``should_stop()``; ``on_status`` every ``status_interval_s``."""
-        sock = self._sock
-        if sock is None:
+        if self._sock is None:
             raise TransportError("server not opened (use it as a context manager)")
-        sock.setblocking(False)  # waits go through poll(): a frame already here is taken at once
         self._poller = select.poll()
-        self._poller.register(sock, select.POLLIN)
+        for sock in self._socks:
+            sock.setblocking(False)  # waits go through poll(): a frame here is taken at once
+            self._poller.register(sock, select.POLLIN)
         self._poll_ms = max(1, round(poll_s * 1000))
         self.stats.started_ns = time.monotonic_ns()
         next_status = time.monotonic() + status_interval_s
         while not should_stop():
-            self._serve_one(sock)
+            self._serve_one(self._sock)
             if on_status is not None and time.monotonic() >= next_status:
                 on_status(self.stats)
                 next_status = time.monotonic() + status_interval_s
         return self.stats
 
     def _serve_one(self, sock: socket.socket) -> None:
-        if self._next is None and not self._poll(sock):
+        if self._next is None and not self._poll():
             if not self._poller.poll(WARM_EVERY_MS if self.keep_warm else self._poll_ms):
                 if self.keep_warm is not None:
                     self.keep_warm(None)
@@ -236,16 +323,17 @@ class RawSocketServer:
                 self.chain.tick(time.monotonic_ns())  # watchdogs run while it is silent
                 gc.collect()
                 return
-            if not self._poll(sock):
+            if not self._poll():
                 return  # a frame of our own, or a wake-up for nothing
         received = self._next
         self._next = None
         assert received is not None
-        frame, ancillary = received
+        frame, ancillary, cpu = received
         t_ns = time.monotonic_ns()
         arrived = _arrival_ns(ancillary)
-        if arrived is not None:
-            self.stats.wake.add(time.time_ns() - arrived)
+        held_ns = time.time_ns() - arrived if arrived is not None else None
+        if held_ns is not None:
+            self.stats.wake.add(held_ns)
         self.stats.received += 1
         reply, _delay_ns = self.chain.process(frame, t_ns, defer_cycles=True)
         if reply is None:
@@ -259,30 +347,58 @@ class RawSocketServer:
         self.stats.answered += 1
         self.stats.service.add(service_ns)
         self.stats.max_service_ns = max(self.stats.max_service_ns, service_ns)
-        if self._firmware(sock) or self._spin(sock):
+        if self._follow:
+            self._place(cpu, held_ns)
+        if self._firmware() or self._spin():
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
             return
         # device updates after the answer is on its way, giving way to the next frame
         if self.chain.run_deferred_cycles(should_yield=self._frame_waiting):
             self._idle()
 
-    def _poll(self, sock: socket.socket) -> bool:
+    def _place(self, cpu: int, held_ns: int | None) -> None:
+        """After answering a frame that arrived on ``cpu`` (held ``held_ns`` before the
+        server took it): move to that CPU, or leave it when the master keeps it."""
+        if cpu == self._on_cpu:
+            if held_ns is None or held_ns <= FOLLOW_LATE_NS:
+                self._late = 0
+                return
+            self._late += 1
+            if self._late >= FOLLOW_LATE_FRAMES:
+                self._late = 0
+                self._on_cpu = None
+                self._backoff_until_ns = time.monotonic_ns() + FOLLOW_BACKOFF_NS
+                self.stats.backoffs += 1
+                _set_cpus(self._allowed)
+            return
+        if cpu not in self._allowed or time.monotonic_ns() < self._backoff_until_ns:
+            return
+        if _set_cpus({cpu}):
+            self._on_cpu = cpu
+            self._late = 0
+            self.stats.moves += 1
+        else:
+            self._follow = False  # refused (a cpuset changed under us): the OS places it
+
+    def _poll(self) -> bool:
         """Take a frame that is already here (kept for the next answer); True if one is."""
-        while True:
-            try:
-                frame, ancillary, _flags, address = sock.recvmsg(
-                    MAX_FRAME_BYTES, 64, socket.MSG_DONTWAIT
-                )
-            except (BlockingIOError, InterruptedError):
-                return False  # nothing here
-            except OSError as exc:
-                raise TransportError(
-                    f"{self.iface}: receive failed: {exc.strerror or exc}"
-                ) from None
-            if len(address) > 2 and address[2] == PACKET_OUTGOING:
-                continue
-            self._next = frame, ancillary
-            return True
+        for cpu, sock in enumerate(self._socks):
+            while True:
+                try:
+                    frame, ancillary, _flags, address = sock.recvmsg(
+                        MAX_FRAME_BYTES, 64, socket.MSG_DONTWAIT
+                    )
+                except (BlockingIOError, InterruptedError):
+                    break  # nothing here
+                except OSError as exc:
+                    raise TransportError(
+                        f"{self.iface}: receive failed: {exc.strerror or exc}"
+                    ) from None
+                if len(address) > 2 and address[2] == PACKET_OUTGOING:
+                    continue
+                self._next = frame, ancillary, cpu
+                return True
+        return False
 
     def _frame_waiting(self) -> bool:
         """Whether the master's next frame is here (looked for at most every
@@ -291,9 +407,9 @@ class RawSocketServer:
         if now < self._next_check_ns or self._sock is None:
             return False
         self._next_check_ns = now + YIELD_CHECK_NS
-        return self._poll(self._sock)
+        return self._poll()
 
-    def _spin(self, sock: socket.socket) -> bool:
+    def _spin(self) -> bool:
         """Watch the socket for ``grace_s`` after an answer: the master takes the answer
         meanwhile, and its next frame (in a start-up and a mailbox exchange they come back
         to back) is answered at once. Busy for the first :data:`GRACE_BUSY_NS` (pysoem's
@@ -301,12 +417,14 @@ class RawSocketServer:
         rest (``ppoll``, whose timeout is in ns): a master on this core, which a busy
         real-time loop would hold off for all of the grace, sends meanwhile (KickCAT with
         a CPU hog on the other core sent each of its back-to-back frames 110 µs after the
-        last answer when the watch was busy throughout)."""
+        last answer when the watch was busy throughout). On the master's own CPU
+        (placement :data:`FOLLOW`) the watch is blocked throughout: there the master
+        cannot send while the server spins, and its frame wakes the server at once."""
         now = time.monotonic_ns()
-        busy_until = now + GRACE_BUSY_NS
+        busy_until = now if self._on_cpu is not None else now + GRACE_BUSY_NS
         deadline = now + self.grace_ns
         while True:
-            if self._poll(sock):
+            if self._poll():
                 return True
             now = time.monotonic_ns()
             if now >= deadline:
@@ -314,7 +432,7 @@ class RawSocketServer:
             if now >= busy_until and self._wait is not None:
                 self._wait(deadline - now)
 
-    def _firmware(self, sock: socket.socket) -> bool:
+    def _firmware(self) -> bool:
         """The slaves' firmware work, a piece at a time while no frame waits (at least
         one piece per frame, so it never starves). True when a frame waits."""
         chain = self.chain
@@ -322,7 +440,7 @@ class RawSocketServer:
             return False
         chain.run_firmware(1)
         while chain.firmware_pending:
-            if self._poll(sock):
+            if self._poll():
                 return True
             chain.run_firmware(1)
         return False
@@ -339,6 +457,29 @@ class RawSocketServer:
         if self._since_gc >= GC_EVERY_FRAMES:
             self._since_gc = 0
             gc.collect(0)
+
+
+def _allowed_cpus() -> set[int]:
+    """The CPUs this thread may run on (empty where the OS does not say)."""
+    try:
+        return set(os.sched_getaffinity(0))
+    except (OSError, AttributeError):
+        return set()
+
+
+def _set_cpus(cpus: set[int]) -> bool:
+    """Run this thread on ``cpus`` from now on (Linux moves it at once); False if refused."""
+    if not cpus:
+        return False
+    try:
+        os.sched_setaffinity(0, cpus)
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
+def _cpu_list(cpus: set[int]) -> str:
+    return ", ".join(str(c) for c in sorted(cpus))
 
 
 def _arrival_ns(ancillary: list[tuple[int, int, bytes]]) -> int | None:
@@ -415,24 +556,25 @@ class _Timespec(ctypes.Structure):
     _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
 
 
-def readable_within(fd: int) -> Callable[[int], bool] | None:
-    """A wait of at most ``ns`` nanoseconds for ``fd`` to become readable, True if it did
-    (Linux ``ppoll``: poll() and Python's timeouts round up to whole milliseconds);
-    ``None`` where the C library has no ppoll."""
+def readable_within(fds: list[int]) -> Callable[[int], bool] | None:
+    """A wait of at most ``ns`` nanoseconds for one of ``fds`` to become readable, True
+    if one did (Linux ``ppoll``: poll() and Python's timeouts round up to whole
+    milliseconds); ``None`` where the C library has no ppoll."""
     try:
         ppoll = ctypes.CDLL(None, use_errno=True).ppoll
     except (OSError, AttributeError):
         return None
     ppoll.argtypes = [ctypes.c_void_p, ctypes.c_ulong, ctypes.c_void_p, ctypes.c_void_p]
     ppoll.restype = ctypes.c_int
-    pollfd = _PollFd(fd, select.POLLIN, 0)
+    pollfds = (_PollFd * len(fds))(*(_PollFd(fd, select.POLLIN, 0) for fd in fds))
     timeout = _Timespec(0, 0)
-    at_fd, at_timeout = ctypes.addressof(pollfd), ctypes.addressof(timeout)
+    at_fds, at_timeout, count = ctypes.addressof(pollfds), ctypes.addressof(timeout), len(fds)
 
     def wait(ns: int) -> bool:
         timeout.tv_sec, timeout.tv_nsec = divmod(max(0, ns), 1_000_000_000)
-        pollfd.revents = 0
-        return bool(ppoll(at_fd, 1, at_timeout, None) > 0)
+        for pollfd in pollfds:
+            pollfd.revents = 0
+        return bool(ppoll(at_fds, count, at_timeout, None) > 0)
 
     return wait
 

@@ -230,6 +230,7 @@ def serve(
     realtime_priority: int | None = None,
     scratch: Chain | None = None,
     keep_cpus_awake: bool = True,
+    cpu: int | str = "follow",
 ) -> ServerStats:
     """Serve ``chain`` on ``iface`` until ``should_stop()``; TransportError on socket trouble.
     ``on_ready(scheduling)`` is called once the socket is open (frames are answered from
@@ -240,7 +241,8 @@ def serve(
     ``scratch``: a second chain of the same ENI to :func:`warm_up` with first and to
     keep warm with while the master is silent (:func:`keep_warm_with`).
     ``keep_cpus_awake``: hold the CPUs' wake-up latency at 0 while serving (PM QoS, where
-    permitted), as slave hardware never sleeps between frames."""
+    permitted), as slave hardware never sleeps between frames. ``cpu``: where the server
+    runs (:class:`RawSocketServer`: "follow" the master's CPU, "any", or a CPU number)."""
     keep_warm = None
     if scratch is not None:
         warm_up(scratch)
@@ -251,6 +253,7 @@ def serve(
         realtime_priority=realtime_priority,
         keep_cpus_awake=keep_cpus_awake,
         keep_warm=keep_warm,
+        cpu=cpu,
     ) as server:
         if on_ready is not None:
             on_ready(server.scheduling)

@@ -1,0 +1,160 @@
+"""Where `bus emulate` runs: on the CPU the master's frames arrive on (``--cpu follow``, the
+default), off it again when the master keeps that CPU, or where it is told. A real
+emulator process over a veth pair, the master a raw socket in this process."""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import statistics
+import struct
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+
+from lolacli.emulator.rawsock import FOLLOW_LATE_FRAMES, SO_TIMESTAMPNS
+from lolacli.rawsocket import PACKET_OUTGOING, open_socket
+from lolacli.wire.commands import Command
+from lolacli.wire.frame import Datagram, encode_frame, make_frame
+from tests.live import (
+    EXAMPLES,
+    LiveBus,
+    inside,
+    make_bus,
+    remove_bus,
+    start_emulator,
+    stop_emulator,
+)
+
+pytestmark = [
+    pytest.mark.skipif(os.geteuid() != 0, reason="a veth pair needs root"),
+    pytest.mark.skipif(
+        not {0, 1} <= os.sched_getaffinity(0), reason="needs CPUs 0 and 1 to move between"
+    ),
+]
+
+SINGLE = EXAMPLES / "single_drive.xml"
+FRAME = encode_frame(make_frame([Datagram.physical(Command.BRD, 0, 0x0130, 2)]), pad=True)
+
+
+@pytest.fixture
+def bus() -> Iterator[LiveBus]:
+    live = make_bus("p")
+    try:
+        yield live
+    finally:
+        remove_bus(live)
+
+
+@contextmanager
+def on_cpu(cpu: int, priority: int = 0) -> Iterator[None]:
+    """This thread on ``cpu`` (at SCHED_FIFO ``priority`` if not 0) for the block."""
+    affinity = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {cpu})
+    try:
+        if priority:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        yield
+    finally:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.sched_setaffinity(0, affinity)
+
+
+def _answer(sock: socket.socket) -> int:
+    """Wait for the emulator's answer; the kernel's receive time of it (CLOCK_REALTIME)."""
+    while True:
+        data, ancillary, _flags, address = sock.recvmsg(2048, 64)
+        if address[2] != PACKET_OUTGOING and data[6] & 0x02:  # its datagram came back
+            for level, kind, raw in ancillary:
+                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+                    sec, nsec = struct.unpack_from("qq", raw)
+                    return sec * 1_000_000_000 + nsec
+            return time.time_ns()
+
+
+def _master_socket(bus: LiveBus) -> socket.socket:
+    with inside(bus):
+        sock = open_socket(bus.master)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    sock.settimeout(2.0)
+    return sock
+
+
+def _placement_counts(stderr: str) -> tuple[int, int]:
+    """(moves, backoffs) from the emulator's stop lines (0, 0 when it did not say)."""
+    found = re.search(r"placement: moved .* frames (\d+) times, left it to the OS (\d+)", stderr)
+    return (int(found[1]), int(found[2])) if found else (0, 0)
+
+
+def test_the_emulator_runs_on_the_cpu_of_the_masters_frames(bus: LiveBus) -> None:
+    """The master on CPU 0, then 1, then 0 again: each time the emulator is on the master's
+    CPU after its first frames from there, and says it moved."""
+    proc = start_emulator(bus, eni=SINGLE)
+    sock = _master_socket(bus)
+    seen = []
+    try:
+        for cpu in (0, 1, 0):
+            with on_cpu(cpu):
+                for _ in range(20):
+                    sock.send(FRAME)
+                    _answer(sock)
+                    time.sleep(0.001)
+            seen.append(os.sched_getaffinity(proc.pid))
+    finally:
+        sock.close()
+        err = stop_emulator(proc)
+    assert "on the CPU of the master's frames" in err.splitlines()[0], err
+    assert seen == [{0}, {1}, {0}], err
+    moves, _backoffs = _placement_counts(err)
+    assert moves >= 3, err
+
+
+def test_the_emulator_leaves_a_cpu_the_master_keeps(bus: LiveBus) -> None:
+    """A master at SCHED_FIFO 50 (above the emulator's 10) that spins 2 ms after each frame
+    keeps its CPU: the emulator, following it there, can answer only when the spin ends.
+    After FOLLOW_LATE_FRAMES frames held that long it leaves the placement to the OS, which
+    runs it on the other CPU: the answers come while the master still spins."""
+    proc = start_emulator(bus, eni=SINGLE)
+    sock = _master_socket(bus)
+    latency_us = []
+    try:
+        with on_cpu(0, priority=50):
+            for _ in range(FOLLOW_LATE_FRAMES + 20):
+                sent = time.time_ns()
+                sock.send(FRAME)
+                spin_until = time.monotonic_ns() + 2_000_000
+                while time.monotonic_ns() < spin_until:
+                    pass
+                latency_us.append((_answer(sock) - sent) / 1000)
+                time.sleep(0.001)
+    finally:
+        sock.close()
+        err = stop_emulator(proc)
+    _moves, backoffs = _placement_counts(err)
+    assert backoffs >= 1, (err, latency_us)
+    assert statistics.median(latency_us[-10:]) < 1000, latency_us  # not held by the spin
+
+
+def test_any_and_a_pinned_cpu(bus: LiveBus) -> None:
+    """``--cpu any`` stays where the OS puts it (a master on CPU 0 does not move it);
+    ``--cpu 1`` pins it to CPU 1 (and says so)."""
+    for extra, expected in ((("--cpu", "any"), None), (("--cpu", "1"), {1})):
+        proc = start_emulator(bus, *extra, eni=SINGLE)
+        before = os.sched_getaffinity(proc.pid)
+        sock = _master_socket(bus)
+        try:
+            with on_cpu(0):
+                for _ in range(20):
+                    sock.send(FRAME)
+                    _answer(sock)
+            after = os.sched_getaffinity(proc.pid)
+        finally:
+            sock.close()
+            err = stop_emulator(proc)
+        assert after == (expected or before), (extra, err)
+        assert _placement_counts(err) == (0, 0), err
+        if expected:
+            assert "on CPU 1" in err.splitlines()[0], err
