@@ -312,7 +312,11 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         hog=hog,
         capture=str(pcap),
         steal_ms=None if stolen is None or stolen_after is None else stolen_after - stolen,
-        emulator=" ".join(emu_log.read_text().split()).partition("reply time:")[2],
+        emulator="; ".join(
+            " ".join(line.split()).partition(": ")[2] if line.startswith("reply time:") else line
+            for line in emu_log.read_text().splitlines()
+            if line.startswith(("reply time:", "placement:"))
+        ),
         pairs=report["pairs"],
         lost_frames=report["lost_frames"],
         direction_rule=report.get("direction_rule", "mac"),

@@ -201,8 +201,10 @@ def emulate_cmd(
     if stats.moves or stats.backoffs:
         console.print(
             f"placement: moved to the CPU of the master's frames {stats.moves} times, "
-            f"left it to the OS {stats.backoffs} times (frames held there)",
+            f"left it to the OS {stats.backoffs} times (frames held there, or the master "
+            "moved away)",
             highlight=False,
+            soft_wrap=True,
         )
 
 

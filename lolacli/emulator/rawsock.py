@@ -66,6 +66,7 @@ PACKET_FANOUT = 18  # Linux packet socket option: join a fanout group
 PACKET_FANOUT_CPU = 2  # the group's member of the CPU the packet arrived on
 FOLLOW_LATE_NS = 500_000  # a frame held this long after it arrived, on the master's CPU...
 FOLLOW_LATE_FRAMES = 3  # ...this many times in a row: the master keeps that CPU to itself
+FOLLOW_BOUNCE_NS = 50_000_000  # frames from another CPU this soon after a move: a bounce
 FOLLOW_BACKOFF_NS = 1_000_000_000  # then the OS places the server for this long
 
 
@@ -161,7 +162,10 @@ class RawSocketServer:
     CPU). A master that keeps that CPU (a real-time priority above the server's and never
     sleeping) holds the frames there: after :data:`FOLLOW_LATE_FRAMES` frames in a row
     held over :data:`FOLLOW_LATE_NS` the OS places the server again for
-    :data:`FOLLOW_BACKOFF_NS`. :data:`ANY`: the OS places it. A number: pinned to that CPU."""
+    :data:`FOLLOW_BACKOFF_NS`; so it does when the master's frames come from another CPU
+    within :data:`FOLLOW_BOUNCE_NS` of a move (a real-time master below the server's
+    priority, which the kernel pushes to the other CPU when the server preempts it).
+    :data:`ANY`: the OS places it. A number: pinned to that CPU."""
 
     def __init__(
         self,
@@ -202,6 +206,7 @@ class RawSocketServer:
         self._on_cpu: int | None = None  # the master's CPU the server is on (FOLLOW)
         self._late = 0  # frames in a row held over FOLLOW_LATE_NS there
         self._backoff_until_ns = 0
+        self._moved_ns = 0  # when the server last moved to the master's CPU
 
     def __enter__(self) -> RawSocketServer:
         try:
@@ -358,27 +363,40 @@ class RawSocketServer:
 
     def _place(self, cpu: int, held_ns: int | None) -> None:
         """After answering a frame that arrived on ``cpu`` (held ``held_ns`` before the
-        server took it): move to that CPU, or leave it when the master keeps it."""
+        server took it): move to that CPU, or leave it to the OS when the master keeps it
+        (frames held there) or leaves it when the server comes (a bounce)."""
+        now = time.monotonic_ns()
         if cpu == self._on_cpu:
             if held_ns is None or held_ns <= FOLLOW_LATE_NS:
                 self._late = 0
                 return
             self._late += 1
             if self._late >= FOLLOW_LATE_FRAMES:
-                self._late = 0
-                self._on_cpu = None
-                self._backoff_until_ns = time.monotonic_ns() + FOLLOW_BACKOFF_NS
-                self.stats.backoffs += 1
-                _set_cpus(self._allowed)
+                self._back_off(now)
             return
-        if cpu not in self._allowed or time.monotonic_ns() < self._backoff_until_ns:
+        if self._on_cpu is not None and now - self._moved_ns < FOLLOW_BOUNCE_NS:
+            # the master went elsewhere as the server came: a real-time master the
+            # kernel pushes off the CPU the server preempts it on, or a busy CPU the load
+            # balancer moves it from; chasing it would move both on every frame
+            self._back_off(now)
+            return
+        if cpu not in self._allowed or now < self._backoff_until_ns:
             return
         if _set_cpus({cpu}):
             self._on_cpu = cpu
             self._late = 0
+            self._moved_ns = now
             self.stats.moves += 1
         else:
             self._follow = False  # refused (a cpuset changed under us): the OS places it
+
+    def _back_off(self, now: int) -> None:
+        """The OS places the server for :data:`FOLLOW_BACKOFF_NS`."""
+        self._late = 0
+        self._on_cpu = None
+        self._backoff_until_ns = now + FOLLOW_BACKOFF_NS
+        self.stats.backoffs += 1
+        _set_cpus(self._allowed)
 
     def _poll(self) -> bool:
         """Take a frame that is already here (kept for the next answer); True if one is."""

@@ -15,7 +15,12 @@ from contextlib import contextmanager
 
 import pytest
 
-from lolacli.emulator.rawsock import FOLLOW_LATE_FRAMES, SO_TIMESTAMPNS
+from lolacli.emulator.rawsock import (
+    FOLLOW_BACKOFF_NS,
+    FOLLOW_BOUNCE_NS,
+    FOLLOW_LATE_FRAMES,
+    SO_TIMESTAMPNS,
+)
 from lolacli.rawsocket import PACKET_OUTGOING, open_socket
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram, encode_frame, make_frame
@@ -90,15 +95,17 @@ def _placement_counts(stderr: str) -> tuple[int, int]:
 
 
 def test_the_emulator_runs_on_the_cpu_of_the_masters_frames(bus: LiveBus) -> None:
-    """The master on CPU 0, then 1, then 0 again: each time the emulator is on the master's
-    CPU after its first frames from there, and says it moved."""
+    """The master on CPU 0, then 1, then 0 again, each for twice FOLLOW_BOUNCE_NS: each
+    time the emulator is on the master's CPU after its first frames from there, and says it
+    moved."""
     proc = start_emulator(bus, eni=SINGLE)
     sock = _master_socket(bus)
     seen = []
     try:
         for cpu in (0, 1, 0):
             with on_cpu(cpu):
-                for _ in range(20):
+                until = time.monotonic_ns() + 2 * FOLLOW_BOUNCE_NS
+                while time.monotonic_ns() < until:
                     sock.send(FRAME)
                     _answer(sock)
                     time.sleep(0.001)
@@ -136,6 +143,54 @@ def test_the_emulator_leaves_a_cpu_the_master_keeps(bus: LiveBus) -> None:
     _moves, backoffs = _placement_counts(err)
     assert backoffs >= 1, (err, latency_us)
     assert statistics.median(latency_us[-10:]) < 1000, latency_us  # not held by the spin
+
+
+def test_the_emulator_does_not_chase_a_master_that_moves_away(bus: LiveBus) -> None:
+    """A master whose frames come from the other CPU right after the emulator came to its
+    own (here it changes CPU every frame; a real-time master below the emulator's priority
+    is pushed off the CPU where the emulator preempts it): the emulator leaves the placement
+    to the OS after the first such bounce instead of moving on every frame."""
+    proc = start_emulator(bus, eni=SINGLE)
+    sock = _master_socket(bus)
+    frames = 0
+    try:
+        until = time.monotonic_ns() + FOLLOW_BACKOFF_NS // 2
+        while time.monotonic_ns() < until:
+            with on_cpu(frames % 2):
+                sock.send(FRAME)
+                _answer(sock)
+            frames += 1
+            time.sleep(0.001)
+    finally:
+        sock.close()
+        err = stop_emulator(proc)
+    moves, backoffs = _placement_counts(err)
+    assert frames > 100
+    assert (moves, backoffs) == (1, 1), err
+
+
+def test_a_real_time_master_below_the_emulator_keeps_it_in_place(bus: LiveBus) -> None:
+    """A master at SCHED_FIFO 5, free to run on either CPU, sending a frame a millisecond
+    for a second: the emulator (SCHED_FIFO 10) moves to it a few times at most, not on
+    every frame (the kernel pushes the preempted master to the other CPU)."""
+    proc = start_emulator(bus, eni=SINGLE)
+    sock = _master_socket(bus)
+    frames = 0
+    try:
+        with on_cpu(0, priority=5):
+            os.sched_setaffinity(0, {0, 1})
+            until = time.monotonic_ns() + 1_000_000_000
+            while time.monotonic_ns() < until:
+                sock.send(FRAME)
+                _answer(sock)
+                frames += 1
+                time.sleep(0.001)
+    finally:
+        sock.close()
+        err = stop_emulator(proc)
+    moves, _backoffs = _placement_counts(err)
+    assert frames > 300
+    assert moves <= 5, err
 
 
 def test_any_and_a_pinned_cpu(bus: LiveBus) -> None:
