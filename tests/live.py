@@ -28,6 +28,14 @@ from typing import Any
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the CPUs the test run may use, taken at import (a test may pin its master to one of them)
+ALL_CPUS = frozenset(os.sched_getaffinity(0))
+
+
+def on_all_cpus() -> None:
+    """A child's CPUs as the run's (``preexec_fn``: not the one core a test's master is
+    pinned to; the emulator places itself)."""
+    os.sched_setaffinity(0, ALL_CPUS)
 EXAMPLES = ROOT / "lolacli" / "eni_examples"
 LOLA = EXAMPLES / "lola.xml"
 PREFIX = os.environ.get("LOLACLI_TEST_NETNS_PREFIX", "lct")
@@ -124,7 +132,12 @@ def spawn_emulator(argv: list[str]) -> subprocess.Popen[bytes]:
     ("emulating N slaves of …", kept as ``first_line``) says the socket is open. Read byte
     by byte, so nothing after it is buffered here and lost to :func:`stop_emulator`."""
     proc = subprocess.Popen(
-        argv, cwd=ROOT, stderr=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0
+        argv,
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        bufsize=0,
+        preexec_fn=on_all_cpus,
     )
     assert proc.stderr is not None
     line = b""

@@ -23,6 +23,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.live import on_all_cpus
+
 MARKER_ETHERTYPE = b"\x88\xb5"  # IEEE 802 local experimental ethertype 1
 
 
@@ -144,6 +146,7 @@ class MasterCapture:
             ["dumpcap", "-B", "32", "-i", self.iface, "-w", str(self.path)],
             stdout=subprocess.DEVNULL,
             stderr=self._log,
+            preexec_fn=on_all_cpus,  # not on the master's core
         )
         deadline = time.monotonic() + 10
         # capturing once the file holds its section header and interface description
