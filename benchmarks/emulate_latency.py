@@ -32,7 +32,9 @@ no emulator can answer through). The witness costs each CPU about 4% and wakes e
 
 Needs root (veth, raw sockets), dumpcap, pysoem and/or kickcat. The masters run at
 ``--master-nice`` (default 0: normal; SOEM polls its socket without sleeping, and above
-the kernel's softirq thread it holds back the very packets it waits for). The
+the kernel's softirq thread it holds back the very packets it waits for), on core
+``--master-cpu`` (default 0, as a real-time master is deployed and as the tests run
+them; -1 leaves it free; the emulator follows it there, ``bus emulate --cpu follow``). The
 machine's load during the run is printed with the table: figures on a shared host are
 upper bounds.
 """
@@ -280,6 +282,8 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
                "--cycles", str(args.cycles)]  # fmt: skip
         if args.master_nice:
             cmd = ["nice", "-n", str(args.master_nice), *cmd]
+        if args.master_cpu >= 0 and shutil.which("taskset"):
+            cmd = ["taskset", "-c", str(args.master_cpu), *cmd]
         stolen = steal_ms()
         realtime_minus_mono = time.time_ns() - time.monotonic_ns()  # the capture's clock
         with _witness(args) as witness:
@@ -582,6 +586,12 @@ def main() -> None:
     parser.add_argument("--masters", default="pysoem,kickcat")
     parser.add_argument("--loads", default="idle,hog", help="idle, hog or both")
     parser.add_argument("--master-nice", type=int, default=0)
+    parser.add_argument(
+        "--master-cpu",
+        type=int,
+        default=0,
+        help="the core the master runs on, as the tests' masters (-1: free on every core)",
+    )
     parser.add_argument("--prefix", default="lbl", help="veth name prefix")
     parser.add_argument("--keep", type=Path, help="keep the captures in this folder")
     parser.add_argument(
