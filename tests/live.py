@@ -36,6 +36,22 @@ def on_all_cpus() -> None:
     """A child's CPUs as the run's (``preexec_fn``: not the one core a test's master is
     pinned to; the emulator places itself)."""
     os.sched_setaffinity(0, ALL_CPUS)
+
+
+@contextmanager
+def on_cpu(cpu: int, priority: int = 0) -> Iterator[None]:
+    """This thread on ``cpu`` (at SCHED_FIFO ``priority`` if not 0) for the block; its
+    CPUs and normal scheduling again afterwards."""
+    affinity = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {cpu})
+    try:
+        if priority:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        yield
+    finally:
+        if priority:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        os.sched_setaffinity(0, affinity)
 EXAMPLES = ROOT / "lolacli" / "eni_examples"
 LOLA = EXAMPLES / "lola.xml"
 PREFIX = os.environ.get("LOLACLI_TEST_NETNS_PREFIX", "lct")

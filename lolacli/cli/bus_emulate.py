@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Annotated
@@ -114,10 +113,6 @@ def emulate_cmd(
                 f"{cpu!r}: expected follow, any or a CPU number", param_hint="--cpu"
             )
         placement = int(cpu)
-        if placement not in os.sched_getaffinity(0):
-            raise typer.BadParameter(
-                f"CPU {placement} is not one this process may run on", param_hint="--cpu"
-            )
     if not 0.0 <= corrupt_p <= 1.0:
         raise typer.BadParameter(f"{corrupt_p} is not in [0, 1]", param_hint="--corrupt-p")
     try:

@@ -45,7 +45,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from lolacli.emulator.chain import Chain
-from lolacli.errors import TransportError
+from lolacli.errors import TransportError, UsageError
 from lolacli.rawsocket import MAX_FRAME_BYTES, PACKET_OUTGOING, open_socket
 
 DEFAULT_GRACE_S = 100e-6
@@ -235,8 +235,8 @@ class RawSocketServer:
         """The sockets: one, or one per CPU in a fanout group when following the master."""
         self._allowed = _allowed_cpus()
         if isinstance(self.cpu, int) and self._allowed and self.cpu not in self._allowed:
-            raise TransportError(
-                f"CPU {self.cpu} is not one this process may run on "
+            raise UsageError(
+                f"--cpu {self.cpu}: not a CPU this process may run on "
                 f"({_cpu_list(self._allowed)})"
             )
         self._socks = [open_socket(self.iface)]

@@ -30,7 +30,15 @@ import pytest
 from lolacli.devices.cia402 import Cia402Drive
 from tests.emulator.bus import EXAMPLES
 from tests.emulator.master_capture import Exchange, MasterCapture, realtime_ns
-from tests.live import ALL_CPUS, emulate_argv, ip, need_root, spawn_emulator, stop_emulator
+from tests.live import (
+    ALL_CPUS,
+    emulate_argv,
+    ip,
+    need_root,
+    on_cpu,
+    spawn_emulator,
+    stop_emulator,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = [pytest.mark.root, pytest.mark.slow]
@@ -53,18 +61,8 @@ def veth() -> Iterator[tuple[str, str]]:
     free, 0 in 4 runs with master and emulator on one core). The emulator, dumpcap and
     the other children keep every core (:func:`tests.live.on_all_cpus`)."""
     need_root()
-    with _master_core():
+    with on_cpu(MASTER_CPU):
         yield from _veth_pair()
-
-
-@contextmanager
-def _master_core() -> Iterator[None]:
-    before = os.sched_getaffinity(0)
-    os.sched_setaffinity(0, {MASTER_CPU})
-    try:
-        yield
-    finally:
-        os.sched_setaffinity(0, before)
 
 
 def _veth_pair() -> Iterator[tuple[str, str]]:

@@ -10,8 +10,7 @@ import socket
 import statistics
 import struct
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -29,6 +28,7 @@ from tests.live import (
     LiveBus,
     inside,
     make_bus,
+    on_cpu,
     remove_bus,
     start_emulator,
     stop_emulator,
@@ -52,20 +52,6 @@ def bus() -> Iterator[LiveBus]:
         yield live
     finally:
         remove_bus(live)
-
-
-@contextmanager
-def on_cpu(cpu: int, priority: int = 0) -> Iterator[None]:
-    """This thread on ``cpu`` (at SCHED_FIFO ``priority`` if not 0) for the block."""
-    affinity = os.sched_getaffinity(0)
-    os.sched_setaffinity(0, {cpu})
-    try:
-        if priority:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        yield
-    finally:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        os.sched_setaffinity(0, affinity)
 
 
 def _answer(sock: socket.socket) -> int:
@@ -92,6 +78,29 @@ def _placement_counts(stderr: str) -> tuple[int, int]:
     """(moves, backoffs) from the emulator's stop lines (0, 0 when it did not say)."""
     found = re.search(r"placement: moved .* frames (\d+) times, left it to the OS (\d+)", stderr)
     return (int(found[1]), int(found[2])) if found else (0, 0)
+
+
+def _exchange_for(
+    bus: LiveBus, duration_ns: int, before_each: Callable[[int], None] | None = None
+) -> tuple[int, str]:
+    """A frame a millisecond to a fresh emulator for ``duration_ns``, each answered
+    (``before_each(k)`` before the k-th); how many, and the emulator's stderr."""
+    proc = start_emulator(bus, eni=SINGLE)
+    sock = _master_socket(bus)
+    frames = 0
+    try:
+        until = time.monotonic_ns() + duration_ns
+        while time.monotonic_ns() < until:
+            if before_each is not None:
+                before_each(frames)
+            sock.send(FRAME)
+            _answer(sock)
+            frames += 1
+            time.sleep(0.001)
+    finally:
+        sock.close()
+        err = stop_emulator(proc)
+    return frames, err
 
 
 def test_the_emulator_runs_on_the_cpu_of_the_masters_frames(bus: LiveBus) -> None:
@@ -150,20 +159,12 @@ def test_the_emulator_does_not_chase_a_master_that_moves_away(bus: LiveBus) -> N
     own (here it changes CPU every frame; a real-time master below the emulator's priority
     is pushed off the CPU where the emulator preempts it): the emulator leaves the placement
     to the OS after the first such bounce instead of moving on every frame."""
-    proc = start_emulator(bus, eni=SINGLE)
-    sock = _master_socket(bus)
-    frames = 0
-    try:
-        until = time.monotonic_ns() + FOLLOW_BACKOFF_NS // 2
-        while time.monotonic_ns() < until:
-            with on_cpu(frames % 2):
-                sock.send(FRAME)
-                _answer(sock)
-            frames += 1
-            time.sleep(0.001)
-    finally:
-        sock.close()
-        err = stop_emulator(proc)
+
+    def on_the_other_cpu(frame: int) -> None:
+        os.sched_setaffinity(0, {frame % 2})
+
+    with on_cpu(0):
+        frames, err = _exchange_for(bus, FOLLOW_BACKOFF_NS // 2, on_the_other_cpu)
     moves, backoffs = _placement_counts(err)
     assert frames > 100
     assert (moves, backoffs) == (1, 1), err
@@ -173,21 +174,9 @@ def test_a_real_time_master_below_the_emulator_keeps_it_in_place(bus: LiveBus) -
     """A master at SCHED_FIFO 5, free to run on either CPU, sending a frame a millisecond
     for a second: the emulator (SCHED_FIFO 10) moves to it a few times at most, not on
     every frame (the kernel pushes the preempted master to the other CPU)."""
-    proc = start_emulator(bus, eni=SINGLE)
-    sock = _master_socket(bus)
-    frames = 0
-    try:
-        with on_cpu(0, priority=5):
-            os.sched_setaffinity(0, {0, 1})
-            until = time.monotonic_ns() + 1_000_000_000
-            while time.monotonic_ns() < until:
-                sock.send(FRAME)
-                _answer(sock)
-                frames += 1
-                time.sleep(0.001)
-    finally:
-        sock.close()
-        err = stop_emulator(proc)
+    with on_cpu(0, priority=5):
+        os.sched_setaffinity(0, {0, 1})
+        frames, err = _exchange_for(bus, 1_000_000_000)
     moves, _backoffs = _placement_counts(err)
     assert frames > 300
     assert moves <= 5, err
@@ -213,3 +202,23 @@ def test_any_and_a_pinned_cpu(bus: LiveBus) -> None:
         assert _placement_counts(err) == (0, 0), err
         if expected:
             assert "on CPU 1" in err.splitlines()[0], err
+
+
+def test_a_cpu_it_may_not_run_on_is_a_usage_error() -> None:
+    """``--cpu`` naming a CPU outside the process's set, or not a CPU at all: one line,
+    exit 2, before any socket is opened."""
+    import subprocess
+    import sys
+
+    for value, message in (
+        ("999", "--cpu 999: not a CPU this process may run on"),
+        ("x", "expected follow, any or a CPU number"),
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "lolacli", "bus", "emulate", "--iface", "lo", "--cpu", value],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2, done.stderr
+        assert message in done.stderr and "Traceback" not in done.stderr, done.stderr
