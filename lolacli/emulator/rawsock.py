@@ -12,7 +12,8 @@ sends right after the answer, as in any start-up or mailbox exchange, is answere
 wake-up latency). When the next frame comes first, it is answered first and the
 device cycle waits with the outputs it was due (:meth:`Chain.hold_deferred_cycle`).
 The slaves' firmware work (AL state requests, mailbox services) runs the same way: after
-the answer, a piece at a time while no frame waits, at least one piece per frame.
+the answer, a piece at a time while no frame waits, at least one piece per frame; and so
+do the frame plans the chain has to make (a cyclic layout's, new or of an ended epoch).
 
 Scheduling: by default the server asks for SCHED_FIFO (priority :data:`DEFAULT_PRIORITY`)
 and keeps normal scheduling where the OS refuses; it blocks on the socket, so it takes a
@@ -354,7 +355,7 @@ class RawSocketServer:
         self.stats.max_service_ns = max(self.stats.max_service_ns, service_ns)
         if self._follow:
             self._place(cpu, held_ns)
-        if self._firmware() or self._spin():
+        if self._firmware() or self._plans() or self._spin():
             self.chain.hold_deferred_cycle()  # the next frame is here: it is answered first
             return
         # device updates after the answer is on its way, giving way to the next frame
@@ -462,6 +463,13 @@ class RawSocketServer:
                 return True
             chain.run_firmware(1)
         return False
+
+    def _plans(self) -> bool:
+        """The chain's pending frame plans, a piece at a time while no frame waits, before
+        the grace: a master polling faster than the grace leaves no idle moment for them
+        (:meth:`Chain.make_plans`). True when a frame waits."""
+        chain = self.chain
+        return chain.plans_pending and not chain.make_plans(self._frame_waiting)
 
     def _idle(self) -> None:
         """After a frame's work, while no frame waits: keep-warm work when due (the
