@@ -17,7 +17,10 @@ emulator's worst reply to the host's worst wake-up. Per command type, the same f
 100 Mbit line (lolacli's timing model, each frame after those sent just before it, as a
 real port sends them): "line p99", and the p99 of the emulator's reply minus the line's,
 "over line". First of all (``--no-first-frames`` to skip), a probe of a session's first
-frames against the emulator and against a plain echo server on the same kind of veth pair.
+frames against the emulator and against a plain echo server on the same kind of veth pair;
+each master's table is followed by its session's first replies. A command type a start-up
+sends fewer than 100 times (BWR, BRD) has its p99 at its maximum, which is then the
+session's first frame: the table says so where such a type misses.
 With ``--witness`` (root, tracefs and a C compiler), ``vcpu_witness.py`` traces during each
 master's run when the VM's CPUs were not run at all, and each reply later than 1 ms is
 printed with the stretch of a vCPU not run that covers it, if one does (the host's, which
@@ -159,12 +162,16 @@ def run_kickcat(iface: str, cycles: int) -> dict[str, object]:
     }
 
 
+FIRST_REPLIES = 3  # the session's first replies, printed with each table
 MASTERS = {"pysoem": run_pysoem, "kickcat": run_kickcat}
 
 
 # ------------------------------------------------------------- the capture
 def per_command_latency(
-    path: Path, slaves: int = 0, late: list[tuple[str, int, int]] | None = None
+    path: Path,
+    slaves: int = 0,
+    late: list[tuple[str, int, int]] | None = None,
+    firsts: list[tuple[str, int]] | None = None,
 ) -> tuple[dict[str, list[int]], int, dict[str, list[int]]]:
     """Reply latency (ns) per command type from a master-side capture; unanswered count;
     and per command type, what a 100 Mbit line of ``slaves`` slaves would take for the
@@ -177,7 +184,8 @@ def per_command_latency(
     where the master's own MAC has that bit set (KickCAT), when a working counter or an
     ADP changed on the way; otherwise it is the master sending the frame again.
     ``late`` gets (command type, request time in ns of the capture's clock, latency ns) of
-    every reply later than :data:`TARGET_MAX_US`."""
+    every reply later than :data:`TARGET_MAX_US`; ``firsts`` (command type, latency ns) of
+    the session's first :data:`FIRST_REPLIES` replies."""
     from lolacli.capture.reader import iter_frames
     from lolacli.emulator.chain import ChainTiming
     from lolacli.errors import WireError
@@ -206,6 +214,8 @@ def per_command_latency(
             if bit_differs or fields != first[3]:
                 del pending[key]
                 out[first[1]].append(frame.timestamp_ns - first[0])
+                if firsts is not None and len(firsts) < FIRST_REPLIES:
+                    firsts.append((first[1], frame.timestamp_ns - first[0]))
                 if late is not None and frame.timestamp_ns - first[0] > TARGET_MAX_US * 1000:
                     late.append((first[1], first[0], frame.timestamp_ns - first[0]))
                 line[first[1]].append(sent.pop(key))
@@ -309,7 +319,8 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
     report = analyze_file(pcap).to_dict()
     slaves = len(load_eni(args.eni).slaves)
     late: list[tuple[str, int, int]] = []
-    latency, unanswered, line = per_command_latency(pcap, slaves, late)
+    firsts: list[tuple[str, int]] = []
+    latency, unanswered, line = per_command_latency(pcap, slaves, late, firsts)
     result.update(witness_report(witness, late, realtime_minus_mono))
     result.update(
         master=master,
@@ -326,6 +337,7 @@ def one_run(args: argparse.Namespace, master: str, hog: bool, folder: Path) -> d
         direction_rule=report.get("direction_rule", "mac"),
         round_trip_us=report["round_trip_us"],
         unanswered=unanswered,
+        first_replies=[{"command": kind, "us": ns / 1000} for kind, ns in firsts],
         by_command={
             kind: {
                 "count": len(v),
@@ -436,7 +448,14 @@ def print_table(result: dict[str, object]) -> None:
             f"{kind:>14} {s['count']:7d} {s['p50_us']:8.1f} {s['p99_us']:8.1f} "
             f"{s['max_us']:9.1f} {s['p99_us'] / BUDGET_US:10.3f} {s['line_p99_us']:9.1f} "
             f"{s['over_line_p99_us']:9.1f}  {'ok' if ok else 'MISSED'}"
+            f"{'' if ok or s['count'] >= 100 else ' (n < 100: its p99 is its maximum)'}"
         )
+    firsts = result.get("first_replies") or []
+    assert isinstance(firsts, list)
+    if firsts:
+        print("the session's first replies: " + ", ".join(
+            f"{r['command']} {r['us']:.0f} µs" for r in firsts
+        ) + " (the host's own first-frame cost: the probe of first frames above)")  # fmt: skip
     print(f"emulator's own reply time: {result['emulator']}")
     print(result["witness"])
     late = result.get("late") or []
