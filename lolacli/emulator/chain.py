@@ -280,7 +280,8 @@ class Chain:
     the slaves' cyclic state between frames and gives it back before Python code touches
     it; ``python`` runs the reference code only."""
 
-    #: a logical layout is planned after its first frame (by a server, after the answer),
+    #: a logical layout is planned after its first frame (a server makes the plan after
+    #: the answer; in process, without deferred cycles, it is made for the frame itself),
     #: so the cyclic frame's second comes planned: pysoem sends one LRW in SAFEOP before
     #: it asks for OP, which ends that plan's epoch (see _replan_key)
     plan_after = 1
@@ -330,8 +331,10 @@ class Chain:
         self._plan_later: dict[Key, None] = {}  # plans to make after the answer, in order
         # ... being made in pieces between frames: its layout, the epoch it is for, the work
         self._plan_job: tuple[Key, int, Pieces] | None = None
-        # the layouts of the last logical plans made, planned again unasked in a new epoch
-        self._cyclic_keys: dict[Key, None] = {}
+        # the layouts of the last logical plans frames asked for, oldest first, planned
+        # again unasked in a new epoch: each with its latest plan and whether a frame
+        # asked for that one (a plan made unasked and never used ends it there)
+        self._cyclic_keys: dict[Key, tuple[FramePlan, bool]] = {}
         self._replanned: set[Key] = set()  # ... those of them planned again in the epoch
         self._replanned_epoch = -1  # ... it is
         self._link_loss: tuple[int, int] | None = None  # (after position, at_ns)
@@ -672,7 +675,7 @@ class Chain:
 
     def _make_plan(self, key: Key) -> FramePlan | None:
         """The plan of ``key`` made now, whole, and kept (:meth:`_plan_pieces`)."""
-        return finish(self._plan_pieces(key))  # type: ignore[no-any-return]
+        return finish(self._plan_pieces(key, asked=True))  # type: ignore[no-any-return]
 
     def _run_plan(
         self, plan: FramePlan, frame: bytes, t_ns: int, defer_cycles: bool
@@ -680,6 +683,7 @@ class Chain:
         if self.faults.drop():
             self._lost_on_cable()
             return None, 0
+        plan.used = True
         compiled = plan.compiled
         if compiled is NOT_COMPILED:
             compiled = self._compiled(plan)
@@ -783,16 +787,17 @@ class Chain:
         frame takes ~250 µs to plan, which a frame that comes meanwhile (pysoem's AL
         status poll after its first frame in OP) would otherwise wait for. The plan is
         used from the frame after the last piece on; a plan begun in an epoch that has
-        ended meanwhile is dropped (the slaves it read may have changed: the layout's
-        next frame asks for it again). True when nothing is left to do."""
+        ended meanwhile is dropped (the slaves it read may have changed), and a cyclic
+        layout's is begun again for the new epoch. True when nothing is left to do."""
         while True:
             if self._plan_job is None:
-                key = self._next_plan_key()
-                if key is None:
+                nxt = self._next_plan_key()
+                if nxt is None:
                     return True
+                key, asked = nxt
                 if key in self._plans and self._plan_epoch == self._epoch[0]:
                     continue
-                self._plan_job = (key, self._epoch[0], self._plan_pieces(key))
+                self._plan_job = (key, self._epoch[0], self._plan_pieces(key, asked))
             key, epoch, pieces = self._plan_job
             while epoch == self._epoch[0]:
                 try:
@@ -805,36 +810,51 @@ class Chain:
             if should_yield is not None and should_yield():
                 return False  # the next layout's plan, if any, after that frame
 
-    def _next_plan_key(self) -> Key | None:
-        """The layout to plan next: one a frame asked for, else a cyclic one to plan
-        again (:meth:`_replan_key`)."""
+    def _next_plan_key(self) -> tuple[Key, bool] | None:
+        """The layout to plan next, and whether a frame asked for it: one a frame asked
+        for, else a cyclic one to plan again (:meth:`_replan_key`)."""
         if self._plan_later:
             key = next(iter(self._plan_later))
             del self._plan_later[key]
-            return key
-        return self._replan_key()
+            return key, True
+        again = self._replan_key()
+        return None if again is None else (again, False)
 
     def _replan_key(self) -> Key | None:
         """A cyclic layout to plan again, before its next frame, once the epoch of its
-        plan has ended (each once an epoch): any register write ends one, and so does
-        each slave's step to OP. Its frames would otherwise take the general path until a
-        plan is made after one of them: LOLA's first LRW after pysoem asked for OP took
-        200-550 µs in the general path against ~15 planned, and KickCAT's LRD and LWR
-        alike."""
+        plan has ended (each once an epoch, the most recent first): any register write
+        ends one, and so does each slave's step to OP. Its frames would otherwise take
+        the general path until a plan is made after one of them: LOLA's first LRW after
+        pysoem asked for OP took 200-550 µs in the general path against ~15 planned, and
+        KickCAT's LRD and LWR alike. A layout whose plan was made unasked and never used
+        is no longer sent: it is forgotten (a frame of it asks again)."""
         epoch = self._epoch[0]
-        if self._plan_epoch == epoch and all(k in self._plans for k in self._cyclic_keys):
-            return None
         if self._replanned_epoch != epoch:
             self._replanned_epoch = epoch
             self._replanned.clear()
-        for key in self._cyclic_keys:
+            for key in [k for k, (p, asked) in self._cyclic_keys.items() if not (asked or p.used)]:
+                del self._cyclic_keys[key]
+        for key in reversed(self._cyclic_keys):
             if key not in self._replanned:
                 self._replanned.add(key)
                 if self._plan_epoch != epoch or key not in self._plans:
                     return key
         return None
 
-    def _plan_pieces(self, key: Key) -> Pieces:
+    def _replan_due(self) -> bool:
+        """Whether :meth:`_replan_key` has a layout to give (changing nothing)."""
+        epoch = self._epoch[0]
+        current = self._replanned_epoch == epoch
+        for key, (plan, asked) in self._cyclic_keys.items():
+            if current and key in self._replanned:
+                continue
+            if not current and not asked and not plan.used:
+                continue  # forgotten there
+            if self._plan_epoch != epoch or key not in self._plans:
+                return True
+        return False
+
+    def _plan_pieces(self, key: Key, asked: bool) -> Pieces:
         """The plan of ``key`` and its C program in pieces, then both kept; it returns the
         plan (``None``: the layout takes the general path)."""
         lengths = [key[i] & 0x7FF for i in range(5, len(key), 4)]
@@ -852,10 +872,11 @@ class Chain:
         if len(self._plans) >= PLAN_CACHE_SIZE:
             self._plans.clear()
         self._plans[key] = self._last_plan = plan
-        if plan is not None and plan.logical:
-            cyclic = self._cyclic_keys
-            cyclic.pop(key, None)
-            cyclic[key] = None  # the most recent last
+        cyclic = self._cyclic_keys
+        if plan is not None and plan.logical and (asked or key in cyclic):
+            if asked:
+                cyclic.pop(key, None)  # the most recent last
+            cyclic[key] = (plan, asked)  # planned again: it keeps its place
             if len(cyclic) > CYCLIC_LAYOUTS:
                 del cyclic[next(iter(cyclic))]
         return plan
@@ -900,16 +921,7 @@ class Chain:
     def plans_pending(self) -> bool:
         """Whether frame plans are to be made (:meth:`make_plans`): asked for by a frame,
         begun, or of cyclic layouts whose plans' epoch has ended."""
-        epoch = self._epoch[0]
-        return (
-            self._plan_job is not None
-            or bool(self._plan_later)
-            or (
-                bool(self._cyclic_keys)
-                and self._plan_epoch != epoch
-                and self._replanned_epoch != epoch
-            )
-        )
+        return self._plan_job is not None or bool(self._plan_later) or self._replan_due()
 
     def make_plans(self, should_yield: Callable[[], bool] | None = None) -> bool:
         """Make the pending frame plans a piece at a time, before the work

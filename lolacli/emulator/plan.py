@@ -178,6 +178,8 @@ def plan_pieces(
 class FramePlan:
     """The precomputed work of one frame layout for one chain epoch."""
 
+    used = False  #: whether a frame has run it (the chain sets it)
+
     def __init__(
         self,
         key: Key,

@@ -236,6 +236,26 @@ def test_a_plan_is_made_in_pieces_between_frames(engine: str) -> None:
     assert chain.run_deferred_cycles() is True and chain._plan_job is None  # nothing left
 
 
+def _logical_frames(eni: Eni) -> list[bytes]:
+    """LRD, LWR and LRW of the ENI's whole first logical window."""
+    c = eni.cyclic_frames[0].commands[0]
+    start, size = c.logical_address or 0, c.data_length_bytes
+    return [
+        encode_frame(make_frame([Datagram.logical(cmd, start, size)]), pad=True)
+        for cmd in (C.LRD, C.LWR, C.LRW)
+    ]
+
+
+def _sender(bus: Bus, chain: Chain):  # type: ignore[no-untyped-def]
+    def planned_after(frame: bytes) -> bool:
+        bus.t_ns += 500_000
+        before = chain.stats.planned_frames
+        assert chain.process(frame, bus.t_ns, defer_cycles=True)[0] is not None
+        return chain.stats.planned_frames > before
+
+    return planned_after
+
+
 @pytest.mark.parametrize("engine", ENGINES)
 def test_cyclic_layouts_are_planned_again_before_their_next_frame(engine: str) -> None:
     """When a register write (or a slave's step to OP) ends the epoch of the cyclic
@@ -246,20 +266,8 @@ def test_cyclic_layouts_are_planned_again_before_their_next_frame(engine: str) -
     chain = build_chain(eni, engine=engine)
     bus = Bus(chain)
     bus.bring_up(eni)
-    size = eni.cyclic_frames[0].commands[0].data_length_bytes
-    start = eni.cyclic_frames[0].commands[0].logical_address or 0
-    frames = [
-        encode_frame(make_frame([Datagram.logical(cmd, start, size)]), pad=True)
-        for cmd in (C.LRD, C.LWR)
-    ]
-    t = [bus.t_ns]
-
-    def planned_after(frame: bytes) -> bool:
-        t[0] += 500_000
-        before = chain.stats.planned_frames
-        assert chain.process(frame, t[0], defer_cycles=True)[0] is not None
-        return chain.stats.planned_frames > before
-
+    frames = _logical_frames(eni)[:2]  # LRD, LWR
+    planned_after = _sender(bus, chain)
     assert [planned_after(f) for f in frames] == [False, False]  # first seen
     chain.run_deferred_cycles()
     assert [planned_after(f) for f in frames] == [True, True]
@@ -270,6 +278,65 @@ def test_cyclic_layouts_are_planned_again_before_their_next_frame(engine: str) -
     assert [planned_after(f) for f in frames] == [True, True]
     assert chain.run_deferred_cycles() is True  # nothing left: no plan made again
     assert chain._plan_job is None
+
+
+def test_plans_stay_pending_until_every_cyclic_layout_is_planned_again() -> None:
+    """The server makes plans only while ``plans_pending`` says some are left: after a
+    frame came between two layouts' plans, or an AL status poll came first in the new
+    epoch, the layouts not yet planned again are still pending (review)."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    lrd, lwr, _ = _logical_frames(eni)
+    planned_after = _sender(bus, chain)
+    poll = encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, 2)]), pad=True)
+    planned_after(lrd), planned_after(lwr)
+    chain.make_plans()
+    assert planned_after(lrd) and planned_after(lwr)
+    station = eni.slaves[0].station_address
+    fmmu0 = bus.fprd(station, 0x0600, 16)
+    assert bus.fpwr(station, 0x0600, fmmu0) == 1  # the epoch ends
+    assert chain.plans_pending
+    planned_after(poll)  # a frame first, which sees the new epoch
+    assert chain.plans_pending
+    assert chain.make_plans(lambda: chain._plan_job is None) is False  # a frame came
+    assert chain.plans_pending  # the other layout is left
+    assert chain.make_plans() is True and not chain.plans_pending
+    assert planned_after(lrd) and planned_after(lwr)
+
+
+def test_a_layout_no_longer_sent_is_planned_again_once_then_forgotten() -> None:
+    """A logical frame sent once gets a plan; once its epoch ends it is planned again one
+    time, and as that plan is never used, no more: the layouts the master still sends
+    are planned again every epoch, first (review: 40 plans in 10 epochs, not 20)."""
+    eni = load_eni(EXAMPLES / "lola.xml")
+    chain = build_chain(eni)
+    bus = Bus(chain)
+    bus.bring_up(eni)
+    lrd, lwr, lrw = _logical_frames(eni)
+    planned_after = _sender(bus, chain)
+    planned_after(lrw)  # once only
+    planned_after(lrd), planned_after(lwr)
+    chain.make_plans()
+    made: list[object] = []
+    pieces = chain._plan_pieces
+
+    def spy(key, asked):  # type: ignore[no-untyped-def]
+        made.append(key)
+        return (yield from pieces(key, asked))
+
+    chain._plan_pieces = spy  # type: ignore[method-assign]
+    station = eni.slaves[0].station_address
+    fmmu0 = bus.fprd(station, 0x0600, 16)
+    for _ in range(10):
+        assert bus.fpwr(station, 0x0600, fmmu0) == 1  # the epoch ends
+        while not chain.make_plans():
+            pass
+        assert planned_after(lrd) and planned_after(lwr)
+    assert made.count(layout_key(lrw)) == 1
+    assert made.count(layout_key(lrd)) == made.count(layout_key(lwr)) == 10
+    assert len(made) == 21
 
 
 def test_a_register_write_makes_the_next_frame_replan() -> None:
