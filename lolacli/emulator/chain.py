@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 import random
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -828,31 +828,33 @@ class Chain:
         pysoem asked for OP took 200-550 µs in the general path against ~15 planned, and
         KickCAT's LRD and LWR alike. A layout whose plan was made unasked and never used
         is no longer sent: it is forgotten (a frame of it asks again)."""
-        epoch = self._epoch[0]
-        if self._replanned_epoch != epoch:
-            self._replanned_epoch = epoch
+        if self._replanned_epoch != self._epoch[0]:
+            self._replanned_epoch = self._epoch[0]
             self._replanned.clear()
             for key in [k for k, (p, asked) in self._cyclic_keys.items() if not (asked or p.used)]:
                 del self._cyclic_keys[key]
-        for key in reversed(self._cyclic_keys):
-            if key not in self._replanned:
-                self._replanned.add(key)
-                if self._plan_epoch != epoch or key not in self._plans:
-                    return key
-        return None
+        again = next(self._replan_candidates(), None)
+        if again is not None:
+            self._replanned.add(again)
+        return again
 
     def _replan_due(self) -> bool:
         """Whether :meth:`_replan_key` has a layout to give (changing nothing)."""
+        return next(self._replan_candidates(), None) is not None
+
+    def _replan_candidates(self) -> Iterator[Key]:
+        """The cyclic layouts to plan again in this epoch, the most recent first: not
+        planned again in it yet, not to be forgotten at its start, their plan not of it."""
         epoch = self._epoch[0]
-        current = self._replanned_epoch == epoch
-        for key, (plan, asked) in self._cyclic_keys.items():
-            if current and key in self._replanned:
+        started = self._replanned_epoch == epoch  # _replan_key has forgotten the unused
+        for key in reversed(self._cyclic_keys):
+            plan, asked = self._cyclic_keys[key]
+            if started and key in self._replanned:
                 continue
-            if not current and not asked and not plan.used:
-                continue  # forgotten there
+            if not started and not (asked or plan.used):
+                continue  # forgotten when the epoch's first layout is asked for
             if self._plan_epoch != epoch or key not in self._plans:
-                return True
-        return False
+                yield key
 
     def _plan_pieces(self, key: Key, asked: bool) -> Pieces:
         """The plan of ``key`` and its C program in pieces, then both kept; it returns the

@@ -236,24 +236,34 @@ def test_a_plan_is_made_in_pieces_between_frames(engine: str) -> None:
     assert chain.run_deferred_cycles() is True and chain._plan_job is None  # nothing left
 
 
-def _logical_frames(eni: Eni) -> list[bytes]:
-    """LRD, LWR and LRW of the ENI's whole first logical window."""
-    c = eni.cyclic_frames[0].commands[0]
-    start, size = c.logical_address or 0, c.data_length_bytes
-    return [
-        encode_frame(make_frame([Datagram.logical(cmd, start, size)]), pad=True)
-        for cmd in (C.LRD, C.LWR, C.LRW)
-    ]
+class _Lola:
+    """LOLA brought up; LRD, LWR and LRW of its whole first logical window."""
 
+    def __init__(self, engine: str | None = None) -> None:
+        self.eni = eni = load_eni(EXAMPLES / "lola.xml")
+        self.chain = build_chain(eni, engine=engine)
+        self.bus = Bus(self.chain)
+        self.bus.bring_up(eni)
+        c = eni.cyclic_frames[0].commands[0]
+        start, size = c.logical_address or 0, c.data_length_bytes
+        self.lrd, self.lwr, self.lrw = (
+            encode_frame(make_frame([Datagram.logical(cmd, start, size)]), pad=True)
+            for cmd in (C.LRD, C.LWR, C.LRW)
+        )
+        self.station = eni.slaves[0].station_address
+        self.fmmu0 = self.bus.fprd(self.station, 0x0600, 16)
 
-def _sender(bus: Bus, chain: Chain):  # type: ignore[no-untyped-def]
-    def planned_after(frame: bytes) -> bool:
-        bus.t_ns += 500_000
-        before = chain.stats.planned_frames
-        assert chain.process(frame, bus.t_ns, defer_cycles=True)[0] is not None
-        return chain.stats.planned_frames > before
+    def planned_after(self, frame: bytes) -> bool:
+        """Send ``frame`` as a server does (its work after the answer left); whether
+        a plan answered it."""
+        self.bus.t_ns += 500_000
+        before = self.chain.stats.planned_frames
+        assert self.chain.process(frame, self.bus.t_ns, defer_cycles=True)[0] is not None
+        return self.chain.stats.planned_frames > before
 
-    return planned_after
+    def new_epoch(self) -> None:
+        """A register write that changes nothing: FMMU 0 as it is."""
+        assert self.bus.fpwr(self.station, 0x0600, self.fmmu0) == 1
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -262,20 +272,15 @@ def test_cyclic_layouts_are_planned_again_before_their_next_frame(engine: str) -
     frames' plans, the server's work after the answer plans those layouts again before
     their next frame comes: KickCAT's LRD and LWR after its request for OP each took
     the general path once more (200-550 µs each for LOLA, against ~15 planned)."""
-    eni = load_eni(EXAMPLES / "lola.xml")
-    chain = build_chain(eni, engine=engine)
-    bus = Bus(chain)
-    bus.bring_up(eni)
-    frames = _logical_frames(eni)[:2]  # LRD, LWR
-    planned_after = _sender(bus, chain)
-    assert [planned_after(f) for f in frames] == [False, False]  # first seen
+    lola = _Lola(engine)
+    chain, frames = lola.chain, (lola.lrd, lola.lwr)
+    assert [lola.planned_after(f) for f in frames] == [False, False]  # first seen
     chain.run_deferred_cycles()
-    assert [planned_after(f) for f in frames] == [True, True]
-    station = eni.slaves[0].station_address
-    assert bus.fpwr(station, 0x0600, bus.fprd(station, 0x0600, 16)) == 1  # a new epoch
+    assert [lola.planned_after(f) for f in frames] == [True, True]
+    lola.new_epoch()
     for _ in frames:  # a layout a call: the next is asked for in the next idle moment
         chain.run_deferred_cycles()
-    assert [planned_after(f) for f in frames] == [True, True]
+    assert [lola.planned_after(f) for f in frames] == [True, True]
     assert chain.run_deferred_cycles() is True  # nothing left: no plan made again
     assert chain._plan_job is None
 
@@ -284,40 +289,30 @@ def test_plans_stay_pending_until_every_cyclic_layout_is_planned_again() -> None
     """The server makes plans only while ``plans_pending`` says some are left: after a
     frame came between two layouts' plans, or an AL status poll came first in the new
     epoch, the layouts not yet planned again are still pending (review)."""
-    eni = load_eni(EXAMPLES / "lola.xml")
-    chain = build_chain(eni)
-    bus = Bus(chain)
-    bus.bring_up(eni)
-    lrd, lwr, _ = _logical_frames(eni)
-    planned_after = _sender(bus, chain)
+    lola = _Lola()
+    chain, planned_after = lola.chain, lola.planned_after
     poll = encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, 2)]), pad=True)
-    planned_after(lrd), planned_after(lwr)
+    planned_after(lola.lrd), planned_after(lola.lwr)
     chain.make_plans()
-    assert planned_after(lrd) and planned_after(lwr)
-    station = eni.slaves[0].station_address
-    fmmu0 = bus.fprd(station, 0x0600, 16)
-    assert bus.fpwr(station, 0x0600, fmmu0) == 1  # the epoch ends
+    assert planned_after(lola.lrd) and planned_after(lola.lwr)
+    lola.new_epoch()
     assert chain.plans_pending
     planned_after(poll)  # a frame first, which sees the new epoch
     assert chain.plans_pending
     assert chain.make_plans(lambda: chain._plan_job is None) is False  # a frame came
     assert chain.plans_pending  # the other layout is left
     assert chain.make_plans() is True and not chain.plans_pending
-    assert planned_after(lrd) and planned_after(lwr)
+    assert planned_after(lola.lrd) and planned_after(lola.lwr)
 
 
 def test_a_layout_no_longer_sent_is_planned_again_once_then_forgotten() -> None:
     """A logical frame sent once gets a plan; once its epoch ends it is planned again one
     time, and as that plan is never used, no more: the layouts the master still sends
     are planned again every epoch, first (review: 40 plans in 10 epochs, not 20)."""
-    eni = load_eni(EXAMPLES / "lola.xml")
-    chain = build_chain(eni)
-    bus = Bus(chain)
-    bus.bring_up(eni)
-    lrd, lwr, lrw = _logical_frames(eni)
-    planned_after = _sender(bus, chain)
-    planned_after(lrw)  # once only
-    planned_after(lrd), planned_after(lwr)
+    lola = _Lola()
+    chain, planned_after = lola.chain, lola.planned_after
+    planned_after(lola.lrw)  # once only
+    planned_after(lola.lrd), planned_after(lola.lwr)
     chain.make_plans()
     made: list[object] = []
     pieces = chain._plan_pieces
@@ -327,15 +322,13 @@ def test_a_layout_no_longer_sent_is_planned_again_once_then_forgotten() -> None:
         return (yield from pieces(key, asked))
 
     chain._plan_pieces = spy  # type: ignore[method-assign]
-    station = eni.slaves[0].station_address
-    fmmu0 = bus.fprd(station, 0x0600, 16)
     for _ in range(10):
-        assert bus.fpwr(station, 0x0600, fmmu0) == 1  # the epoch ends
+        lola.new_epoch()
         while not chain.make_plans():
             pass
-        assert planned_after(lrd) and planned_after(lwr)
-    assert made.count(layout_key(lrw)) == 1
-    assert made.count(layout_key(lrd)) == made.count(layout_key(lwr)) == 10
+        assert planned_after(lola.lrd) and planned_after(lola.lwr)
+    assert made.count(layout_key(lola.lrw)) == 1
+    assert made.count(layout_key(lola.lrd)) == made.count(layout_key(lola.lwr)) == 10
     assert len(made) == 21
 
 
