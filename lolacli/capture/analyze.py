@@ -46,17 +46,16 @@ from lolacli.capture.verdict import (
     INFO,
     MIN_TIMEOUT_NS,
     WARNING,
-    Finding,
-    Findings,
     FrameFate,
     fates,
-    first,
     frame_findings,
     timeout_ns,
     timestamp_findings,
 )
 from lolacli.capture.wkc import WkcVerdict, eni_slaves_not_mapped, verdict
 from lolacli.errors import CaptureError
+from lolacli.findings import Finding, Findings, failed, first
+from lolacli.findings import verdict as verdict_of
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
@@ -123,7 +122,7 @@ class CaptureReport:
     @property
     def failed(self) -> bool:
         """Whether a finding is a failure (``capture analyze`` exits 1)."""
-        return any(f.severity == FAILURE for f in self.findings)
+        return failed(self.findings)
 
     def to_dict(self) -> dict[str, Any]:
         c = self.counts
@@ -133,7 +132,7 @@ class CaptureReport:
             "file": self.path,
             "format": self.format,
             "engine": self.engine,
-            "verdict": "fail" if self.failed else "pass",
+            "verdict": verdict_of(self.findings),
             "frames_total": c["frames_total"],
             "ecat_frames": c["ecat_frames"],
             "non_ecat_frames": c["non_ecat_frames"],
@@ -617,7 +616,7 @@ class _Pass:
             direction_rule=rule,
             wkc_verdict=wkc,
             fate=fate,
-            findings=_ordered(findings.items),
+            findings=findings.ordered(),
             unusable_stats=unusable,
             al_status=al,
             layout=self.layout,
@@ -695,13 +694,6 @@ class _Pass:
             "system_time_difference_max_abs_ns": int(np.abs(values).max()) if values.size else None,
             "system_time_difference_last_ns": int(values[-1]) if values.size else None,
         }
-
-
-_SEVERITY_ORDER = {FAILURE: 0, WARNING: 1, INFO: 2}
-
-
-def _ordered(items: list[Finding]) -> list[Finding]:
-    return sorted(items, key=lambda f: _SEVERITY_ORDER.get(f.severity, 3))
 
 
 def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,

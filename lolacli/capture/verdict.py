@@ -7,39 +7,22 @@ DESIGN.md "Timestamp quality": round trips of 0 (quantised timestamps), timestam
 backwards and cut-short files are findings, and the statistics built on them are marked
 unusable.
 
-A finding has a severity: ``failure`` (the command exits 1), ``warning`` or ``info``.
+Findings are the product's one model (:mod:`lolacli.findings`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-FAILURE = "failure"
-WARNING = "warning"
-INFO = "info"
-FRAMES_SHOWN = 5
+from lolacli.findings import Findings, Severity
+
+FAILURE = Severity.FAILURE
+WARNING = Severity.WARNING
+INFO = Severity.INFO
 MIN_TIMEOUT_NS = 1_000_000
 TIMEOUT_ROUND_TRIPS = 10
-
-
-@dataclass(frozen=True, slots=True)
-class Finding:
-    kind: str
-    severity: str
-    message: str
-    frames: tuple[int, ...] = ()
-    count: int = 0
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "severity": self.severity, "message": self.message,
-                "frames": list(self.frames), "count": self.count}
-
-
-def first(frames: Any, n: int = FRAMES_SHOWN) -> tuple[int, ...]:
-    return tuple(int(f) for f in sorted(set(int(x) for x in frames))[:n])
 
 
 def timeout_ns(median_round_trip_ns: float | None, given_ns: int | None) -> tuple[int, str]:
@@ -75,22 +58,6 @@ def fates(
     frames, flying, cyc = pending_frames[order], flying[order], pending_cyclic[order]
     return FrameFate(t, source, frames[~flying], frames[flying], late_count, late_frames,
                      int(np.count_nonzero(cyc & ~flying)))
-
-
-@dataclass(slots=True)
-class Findings:
-    items: list[Finding] = field(default_factory=list)
-
-    def add(self, kind: str, severity: str, message: str, frames: Any = (), count: int = 0
-            ) -> None:
-        self.items.append(Finding(kind, severity, message, first(frames), count))
-
-    @property
-    def failed(self) -> bool:
-        return any(f.severity == FAILURE for f in self.items)
-
-    def of(self, *kinds: str) -> list[Finding]:
-        return [f for f in self.items if f.kind in kinds]
 
 
 def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_lost: int,

@@ -172,7 +172,8 @@ def validate_cmd(
     file cannot be read."""
     from rich.markup import escape
 
-    from lolacli.eni.validate import Severity, validate_eni, validate_report
+    from lolacli.eni.validate import validate_eni, validate_report
+    from lolacli.findings import Severity
 
     eni = _load(file)
     findings = validate_eni(eni)
@@ -183,9 +184,9 @@ def validate_cmd(
         console = _console()
         for f in findings:
             where = escape(f" [slave {f.slave}]") if f.slave is not None else ""
-            style = "red" if f.severity is Severity.ERROR else "yellow"
+            style = "red" if f.severity is Severity.FAILURE else "yellow"
             console.print(
-                f"[{style}]{f.severity.value}[/{style}] {f.code}{where}: {f.message}", markup=True
+                f"[{style}]{f.severity.value}[/{style}] {f.kind}{where}: {f.message}", markup=True
             )
         console.print(f"{eni.source}: {report['errors']} error(s), {report['warnings']} warning(s)")
     failed = report["errors"] > 0 or (strict and report["warnings"] > 0)

@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any
 
 from lolacli.eni.model import (
@@ -24,41 +23,21 @@ from lolacli.eni.model import (
     Mailbox,
     Slave,
 )
+from lolacli.findings import Finding, Severity
 from lolacli.wire.commands import LOGICAL, Command, addressed_wkc, mnemonic, wkc_increment
 from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, MAX_DATAGRAM_DATA
 from lolacli.wire.registers import Fmmu, FmmuType
 
-VALIDATE_SCHEMA = "lolacli.eni-validate/1"
+VALIDATE_SCHEMA = "lolacli.eni-validate/2"
 
-
-
-class Severity(StrEnum):
-    ERROR = "error"
-    WARNING = "warning"
-
-
-@dataclass(frozen=True, slots=True)
-class Finding:
-    severity: Severity
-    code: str
-    message: str
-    slave: int | None = None  # 1-based position, when one slave is concerned
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "severity": self.severity.value,
-            "code": self.code,
-            "message": self.message,
-            "slave": self.slave,
-        }
 
 
 def _error(code: str, message: str, slave: int | None = None) -> Finding:
-    return Finding(Severity.ERROR, code, message, slave)
+    return Finding(code, Severity.FAILURE, message, slave=slave)
 
 
 def _warning(code: str, message: str, slave: int | None = None) -> Finding:
-    return Finding(Severity.WARNING, code, message, slave)
+    return Finding(code, Severity.WARNING, message, slave=slave)
 
 
 # --------------------------------------------------------------------------- FMMU helpers
@@ -576,14 +555,17 @@ def validate_eni(eni: Eni) -> tuple[Finding, ...]:
 
 
 def validate_report(eni: Eni, findings: tuple[Finding, ...]) -> dict[str, Any]:
-    """The ``lolacli.eni-validate/1`` document."""
-    errors = sum(1 for f in findings if f.severity is Severity.ERROR)
+    """The ``lolacli.eni-validate/2`` document: the findings as every verdict gives them
+    (:class:`lolacli.findings.Finding`; /1 had ``code`` for ``kind`` and ``error`` for
+    ``failure``: ``code`` stays as an alias)."""
+    errors = sum(1 for f in findings if f.severity is Severity.FAILURE)
     return {
         "schema": VALIDATE_SCHEMA,
         "source": eni.source,
         "errors": errors,
         "warnings": len(findings) - errors,
-        "findings": [f.as_dict() for f in findings],
+        "verdict": "fail" if errors else "pass",
+        "findings": [{**f.to_dict(), "code": f.kind} for f in findings],
     }
 
 
@@ -591,8 +573,6 @@ __all__ = [
     "CHECKS",
     "RANGE_CODE",
     "VALIDATE_SCHEMA",
-    "Finding",
-    "Severity",
     "Width",
     "check_field_ranges",
     "expected_wkc",

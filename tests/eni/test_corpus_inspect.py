@@ -179,7 +179,7 @@ def test_corpus_validates_without_errors(cli, eni_path):
     scrambled (its root is EncryptedEtherCATConfig) and is reported as a warning only."""
     code, out, err = cli("eni", "validate", str(eni_path), "--format", "json")
     report = json.loads(out)
-    assert report["schema"] == "lolacli.eni-validate/1"
+    assert report["schema"] == "lolacli.eni-validate/2"
     assert report["errors"] == 0, report["findings"]
     assert code == 0
     if eni_path.name.startswith("murrelektronik"):

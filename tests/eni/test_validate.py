@@ -24,7 +24,7 @@ def planted(old: str, new: str, count: int = 1) -> str:
 
 
 def codes(xml: str) -> list[str]:
-    return [f.code for f in validate_eni(parse_eni(xml.encode(), "t.xml"))]
+    return [f.kind for f in validate_eni(parse_eni(xml.encode(), "t.xml"))]
 
 
 def test_small_valid_eni_is_clean(cli):
@@ -32,10 +32,11 @@ def test_small_valid_eni_is_clean(cli):
     assert code == 0, out
     report = json.loads(out)
     assert report == {
-        "schema": "lolacli.eni-validate/1",
+        "schema": "lolacli.eni-validate/2",
         "source": str(FIXTURES / "eni-small-valid.xml"),
         "errors": 0,
         "warnings": 0,
+        "verdict": "pass",
         "findings": [],
     }
 
@@ -84,7 +85,7 @@ def test_planted_defect_is_found(cli, tmp_path, code):
     assert exit_code == 1
     assert report["errors"] >= 1
     finding = next(f for f in report["findings"] if f["code"] == code)
-    assert finding["severity"] == "error" and finding["message"]
+    assert finding["severity"] == "failure" and finding["message"]
 
 
 def test_wrong_cnt_is_the_only_finding():

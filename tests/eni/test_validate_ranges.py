@@ -18,7 +18,8 @@ import pytest
 
 from lolacli.eni.model import Eni, Slave
 from lolacli.eni.parser import parse_eni
-from lolacli.eni.validate import RANGE_CODE, Finding, Severity, check_field_ranges, validate_eni
+from lolacli.eni.validate import RANGE_CODE, check_field_ranges, validate_eni
+from lolacli.findings import Finding, Severity
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "lolacli" / "eni_examples"
 SINGLE_DRIVE = (EXAMPLES / "single_drive.xml").read_text()
@@ -194,7 +195,7 @@ def _run(cli, tmp_path: Path, text: str) -> tuple[int, dict]:
 
 def _errors(report: dict) -> Counter[tuple[str, str]]:
     return Counter(
-        (f["code"], f["message"]) for f in report["findings"] if f["severity"] == "error"
+        (f["code"], f["message"]) for f in report["findings"] if f["severity"] == "failure"
     )
 
 
@@ -212,7 +213,7 @@ def test_just_outside_is_one_error_just_inside_none(case: Case, cli, tmp_path):
     assert finding["slave"] == case.slave
     assert {c for c, _m in new} - {RANGE_CODE} <= case.cascades, new
     assert code == 1  # any error: exit 1
-    assert out["schema"] == "lolacli.eni-validate/1"
+    assert out["schema"] == "lolacli.eni-validate/2"
 
     code, out = _run(cli, tmp_path, case.text(case.inside))
     new = _errors(out) - _errors(base)
@@ -335,7 +336,7 @@ def test_the_base_model_is_in_range():
 )
 def test_model_field_just_outside_and_inside(mutate, outside, inside, label, slave):
     (finding,) = _ranged(mutate(BASE, outside))
-    assert finding.severity is Severity.ERROR and finding.code == RANGE_CODE
+    assert finding.severity is Severity.FAILURE and finding.kind == RANGE_CODE
     assert f"{label} {outside} is outside" in finding.message, finding.message
     assert finding.slave == slave
     assert _ranged(mutate(BASE, inside)) == []
