@@ -28,17 +28,19 @@ class _LolaGroup(TyperGroup):
 
     def invoke(self, ctx: Any) -> Any:  # typer.Context; click is vendored in typer
         from lolacli.errors import LolaError
+        from lolacli.interrupt import exit_code, stop_signals
 
         try:
-            return super().invoke(ctx)
+            with stop_signals():  # SIGINT and SIGTERM raise Interrupted; restored after
+                return super().invoke(ctx)
         except LolaError as exc:
             if debug_enabled():
                 raise
             sys.stderr.write(f"lolacli: error: {exc}\n")
             raise typer.Exit(exc.exit_code) from None
-        except KeyboardInterrupt:
-            sys.stderr.write("lolacli: interrupted\n")
-            raise typer.Exit(130) from None
+        except KeyboardInterrupt as exc:
+            sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}\n")
+            raise typer.Exit(exit_code(exc)) from None
 
 
 _light_parameters()  # simple parameters without pydantic: a third of a short command's start-up
