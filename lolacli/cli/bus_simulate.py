@@ -128,73 +128,74 @@ def simulate_cmd(
     unknown variables, values of the wrong type or an unwritable output; 3 for an ENI that
     cannot be read or simulated; 4 when no slave answers or the interface cannot be
     used; 130 when interrupted (recordings are kept up to the last cycle)."""
-    import signal
-
-    from lolacli.emulator.run import parse_link_down
     from lolacli.files import load_eni
-    from lolacli.master.simulate import SimulateOptions, simulate
-    from lolacli.timing.model import parse_duration_ns
+    from lolacli.interrupt import stop_signals
+    from lolacli.master.simulate import simulate
 
-    if duration is not None and cycles is not None:
-        raise UsageError("--duration and --cycles contradict each other; give one")
-    if not 0.0 <= drop_p <= 1.0:
-        raise typer.BadParameter(f"{drop_p} is not in [0, 1]", param_hint="--drop-p")
-    n_cycles = cycles
-    if n_cycles is None:
-        ns = parse_duration_ns(duration, "s") if duration is not None else 10_000_000_000
-        n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
-    cut = parse_link_down(link_down) if link_down is not None else None
-    pairs = []
-    for item in set_value or ():
-        name, eq, value = item.rpartition("=")
-        if not eq or not name:
-            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
-        pairs.append((name, value))
+    options = _options(locals())
     model = load_eni(eni if eni is not None else default_eni())
-    options = SimulateOptions(
-        rate_hz=rate,
-        cycles=n_cycles,
-        pcap=pcap,
-        mcap=mcap,
-        drop_probability=drop_p,
-        stuck_safeop=tuple(stuck_safeop or ()),
-        link_down=cut,
-        drift_ppb=drift_ppb,
-        seed=seed,
-        middleware=not no_middleware,
-        shm=shm,
-        pace=pace,
-        watch=tuple(watch or ()),
-        set_values=tuple(pairs),
-        iface=iface,
-        busy_wait_us=busy_wait_us,
-        realtime_priority=realtime_priority,
-        max_lost=max_lost,
-        max_wkc_mismatches=max_wkc,
-    )
-    stop = {"flag": False}
-
-    def _stop(_signum: int, _frame: object) -> None:
-        stop["flag"] = True
-
-    old_int = signal.signal(signal.SIGINT, _stop)
-    old_term = signal.signal(signal.SIGTERM, _stop)
-    try:
+    with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
-            result = simulate(model, options, progress=progress, should_stop=lambda: stop["flag"])
-    finally:
-        signal.signal(signal.SIGINT, old_int)
-        signal.signal(signal.SIGTERM, old_term)
+            result = simulate(model, options, progress=progress, stop=stop)
     if fmt is OutputFormat.json:
         emit_json(result.doc)
     else:
         _render(result.doc)
     if result.interrupted:
-        sys.stderr.write("lolacli: interrupted; recordings kept up to the last cycle\n")
-        raise typer.Exit(130)
+        sys.stderr.write("lolacli: stopped; the report covers the cycles run, recordings "
+                         "are kept up to the last cycle\n")
+        raise typer.Exit(stop.exit_code)
     if result.failed:
         raise typer.Exit(1)
+
+
+def _options(given: dict[str, Any]) -> Any:
+    """The library's SimulateOptions from the command's parameters."""
+    from lolacli.emulator.run import parse_link_down
+    from lolacli.master.simulate import SimulateOptions
+    from lolacli.timing.model import parse_duration_ns
+
+    duration, cycles, rate = given["duration"], given["cycles"], given["rate"]
+    if duration is not None and cycles is not None:
+        raise UsageError("--duration and --cycles contradict each other; give one")
+    n_cycles = cycles
+    if n_cycles is None:
+        ns = (
+            parse_duration_ns(duration, "s", what="--duration")
+            if duration is not None
+            else 10_000_000_000
+        )
+        n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
+    link_down = given["link_down"]
+    cut = parse_link_down(link_down) if link_down is not None else None
+    pairs = []
+    for item in given["set_value"] or ():
+        name, eq, value = item.rpartition("=")
+        if not eq or not name:
+            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
+        pairs.append((name, value))
+    return SimulateOptions(
+        rate_hz=rate,
+        cycles=n_cycles,
+        pcap=given["pcap"],
+        mcap=given["mcap"],
+        drop_probability=given["drop_p"],
+        stuck_safeop=tuple(given["stuck_safeop"] or ()),
+        link_down=cut,
+        drift_ppb=given["drift_ppb"],
+        seed=given["seed"],
+        middleware=not given["no_middleware"],
+        shm=given["shm"],
+        pace=given["pace"],
+        watch=tuple(given["watch"] or ()),
+        set_values=tuple(pairs),
+        iface=given["iface"],
+        busy_wait_us=given["busy_wait_us"],
+        realtime_priority=given["realtime_priority"],
+        max_lost=given["max_lost"],
+        max_wkc_mismatches=given["max_wkc"],
+    )
 
 
 class _progress:
@@ -233,29 +234,57 @@ class _progress:
             self._bar.__exit__(*exc)
 
 
+def _us(stats: dict[str, Any] | None, *keys: str) -> str:
+    if not stats:
+        return "none measured"
+    return ", ".join(f"{k} {stats[k]:,.3g} µs" if abs(stats[k]) < 1000 else
+                     f"{k} {stats[k]:,.0f} µs" for k in keys)
+
+
+def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
+    software = doc["software_us_per_cycle"]
+    rates = f"{doc['max_rate_hz'] or 0:,} Hz bus only"
+    if doc["max_rate_with_software_hz"]:
+        rates += f", {doc['max_rate_with_software_hz']:,} Hz with the software"
+    dc = doc["dc_max_error_ns"]
+    rows = [
+        ("cycles", f"{doc['cycles']:,} at {doc['rate_hz']:,g} Hz "
+                   f"(+{doc['startup_cycles']:,} start-up)"),
+        ("slaves", str(doc["slaves"])),
+        ("frame", f"{doc['frame_bytes']:,} B, {doc['wire_time_us']:g} µs on the wire"),
+        ("round trip", _us(doc["round_trip_us"], "mean", "p99", "max")),
+        ("cycle period", _us(doc["cycle_period_us"], "mean", "std", "max")),
+        ("WKC mismatches", f"{doc['wkc_mismatches']:,} of {doc['wkc_checked']:,} checked"),
+        ("frames", f"{doc['lost_frames']:,} lost, {doc['late_frames'] or 0:,} late"),
+        ("cycles not kept", f"{doc['skipped_cycles'] or 0:,} slots skipped, "
+                            f"{doc['overruns'] or 0:,} sent over half a cycle late"),
+        ("DC max error", f"{dc:,} ns" if dc is not None else
+         ("not measured" if doc["dc_slaves"] else "no DC slaves")),
+        ("drives enabled", f"{doc['drives_enabled']} of {doc['drives']}"),
+        ("software per cycle", f"{software:g} µs" if software is not None else "not timed"),
+        ("max rate", rates),
+    ]
+    if doc.get("mode") == "realtime":
+        rows += _live_rows(doc)
+    else:
+        rows.append(("virtual / wall time", f"{doc['realtime_factor']:g}× real time"))
+    return rows
+
+
 def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
-    period = doc["cycle_period_us"] or {}
-    late = doc["wakeup_lateness_us"] or {}
+    late = doc["wakeup_lateness_us"]
     sched = doc["scheduling"]
     granted = sched["policy"] + (f" {sched['priority']}" if sched["priority"] else "")
     if sched["error"]:
         granted += f" ({sched['error']})"
     load = doc["load"]
     return [
-        (
-            "cycle period",
-            f"mean {period.get('mean', 0):g} µs, std {period.get('std', 0):g}, "
-            f"min {period.get('min', 0):g}, max {period.get('max', 0):g}",
-        ),
-        ("wake-up lateness", f"p99 {late.get('p99', 0):g} µs, max {late.get('max', 0):g}"),
-        ("overruns (> half a cycle late)", str(doc["overruns"])),
-        ("late / never returned frames", f"{doc['late_frames']} / {doc['never_returned_frames']}"),
+        ("interface", str(doc["iface"])),
+        ("wake-up lateness", _us(late, "p99", "max")),
         ("scheduling", f"{granted}, busy-wait {sched['busy_wait_us']:g} µs"),
-        (
-            "host load (1 min, before/after)",
-            f"{load['before']['loadavg_1min']} / {load['after']['loadavg_1min']} "
-            f"on {load['before']['cpus']} CPUs",
-        ),
+        ("host load (1 min)", f"{load['before']['loadavg_1min']} before, "
+                              f"{load['after']['loadavg_1min']} after, "
+                              f"{load['before']['cpus']} CPUs"),
         ("master CPU", f"{doc['master_cpu_percent']} % of one core"),
     ]
 
@@ -264,35 +293,16 @@ def _render(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
     from lolacli.cli.common import stdout_console
+    from lolacli.cli.verdict import render_verdict
 
     console = stdout_console()
-    rt = doc["round_trip_us"] or {}
-    table = Table(title=f"Simulation ({doc['eni']})", show_header=False, title_justify="left")
-    table.add_column("quantity")
-    table.add_column("value", justify="right")
-    rows = [
-        ("cycles", f"{doc['cycles']} at {doc['rate_hz']:g} Hz (+{doc['startup_cycles']} start-up)"),
-        ("slaves", str(doc["slaves"])),
-        ("frame", f"{doc['frame_bytes']} B, wire time {doc['wire_time_us']:g} µs"),
-        ("round trip", f"{rt.get('mean', 0):g} µs (max {rt.get('max', 0):g})"),
-        ("WKC mismatches", f"{doc['wkc_mismatches']} of {doc['wkc_checked']} checked"),
-        ("lost frames", str(doc["lost_frames"])),
-        (
-            "DC max error",
-            f"{doc['dc_max_error_ns']} ns" if doc["dc_max_error_ns"] is not None else "-",
-        ),
-        ("drives enabled", f"{doc['drives_enabled']} of {doc['drives']}"),
-        ("software per cycle", f"{doc['software_us_per_cycle']} µs"),
-        ("max rate (bus only)", f"{doc['max_rate_hz'] or 0:,} Hz"),
-        ("max rate (bus + software)", f"{doc['max_rate_with_software_hz'] or 0:,} Hz"),
-        ("virtual / wall time", f"{doc['realtime_factor']}×"),
-    ]
-    if doc.get("mode") == "realtime":
-        rows[-1] = ("interface", str(doc["iface"]))
-        rows += _live_rows(doc)
-    for name, value in rows:
+    console.print(f"Simulation of {doc['eni']}")
+    table = Table.grid(padding=(0, 2))
+    table.add_column(no_wrap=True)
+    table.add_column(overflow="fold")
+    for name, value in _rows(doc):
         table.add_row(name, value)
-    console.print(table)
+    console.print(table, width=min(console.width, 80))
     if doc["sections_us"]:
         sections = Table(
             title="Per-cycle sections (seed Tables I/II, Fig. 7)", title_justify="left"
@@ -304,7 +314,4 @@ def _render(doc: dict[str, Any]) -> None:
         for name, s in doc["sections_us"].items():
             sections.add_row(name, s["thread"], f"{s['mean']:g}", f"{s['p99']:g}", f"{s['max']:g}")
         console.print(sections)
-    for r in doc["refusals"]:
-        console.print(
-            f"refused: slave {r['position']} ({r['slave']}) {r['transition']}: {r['text']}"
-        )
+    render_verdict(console, doc["verdict"], doc["findings"])

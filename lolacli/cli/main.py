@@ -6,6 +6,7 @@ import sys
 from typing import Any
 
 import typer
+from typer._click.exceptions import UsageError as ClickUsageError
 from typer.core import TyperGroup
 
 from lolacli import __version__
@@ -41,6 +42,13 @@ class _LolaGroup(TyperGroup):
         except KeyboardInterrupt as exc:
             sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}\n")
             raise typer.Exit(exit_code(exc)) from None
+        except ClickUsageError as exc:  # wrong arguments: one line, exit 2
+            if debug_enabled():
+                raise
+            path = exc.ctx.command_path if exc.ctx is not None else "lolacli"
+            message = " ".join(exc.format_message().split())
+            sys.stderr.write(f"{path}: error: {message} (see {path} --help)\n")
+            raise typer.Exit(2) from None
 
 
 _light_parameters()  # simple parameters without pydantic: a third of a short command's start-up

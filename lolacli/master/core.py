@@ -105,9 +105,10 @@ class MasterOptions:
     sync_start_delay_ns: int = 100_000_000  # SYNC0 start: this far after "now"
     time_sections: bool = False  # time the cycle's sections (seed Fig. 7)
     # real time: a cyclic frame must be back when the next cycle is due (else its inputs
-    # are late for it: lost), DC diagnosis answers are taken when they are there (no
-    # wait inside a cycle), and a cycle that starts a whole cycle time late or more drops
-    # the slots it missed instead of running them back to back (skipped_cycles)
+    # are late for it), and DC diagnosis answers are taken when they are there (no wait
+    # inside a cycle). In both times a cycle that starts a whole cycle time late or more
+    # drops the slots it missed instead of running them back to back (skipped_cycles), as
+    # a master's cycle timer does when the bus cannot keep its rate
     realtime: bool = False
     source_mac: bytes | None = None  # default: the ENI's, if usable
 
@@ -126,7 +127,23 @@ class MasterStats:
     round_trip_ns: list[int] = field(default_factory=list)  # of every cyclic frame
     dc_errors_ns: list[tuple[int, int]] = field(default_factory=list)  # (t, max |0x092C|)
     slaves_found: int | None = None
-    skipped_cycles: int = 0  # slots dropped in real time (MasterOptions.realtime)
+    skipped_cycles: int = 0  # slots dropped because the cycle before ran past them
+    late_frames: int = 0  # cyclic frames that came back after the master stopped waiting
+    late_acyclic: int = 0  # DC diagnosis frames likewise
+    # the first few cycles where each went wrong (for findings)
+    lost_at: list[int] = field(default_factory=list)
+    late_at: list[int] = field(default_factory=list)
+    mismatch_at: list[int] = field(default_factory=list)
+    skipped_at: list[int] = field(default_factory=list)
+
+
+#: cycle numbers kept per kind of trouble (MasterStats.*_at)
+KEEP_CYCLES = 5
+
+
+def _note(at: list[int], cycle: int) -> None:
+    if len(at) < KEEP_CYCLES:
+        at.append(cycle)
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,6 +195,10 @@ class Master:
         self._index = 0
         self.last_sent_ns = 0
         self._stray: dict[int, Received] = {}
+        # frames of the cycle (its cyclic frames, DC diagnosis) not back when the master
+        # stopped waiting: index -> (sent, cycle, cyclic); one that comes back later is
+        # late, not lost
+        self._overdue: dict[int, tuple[int, int, bool]] = {}
         self._plans: dict[AlState, list[FramePlan]] = {}
         self._pending: list[tuple[FramePlan, int, int]] = []  # (plan, index, sent ns)
         self._pending_dc: list[tuple[int, int]] = []  # DC diagnosis frames: (index, sent)
@@ -200,8 +221,19 @@ class Master:
         return self.transport.now_ns()
 
     def _new_index(self) -> int:
-        self._index = (self._index + 1) & 0xFF
-        return self._index
+        self._index = index = (self._index + 1) & 0xFF
+        if self._overdue:
+            # a frame still not back when its index is used again stays lost: an answer
+            # with this index from now on is the new frame's
+            overdue = self._overdue.pop(index, None)
+            if overdue is not None and overdue[2]:
+                _note(self.stats.lost_at, overdue[1])
+        return index
+
+    def lost_cycles(self) -> list[int]:
+        """The first cycles whose cyclic frames never came back (as far as known now)."""
+        overdue = (c for _s, c, cyclic in self._overdue.values() if cyclic)
+        return sorted({*self.stats.lost_at, *overdue})[:KEEP_CYCLES]
 
     def exchange(
         self, datagrams: Sequence[Datagram], *, retries: int | None = None
@@ -266,11 +298,31 @@ class Master:
             if r is None:
                 return None
             frame_index = r.frame[_INDEX_AT] if len(r.frame) > _INDEX_AT else -1
+            if self._overdue and self._late(frame_index, r):
+                continue
             if frame_index == index:
                 if r.received_ns >= sent_ns:
                     return r
                 continue
             self._stray[frame_index] = r
+
+    def _late(self, index: int, r: Received) -> bool:
+        """Whether ``r`` answers a frame of a cycle the master stopped waiting for: then it
+        is counted late (no longer lost) and dropped."""
+        overdue = self._overdue.get(index)
+        if overdue is None or r.received_ns < overdue[0]:
+            return False
+        del self._overdue[index]
+        stats = self.stats
+        stats.frames_lost -= 1
+        if overdue[2]:
+            stats.round_trip_ns.append(r.received_ns - overdue[0])  # the bus's, late or not
+            stats.late_frames += 1
+            stats.cyclic_lost -= 1
+            _note(stats.late_at, overdue[1])
+        else:
+            stats.late_acyclic += 1
+        return True
 
     def fprd(self, station: int, ado: int, length: int) -> Datagram:
         return self.exchange_one(Datagram.physical(Command.FPRD, station, ado, length))
@@ -288,8 +340,11 @@ class Master:
         self.transport.wait_until(until)
 
     def run_due_cycles(self) -> None:
+        """Run the cycles due by now (not those that fall due while they run: a bus that
+        cannot keep the rate would never leave room for the frame that waits)."""
         if self._cyclic and not self._in_cycle:
-            while self.transport.now_ns() >= self._next_cycle_ns:
+            now = self.transport.now_ns()
+            while self._next_cycle_ns <= now:
                 self.cycle()
 
     # --------------------------------------------------------- transitions
@@ -587,6 +642,11 @@ class Master:
         return worst
 
     # --------------------------------------------------------------- cyclic
+    @property
+    def cycling(self) -> bool:
+        """Whether the cyclic frames run (from SAFEOP on, until :meth:`drain`)."""
+        return self._cyclic
+
     def start_cyclic(self) -> None:
         self._cyclic = True
         self._next_cycle_ns = self.transport.now_ns()
@@ -678,13 +738,14 @@ class Master:
         self._finish_cycle()
 
     def _finish_cycle(self) -> None:
-        self.stats.cycles += 1
+        stats = self.stats
+        stats.cycles += 1
         self._next_cycle_ns += self.cycle_time_ns
-        if self.options.realtime:
-            missed = (self.transport.now_ns() - self._next_cycle_ns) // self.cycle_time_ns
-            if missed > 0:
-                self._next_cycle_ns += missed * self.cycle_time_ns
-                self.stats.skipped_cycles += missed
+        missed = (self.transport.now_ns() - self._next_cycle_ns) // self.cycle_time_ns
+        if missed > 0:
+            self._next_cycle_ns += missed * self.cycle_time_ns
+            stats.skipped_cycles += missed
+            _note(stats.skipped_at, stats.cycles)
 
     @property
     def next_cycle_ns(self) -> int:
@@ -725,6 +786,7 @@ class Master:
             if got is None:
                 stats.cyclic_lost += 1
                 stats.frames_lost += 1
+                self._overdue[index] = (sent, stats.cycles, True)
                 continue
             stats.round_trip_ns.append(got.received_ns - sent)
             bad = plan.take(got.frame, inputs)
@@ -734,6 +796,7 @@ class Master:
                 mismatched = True
         if mismatched:
             stats.cycles_with_mismatch += 1
+            _note(stats.mismatch_at, stats.cycles)
 
     def _admin(self) -> None:
         every = self.options.dc_check_cycles
@@ -785,6 +848,7 @@ class Master:
                     self._pending_dc.append((index, sent))
                     continue
                 self.stats.frames_lost += 1
+                self._overdue[index] = (sent, self.stats.cycles, False)
                 continue
             worst = 0
             for d in decode_frame(got.frame).datagrams:

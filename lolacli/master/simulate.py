@@ -25,12 +25,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from lolacli.eni.model import Eni
 from lolacli.errors import EniError, LinkError, TransportError, UsageError
+from lolacli.findings import Finding, Findings, Severity, verdict
+from lolacli.interrupt import Stop
 from lolacli.master.core import SECTIONS, Master, MasterOptions
 from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.transport import ChainTransport, Transport
@@ -93,15 +96,17 @@ def simulate(
     options: SimulateOptions,
     *,
     progress: Progress | None = None,
-    should_stop: Callable[[], bool] | None = None,
+    stop: Stop | None = None,
 ) -> SimulationResult:
-    """Run the simulation (see the module docstring)."""
+    """Run the simulation (see the module docstring). ``stop``: the CLI's
+    :class:`~lolacli.interrupt.Stop`; a signal during the cyclic run ends it early with the
+    report of the cycles run (:attr:`SimulationResult.interrupted`)."""
     _check(eni, options)
     recorders = _open_recorders(options)
     shm = None
     try:
         if options.iface is not None:
-            return _live(eni, options, recorders, progress, should_stop)
+            return _live(eni, options, recorders, progress, stop)
         from lolacli.emulator.run import EmulateOptions, arm_link_loss, make_chain
 
         cut = options.link_down
@@ -116,20 +121,25 @@ def simulate(
         chain = make_chain(eni, emulate)
         transport = ChainTransport(chain)
         master, app, shm = _compose(eni, options, transport, recorders)
+        clock = _clock(master, transport)
         wall0 = time.perf_counter()
         _bring_up(master)
         start_ns = transport.now_ns()
         arm_link_loss(chain, emulate, start_ns)
         app.enable()
         app.first_cycle = master.stats.cycles
-        interrupted = _run(master, options, progress, should_stop, wall0)
+        skipped0 = master.stats.skipped_cycles
+        clock.active = True
+        interrupted = _run(master, options, progress, stop, wall0)
+        clock.active = False
         app.last_cycle = master.stats.cycles
         master.drain()
-        states = _final_states(master)
+        states = app.final_states = _final_states(master)
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        return _result(doc, options, master, interrupted)
+        doc.update(_timing(master, clock, skipped0))
+        return _result(doc, options, master, app, interrupted, stop)
     finally:
         for r in recorders:
             if r is not None:
@@ -170,34 +180,126 @@ def _bring_up(master: Master) -> None:
 
 
 def _result(
-    doc: dict[str, Any], options: SimulateOptions, master: Master, interrupted: bool
+    doc: dict[str, Any],
+    options: SimulateOptions,
+    master: Master,
+    app: _Application,
+    interrupted: bool,
+    stop: Stop | None,
 ) -> SimulationResult:
     doc["interrupted"] = interrupted
-    failed = bool(
-        doc["wkc_mismatches"] > options.max_wkc_mismatches
-        or doc["lost_frames"] > options.max_lost
-        or master.refusals
-    )
-    return SimulationResult(doc, failed, interrupted)
+    findings = _findings(doc, options, master, app, stop if interrupted else None)
+    doc["verdict"] = verdict(findings)
+    doc["findings"] = [f.to_dict() for f in findings]
+    return SimulationResult(doc, doc["verdict"] == "fail", interrupted)
+
+
+def _findings(
+    doc: dict[str, Any],
+    options: SimulateOptions,
+    master: Master,
+    app: _Application,
+    stopped: Stop | None,
+) -> list[Finding]:
+    """The verdict's findings (the one model of :mod:`lolacli.findings`)."""
+    out = Findings()
+    stats = master.stats
+    fail, warn = Severity.FAILURE, Severity.WARNING
+    for r in master.refusals:
+        code = "" if r.al_status_code is None else f", AL status code 0x{r.al_status_code:04X}"
+        out.add("refused", fail, f"slave {r.position} ({r.slave}) refused {r.transition}"
+                f"{code}: {r.text}", slave=r.position)
+    refused = {r.position for r in master.refusals}
+    for slave in master.eni.slaves:
+        state = app.final_states.get(slave.position, "no answer")
+        if state != "OP" and slave.position not in refused:
+            out.add("not-op", fail, f"slave {slave.position} ({slave.name}) ended in {state}, "
+                    "not OP", slave=slave.position)
+    _overrun_finding(out, doc, master)
+    lost, late = doc["lost_frames"], doc["late_frames"] or 0
+    over = lost + late > options.max_lost
+    if lost:
+        cyclic = doc["cyclic_lost_frames"]
+        out.add("lost", fail if over else warn,
+                f"{lost:,} frames never came back ({cyclic:,} of them cyclic; threshold "
+                f"--max-lost {options.max_lost})", cycles=master.lost_cycles(), count=lost)
+    if late:
+        out.add("late", fail if over else warn,
+                f"{late:,} cyclic frames came back after their cycle had ended: those cycles "
+                "ran without their inputs", cycles=stats.late_at, count=late)
+    if doc["wkc_mismatches"]:
+        out.add("wkc-mismatch", fail if doc["wkc_mismatches"] > options.max_wkc_mismatches
+                else warn,
+                f"{doc['wkc_mismatches']:,} of {doc['wkc_checked']:,} working counters differed"
+                f" from the ENI's <Cnt>, in {doc['cycles_with_wkc_mismatch']:,} cycles (threshold "
+                f"--max-wkc-mismatches {options.max_wkc_mismatches})",
+                cycles=stats.mismatch_at, count=doc["wkc_mismatches"])
+    if doc["drives_enabled"] < doc["drives"]:
+        out.add("drives-disabled", warn,
+                f"{doc['drives'] - doc['drives_enabled']} of {doc['drives']} drives were not "
+                "enabled (CiA 402 state machine short of Operation enabled)")
+    for name, value in doc["watch"].items():
+        out.add("watch", Severity.INFO, f"{name} = {value} (last value)")
+    if stopped is not None:
+        signame = "SIGTERM" if stopped.exit_code == 143 else "SIGINT"
+        out.add("interrupted", warn,
+                f"stopped by {signame} after {doc['cycles']:,} cycles of {options.cycles:,}: the "
+                "figures cover the cycles run")
+    return out.ordered()
+
+
+def _overrun_finding(out: Findings, doc: dict[str, Any], master: Master) -> None:
+    """Cycles the bus (or the host) could not keep: the slots skipped and the cycles sent
+    over half a cycle late, with the rate this bus can hold."""
+    skipped, overruns = doc["skipped_cycles"] or 0, doc["overruns"] or 0
+    if not skipped and not overruns:
+        return
+    cycle_us = master.cycle_time_ns / 1000
+    rt = doc["round_trip_us"]
+    need = ""
+    if rt is not None:
+        need = f"; a round trip takes {rt['median']:g} µs"
+        if doc["max_rate_hz"]:
+            need += f", so this bus holds at most {doc['max_rate_hz']:,} Hz"
+            if doc["max_rate_with_software_hz"]:
+                need += f" ({doc['max_rate_with_software_hz']:,} Hz with the software)"
+    out.add("overrun", Severity.FAILURE,
+            f"the cycle of {cycle_us:g} µs ({doc['rate_hz']:,g} Hz) was not kept: {skipped:,} "
+            f"cycle slots skipped, {overruns:,} cycles sent over half a cycle late{need}",
+            cycles=master.stats.skipped_at, count=skipped + overruns)
 
 
 #: keys only a run on a live bus fills (null in virtual time)
 _NO_LIVE_KEYS: dict[str, Any] = {
     "mode": "virtual",
     "iface": None,
-    "cycle_period_us": None,
-    "cycle_jitter_us": None,
     "wakeup_lateness_us": None,
-    "send_offset_us": None,
-    "overruns": None,
-    "late_frames": None,
-    "never_returned_frames": None,
     "scheduling": None,
     "load": None,
     "master_cpu_percent": None,
     "kernel_timestamps": None,
-    "skipped_cycles": None,
 }
+
+
+def _clock(master: Master, transport: Transport) -> Any:
+    """A tap that times every cyclic frame against the master's schedule."""
+    from lolacli.master.realtime import CycleClock
+
+    clock = CycleClock(master.cycle_time_ns, lambda: master.next_cycle_ns)
+    transport.taps.append(clock)
+    return clock
+
+
+def _timing(master: Master, clock: Any, skipped0: int) -> dict[str, Any]:
+    """Cycle period, jitter and lateness as the frames left, in both times; frames late
+    and never back as the master saw them (a late one came back after it had stopped
+    waiting: the cycle ran without its inputs)."""
+    stats = master.stats
+    doc: dict[str, Any] = clock.report(master.cycle_time_ns)
+    doc["late_frames"] = stats.late_frames
+    doc["never_returned_frames"] = stats.cyclic_lost
+    doc["skipped_cycles"] = stats.skipped_cycles - skipped0
+    return doc
 
 
 def _live(
@@ -205,7 +307,7 @@ def _live(
     options: SimulateOptions,
     recorders: tuple[Any, Any],
     progress: Progress | None,
-    should_stop: Callable[[], bool] | None,
+    stop: Stop | None,
 ) -> SimulationResult:
     """The master in real time on a live bus (``options.iface``): a raw socket, the
     cycle busy-waited at its end, SCHED_FIFO where permitted (see
@@ -235,17 +337,17 @@ def _live(
             clock.active = True
             wakes: list[int] = []
             transport.wake_lateness_ns = wakes
-            interrupted = _run(master, options, progress, should_stop, wall0)
+            interrupted = _run(master, options, progress, stop, wall0)
             app.last_cycle = master.stats.cycles
             transport.wake_lateness_ns = None
             clock.active = False
             cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
-            states = _live_states(master)
+            states = app.final_states = _live_states(master)
             master.drain()
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        doc.update(clock.report(master.cycle_time_ns))
+        doc.update(_timing(master, clock, skipped0))
         wake = summarize_array(wakes)
         doc["wakeup_lateness_us"] = wake.to_dict(scale=1e-3) if wake is not None else None
         doc.update(
@@ -257,47 +359,83 @@ def _live(
                 "load": {"before": load_before, "after": load_now()},
                 "master_cpu_percent": round(100 * cpu_s / run_s, 1) if run_s > 0 else None,
                 "kernel_timestamps": transport.kernel_timestamps,
-                "skipped_cycles": master.stats.skipped_cycles - skipped0,
             }
         )
-        return _result(doc, options, master, interrupted)
+        return _result(doc, options, master, app, interrupted, stop)
     finally:
         transport.close()
         if shm is not None:
             shm.close()
 
 
+#: the most cycle slots one run takes: the per-cycle figures are kept for the statistics
+#: (about 100 B a cycle), so a longer run would outgrow the memory of a small host
+MAX_CYCLES = 20_000_000
+MAX_RATE_HZ = 100_000.0
+#: clock drift along the line: a crystal drifts about ±100 ppm; ten times that at most
+MAX_DRIFT_PPB = 1_000_000
+
+
 def _check(eni: Eni, options: SimulateOptions) -> None:
+    """Options no bus can have: UsageError naming the option and its range (exit 2)."""
     if not eni.cyclic_frames:
         raise EniError("the ENI has no cyclic frame: nothing to simulate", path=eni.source)
     if not eni.slaves:
         raise EniError("the ENI has no slaves: nothing to simulate", path=eni.source)
-    if not 1.0 <= options.rate_hz <= 100_000.0:
-        raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to 100000 Hz")
-    if options.cycles < 0:
-        raise UsageError("the number of cycles cannot be negative")
+    n = len(eni.slaves)
+    if not 1.0 <= options.rate_hz <= MAX_RATE_HZ:
+        raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to {MAX_RATE_HZ:.0f} Hz")
+    if not 1 <= options.cycles <= MAX_CYCLES:
+        raise UsageError(
+            f"--cycles {options.cycles}: expected 1 to {MAX_CYCLES:,} cycles (a --duration "
+            "shorter than one cycle is 0 cycles)"
+        )
+    if not 0.0 <= options.drop_probability <= 1.0:
+        raise UsageError(f"--drop-p {options.drop_probability:g}: expected 0 to 1")
+    if abs(options.drift_ppb) > MAX_DRIFT_PPB:
+        raise UsageError(
+            f"--drift-ppb {options.drift_ppb}: expected -{MAX_DRIFT_PPB:,} to "
+            f"{MAX_DRIFT_PPB:,} ppb (a crystal drifts about ±100,000 ppb)"
+        )
+    for position in options.stuck_safeop:
+        if not 1 <= position <= n:
+            raise UsageError(f"--stuck-safeop {position}: expected a slave position 1 to {n}")
+    if options.link_down is not None:
+        after, at_s = options.link_down
+        if not 0 <= after <= n:
+            raise UsageError(f"--link-down {after}: expected 0 (at the master) to {n}")
+        run_s = options.cycles / options.rate_hz
+        if at_s >= run_s:
+            raise UsageError(
+                f"--link-down {after}@{at_s:g}s: after the run ends ({run_s:g} s of cycles)"
+            )
     if options.iface is not None:
-        faults = [
-            name
-            for name, given in (
-                ("--drop-p", options.drop_probability > 0),
-                ("--stuck-safeop", bool(options.stuck_safeop)),
-                ("--link-down", options.link_down is not None),
-                ("--drift-ppb", options.drift_ppb != 0),
-            )
-            if given
-        ]
-        if faults:
-            raise UsageError(
-                f"{', '.join(faults)}: faults of the emulated chain; on a live bus give them "
-                "to the `bus emulate` serving it"
-            )
-        if options.pace:
-            raise UsageError("--pace: a live bus runs in real time anyway")
-        if options.busy_wait_us < 0 or options.busy_wait_us * 1000 > 1e9 / options.rate_hz:
-            raise UsageError(
-                f"--busy-wait-us {options.busy_wait_us:g}: expected 0 to one cycle time"
-            )
+        _check_live(options)
+
+
+def _check_live(options: SimulateOptions) -> None:
+    faults = [
+        name
+        for name, given in (
+            ("--drop-p", options.drop_probability > 0),
+            ("--stuck-safeop", bool(options.stuck_safeop)),
+            ("--link-down", options.link_down is not None),
+            ("--drift-ppb", options.drift_ppb != 0),
+        )
+        if given
+    ]
+    if faults:
+        raise UsageError(
+            f"{', '.join(faults)}: faults of the emulated chain; on a live bus give them "
+            "to the `bus emulate` serving it"
+        )
+    if options.pace:
+        raise UsageError("--pace: a live bus runs in real time anyway")
+    if options.busy_wait_us < 0 or options.busy_wait_us * 1000 > 1e9 / options.rate_hz:
+        raise UsageError(
+            f"--busy-wait-us {options.busy_wait_us:g}: expected 0 to one cycle time "
+            f"({1e6 / options.rate_hz:g} µs)"
+        )
 
 
 def _open_recorders(options: SimulateOptions) -> tuple[Any, Any]:
@@ -327,6 +465,7 @@ class _Application:
         self.shm: Any = None
         self.mcap: Any = None
         self.homes: dict[int, int] = {}
+        self.final_states: dict[int, str] = {}  # position -> AL state at the end
         self.t_enable_ns = 0
         self.first_cycle = 0
         # the cycle count when the run's own cycles ended (a live run's closing reads of
@@ -461,60 +600,67 @@ def _run(
     master: Master,
     options: SimulateOptions,
     progress: Progress | None,
-    should_stop: Callable[[], bool] | None,
+    stop: Stop | None,
     wall0: float,
 ) -> bool:
-    """The cyclic run; True when stopped early by ``should_stop``."""
-    if not master._cyclic:
+    """The cyclic run over ``options.cycles`` cycle slots (a cycle that runs past the next
+    slot makes the master skip it, as a cycle timer does); True when stopped early by
+    ``stop`` (a signal, polled between cycles so that what ran is whole)."""
+    if not master.cycling:
         master.start_cyclic()
-    total = options.cycles
+    stats = master.stats
+    target = stats.cycles + stats.skipped_cycles + options.cycles
     cycle = master.cycle
     step = 256
     virtual0 = master.transport.now_ns()
-    done = 0
-    while done < total:
-        n = min(step, total - done)
-        for _ in range(n):
-            cycle()
-        done += n
-        if progress is not None:
-            progress(done, total)
-        if should_stop is not None and should_stop():
-            return True
-        if options.pace:
-            ahead = (master.transport.now_ns() - virtual0) / 1e9 - (time.perf_counter() - wall0)
-            if ahead > 0:
-                time.sleep(ahead)
-    return False
+    with stop.polled() if stop is not None else nullcontext():
+        while True:
+            done = stats.cycles + stats.skipped_cycles
+            if done >= target:
+                return False
+            for _ in range(min(step, target - done)):
+                cycle()
+                if stats.skipped_cycles and stats.cycles + stats.skipped_cycles >= target:
+                    break
+            if progress is not None:
+                slots = stats.cycles + stats.skipped_cycles - (target - options.cycles)
+                progress(min(options.cycles, slots), options.cycles)
+            if stop is not None and stop():
+                return True
+            if options.pace:
+                now_s = (master.transport.now_ns() - virtual0) / 1e9
+                ahead = now_s - (time.perf_counter() - wall0)
+                if ahead > 0:
+                    time.sleep(min(ahead, 0.1))
 
 
-def _live_states(master: Master) -> dict[str, str]:
+def _live_states(master: Master) -> dict[int, str]:
     """AL state of every slave at the end of a live run, read in one frame while the
     master still cycles (read after the cycling stops, one frame per slave, a slow host
     takes long enough for the slaves' process-data watchdogs to drop them to SAFEOP)."""
     try:
         got = master.al_states()
     except TransportError:
-        return {s.name: "no answer" for s in master.eni.slaves}
+        return {s.position: "no answer" for s in master.eni.slaves}
     return {
-        s.name: al_state_name(status) if status is not None else "no answer"
+        s.position: al_state_name(status) if status is not None else "no answer"
         for s, (_position, status) in zip(master.eni.slaves, got, strict=True)
     }
 
 
-def _final_states(master: Master) -> dict[str, str]:
+def _final_states(master: Master) -> dict[int, str]:
     """AL state of every slave at the end (the capture's closing frames): after twice the
     frame timeout, so every earlier frame is older than a capture reader's timeout."""
     master.idle(2 * master.options.frame_timeout_ns)
-    out: dict[str, str] = {}
+    out: dict[int, str] = {}
     for s in master.eni.slaves:
         read = Datagram.physical(Command.FPRD, s.station_address, Register.AL_STATUS, 2)
         try:
             got = master.exchange([read], retries=20)[0]
         except TransportError:
-            out[s.name] = "no answer"
+            out[s.position] = "no answer"
             continue
-        out[s.name] = al_state_name(got.data[0]) if got.wkc == 1 else "no answer"
+        out[s.position] = al_state_name(got.data[0]) if got.wkc == 1 else "no answer"
     return out
 
 
@@ -523,7 +669,7 @@ def _report(
     options: SimulateOptions,
     master: Master,
     app: _Application,
-    states: dict[str, str],
+    states: dict[int, str],
     wall_s: float,
     start_ns: int,
     recorders: tuple[Any, Any],
@@ -584,7 +730,7 @@ def _report(
         "simulated_s": simulated_s,
         "wall_s": round(wall_s, 3),
         "refusals": [r.to_dict() for r in master.refusals],
-        "states": states,
+        "states": {s.name: states.get(s.position, "no answer") for s in eni.slaves},
         "drives": len(app.drives),
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},

@@ -1,0 +1,47 @@
+"""Human form of a verdict and its findings (the one Finding model), for every command
+that gives one: a ``Verdict: FAIL (1 failure, 2 warnings)`` line, then one entry per
+finding — its severity, kind and message wrapped to the console's width, and where it
+shows (frames of a capture, cycles of a simulation, the slave)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from lolacli.text import plural
+
+_LABEL = {"failure": "FAIL", "warning": "WARN", "info": "info"}
+
+
+def render_verdict(console: Any, verdict: str, findings: list[dict[str, Any]]) -> None:
+    """``findings`` as :meth:`lolacli.findings.Finding.to_dict` gives them."""
+    from rich.table import Table
+
+    counts = {s: sum(1 for f in findings if f["severity"] == s) for s in _LABEL}
+    parts = [plural(n, s) for s, n in counts.items() if n]
+    console.print(f"Verdict: {verdict.upper()}" + (f" ({', '.join(parts)})" if parts else ""))
+    if not findings:
+        return
+    grid = Table.grid(padding=(0, 1))
+    grid.add_column(no_wrap=True)
+    grid.add_column(overflow="fold")
+    for f in findings:
+        grid.add_row(_LABEL.get(f["severity"], f["severity"]), f"{f['kind']}: {f['message']}"
+                     + _where(f))
+    console.print(grid, width=min(console.width, 80) if console.width else 80)
+
+
+def _where(f: dict[str, Any]) -> str:
+    out = ""
+    for key, noun in (("frames", "frame"), ("cycles", "cycle")):
+        numbers = f.get(key) or []
+        if not numbers:
+            continue
+        listed = ", ".join(str(n) for n in numbers)
+        if f.get("count", 0) > len(numbers):
+            out += f"\nfirst {noun}s {listed} (of {f['count']})"
+        else:
+            out += f"\n{noun}{'s' if len(numbers) > 1 else ''} {listed}"
+    return out
+
+
+__all__ = ["render_verdict"]
