@@ -91,9 +91,8 @@ def emulate_cmd(
     ] = "follow",
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
-    drive it. Ctrl-C (or SIGTERM) stops it with exit 0."""
-    import signal
-
+    drive it. Ctrl-C (SIGINT) or SIGTERM stops it, with exit 130 or 143; --duration ends
+    it with exit 0."""
     from lolacli.emulator.run import (
         EmulateOptions,
         arm_link_loss,
@@ -105,6 +104,7 @@ def emulate_cmd(
     )
     from lolacli.errors import UsageError
     from lolacli.files import load_eni, load_esi
+    from lolacli.interrupt import stop_signals
 
     placement: int | str = cpu
     if cpu not in ("follow", "any"):
@@ -131,13 +131,6 @@ def emulate_cmd(
         corrupt_p,
     )
     chain = make_chain(model, options, esi=esi_files)
-    stop = {"flag": False}
-
-    def _stop(_signum: int, _frame: object) -> None:
-        stop["flag"] = True
-
-    signal.signal(signal.SIGINT, _stop)
-    signal.signal(signal.SIGTERM, _stop)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     console = stderr_console()
     esi_note = ""
@@ -160,8 +153,8 @@ def emulate_cmd(
         if esi_note:
             console.print(esi_note, highlight=False)
 
-    def should_stop() -> bool:
-        return stop["flag"] or (deadline is not None and time.monotonic() >= deadline)
+    def ended() -> bool:
+        return deadline is not None and time.monotonic() >= deadline
 
     def status(stats: object) -> None:
         if quiet:
@@ -175,17 +168,18 @@ def emulate_cmd(
         )
 
     scratch = make_chain(model, EmulateOptions(), esi=esi_files)  # warms the code up
-    stats = serve(
-        iface,
-        chain,
-        should_stop,
-        status,
-        on_ready=ready,
-        realtime_priority=realtime_priority,
-        scratch=scratch,
-        keep_cpus_awake=keep_cpus_awake,
-        cpu=placement,
-    )
+    with stop_signals() as stop, stop.polled():  # the server polls: a stop ends it whole
+        stats = serve(
+            iface,
+            chain,
+            lambda: stop() or ended(),
+            status,
+            on_ready=ready,
+            realtime_priority=realtime_priority,
+            scratch=scratch,
+            keep_cpus_awake=keep_cpus_awake,
+            cpu=placement,
+        )
     status(stats)
     drops = "" if stats.socket_drops is None else f", {stats.socket_drops} dropped at the socket"
     console.print(
@@ -201,6 +195,8 @@ def emulate_cmd(
             highlight=False,
             soft_wrap=True,
         )
+    if stop.signum is not None:
+        raise typer.Exit(stop.exit_code)
 
 
 def _latency_line(stats: object) -> str:

@@ -93,11 +93,13 @@ def simulate_cmd(
         ),
     ] = None,
     busy_wait_us: Annotated[
-        float,
+        float | None,
         typer.Option(
-            "--busy-wait-us", help="With --iface: busy-wait this last part of every cycle."
+            "--busy-wait-us",
+            help="With --iface: busy-wait this last part of every cycle (default 200 µs, at most "
+            "40% of a cycle)."
         ),
-    ] = 200.0,
+    ] = None,
     realtime_priority: Annotated[
         int,
         typer.Option(
@@ -114,6 +116,15 @@ def simulate_cmd(
     max_wkc: Annotated[
         int,
         typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
+    ] = 0,
+    max_overruns: Annotated[
+        int,
+        typer.Option(
+            "--max-overruns",
+            min=0,
+            help="Cycles not kept (slots skipped, or sent over half a cycle late) allowed "
+            "before exit 1.",
+        ),
     ] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
     fmt: FormatOption = OutputFormat.human,
@@ -195,6 +206,7 @@ def _options(given: dict[str, Any]) -> Any:
         realtime_priority=given["realtime_priority"],
         max_lost=given["max_lost"],
         max_wkc_mismatches=given["max_wkc"],
+        max_overruns=given["max_overruns"],
     )
 
 

@@ -35,20 +35,27 @@ class _LolaGroup(TyperGroup):
             with stop_signals():  # SIGINT and SIGTERM raise Interrupted; restored after
                 return super().invoke(ctx)
         except LolaError as exc:
-            if debug_enabled():
-                raise
+            _traceback_if_debug()
             sys.stderr.write(f"lolacli: error: {exc}\n")
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt as exc:
             sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}\n")
             raise typer.Exit(exit_code(exc)) from None
         except ClickUsageError as exc:  # wrong arguments: one line, exit 2
-            if debug_enabled():
-                raise
+            _traceback_if_debug()
             path = exc.ctx.command_path if exc.ctx is not None else "lolacli"
             message = " ".join(exc.format_message().split())
             sys.stderr.write(f"{path}: error: {message} (see {path} --help)\n")
             raise typer.Exit(2) from None
+
+
+def _traceback_if_debug() -> None:
+    """With LOLACLI_DEBUG=1 the traceback of the error being handled goes to stderr (the
+    exit code stays the documented one)."""
+    if debug_enabled():
+        import traceback
+
+        traceback.print_exc()
 
 
 _light_parameters()  # simple parameters without pydantic: a third of a short command's start-up

@@ -256,7 +256,7 @@ class Master:
             self.last_sent_ns = self.transport.send(frame)
             self.stats.frames_sent += 1
             self.stats.acyclic_frames += 1
-            got = self._await(index, self.options.frame_timeout_ns, self.last_sent_ns)
+            got = self._await(index, self.options.frame_timeout_ns, self.last_sent_ns, frame)
             if got is not None:
                 return decode_frame(got.frame).datagrams
             self.stats.frames_lost += 1
@@ -284,13 +284,17 @@ class Master:
             out += self.exchange(batch)
         return out
 
-    def _await(self, index: int, timeout_ns: int, sent_ns: int = 0) -> Received | None:
+    def _await(
+        self, index: int, timeout_ns: int, sent_ns: int = 0, like: bytes | bytearray | None = None
+    ) -> Received | None:
         """The returned frame with ``index`` within ``timeout_ns``; other returned frames
         that come meanwhile are kept for whoever waits for them. A frame with ``index``
         that returned before ``sent_ns`` answers an earlier frame with the same index (a
-        late one, in real time) and is dropped."""
+        late one, in real time) and is dropped; so is one that is not shaped like the
+        frame sent (``like``: its EtherCAT header and first command): a frame
+        so late that its index came round again."""
         got = self._stray.pop(index, None)
-        if got is not None and got.received_ns >= sent_ns:
+        if got is not None and got.received_ns >= sent_ns and _alike(got.frame, like):
             return got
         deadline = self.transport.now_ns() + timeout_ns
         while True:
@@ -301,7 +305,7 @@ class Master:
             if self._overdue and self._late(frame_index, r):
                 continue
             if frame_index == index:
-                if r.received_ns >= sent_ns:
+                if r.received_ns >= sent_ns and _alike(r.frame, like):
                     return r
                 continue
             self._stray[frame_index] = r
@@ -782,7 +786,7 @@ class Master:
             until = sent + self.cycle_time_ns
             if realtime and until > self._next_cycle_ns:
                 until = self._next_cycle_ns
-            got = self._await(index, max(0, until - now), sent)
+            got = self._await(index, max(0, until - now), sent, plan.template)
             if got is None:
                 stats.cyclic_lost += 1
                 stats.frames_lost += 1
@@ -894,6 +898,16 @@ class Master:
             (s.position, d.data[0] if d.wkc == 1 else None)
             for s, d in zip(self.eni.slaves, got, strict=True)
         ]
+
+
+def _alike(frame: bytes, like: bytes | bytearray | None) -> bool:
+    """Whether ``frame`` can be the answer to ``like``: the same EtherCAT header (the
+    datagrams' length) and first command (a slave changes data and working counters,
+    never these)."""
+    if like is None:
+        return True
+    head = ETH_HEADER_BYTES
+    return frame[head : head + 3] == like[head : head + 3]
 
 
 def _masked(data: bytes, mask: bytes | None) -> bytes:

@@ -73,11 +73,13 @@ class SimulateOptions:
     period_s: float = 2.0
     time_sections: bool = True
     iface: str | None = None  # a live bus in real time instead of the emulated chain
-    busy_wait_us: float = 200.0  # live: busy-wait this last part of every cycle
+    # live: busy-wait this last part of every cycle (None: 200 µs, at most 40% of a cycle)
+    busy_wait_us: float | None = None
     realtime_priority: int = 80  # live: SCHED_FIFO priority where permitted (0: do not ask)
     frame_timeout_ms: float = 10.0  # live: an acyclic frame not back by then is lost
     max_lost: int = 0  # lost frames allowed before the run fails
     max_wkc_mismatches: int = 0
+    max_overruns: int = 0  # cycles not kept (slots skipped + sent over half a cycle late)
 
 
 @dataclass(slots=True)
@@ -132,13 +134,13 @@ def simulate(
         clock.active = True
         interrupted = _run(master, options, progress, stop, wall0)
         clock.active = False
-        app.last_cycle = master.stats.cycles
+        app.last_cycle, app.last_skipped = master.stats.cycles, master.stats.skipped_cycles
         master.drain()
         states = app.final_states = _final_states(master)
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        doc.update(_timing(master, clock, skipped0))
+        doc.update(_timing(master, clock, app.last_skipped - skipped0))
         return _result(doc, options, master, app, interrupted, stop)
     finally:
         for r in recorders:
@@ -215,7 +217,7 @@ def _findings(
         if state != "OP" and slave.position not in refused:
             out.add("not-op", fail, f"slave {slave.position} ({slave.name}) ended in {state}, "
                     "not OP", slave=slave.position)
-    _overrun_finding(out, doc, master)
+    _overrun_finding(out, doc, master, options)
     lost, late = doc["lost_frames"], doc["late_frames"] or 0
     over = lost + late > options.max_lost
     if lost:
@@ -248,24 +250,30 @@ def _findings(
     return out.ordered()
 
 
-def _overrun_finding(out: Findings, doc: dict[str, Any], master: Master) -> None:
-    """Cycles the bus (or the host) could not keep: the slots skipped and the cycles sent
-    over half a cycle late, with the rate this bus can hold."""
+def _overrun_finding(
+    out: Findings, doc: dict[str, Any], master: Master, options: SimulateOptions
+) -> None:
+    """Cycles not kept: the slots skipped and the cycles sent over half a cycle late, and
+    why — a bus too slow for the rate (with the rate it holds), or the host."""
     skipped, overruns = doc["skipped_cycles"] or 0, doc["overruns"] or 0
     if not skipped and not overruns:
         return
     cycle_us = master.cycle_time_ns / 1000
     rt = doc["round_trip_us"]
-    need = ""
-    if rt is not None:
-        need = f"; a round trip takes {rt['median']:g} µs"
-        if doc["max_rate_hz"]:
-            need += f", so this bus holds at most {doc['max_rate_hz']:,} Hz"
-            if doc["max_rate_with_software_hz"]:
-                need += f" ({doc['max_rate_with_software_hz']:,} Hz with the software)"
-    out.add("overrun", Severity.FAILURE,
+    why = ""
+    holds = doc["max_rate_with_software_hz"] or doc["max_rate_hz"]
+    if rt is not None and doc["max_rate_hz"]:
+        why = (f"; a round trip takes {rt['median']:g} µs, so this bus holds at most "
+               f"{doc['max_rate_hz']:,} Hz")
+        if doc["max_rate_with_software_hz"]:
+            why += f" ({doc['max_rate_with_software_hz']:,} Hz with the software)"
+        if holds and holds >= doc["rate_hz"]:
+            why += ": the cycles were lost to the host (scheduling, load), not to the bus"
+    severity = Severity.FAILURE if skipped + overruns > options.max_overruns else Severity.WARNING
+    out.add("overrun", severity,
             f"the cycle of {cycle_us:g} µs ({doc['rate_hz']:,g} Hz) was not kept: {skipped:,} "
-            f"cycle slots skipped, {overruns:,} cycles sent over half a cycle late{need}",
+            f"cycle slots skipped, {overruns:,} cycles sent over half a cycle late (threshold "
+            f"--max-overruns {options.max_overruns}){why}",
             cycles=master.stats.skipped_at, count=skipped + overruns)
 
 
@@ -290,7 +298,7 @@ def _clock(master: Master, transport: Transport) -> Any:
     return clock
 
 
-def _timing(master: Master, clock: Any, skipped0: int) -> dict[str, Any]:
+def _timing(master: Master, clock: Any, skipped: int) -> dict[str, Any]:
     """Cycle period, jitter and lateness as the frames left, in both times; frames late
     and never back as the master saw them (a late one came back after it had stopped
     waiting: the cycle ran without its inputs)."""
@@ -298,7 +306,7 @@ def _timing(master: Master, clock: Any, skipped0: int) -> dict[str, Any]:
     doc: dict[str, Any] = clock.report(master.cycle_time_ns)
     doc["late_frames"] = stats.late_frames
     doc["never_returned_frames"] = stats.cyclic_lost
-    doc["skipped_cycles"] = stats.skipped_cycles - skipped0
+    doc["skipped_cycles"] = skipped
     return doc
 
 
@@ -316,7 +324,8 @@ def _live(
     from lolacli.master.transport import RawSocketTransport
 
     assert options.iface is not None
-    transport = RawSocketTransport(options.iface, spin_ns=round(options.busy_wait_us * 1000))
+    busy_us = busy_wait_us(options)
+    transport = RawSocketTransport(options.iface, spin_ns=round(busy_us * 1000))
     shm = None
     try:
         master, app, shm = _compose(eni, options, transport, recorders)
@@ -324,7 +333,7 @@ def _live(
         transport.taps.append(clock)
         load_before = load_now()
         with realtime_section(
-            options.realtime_priority, busy_wait_us=options.busy_wait_us
+            options.realtime_priority, busy_wait_us=busy_us
         ) as scheduling:
             wall0 = time.perf_counter()
             _bring_up(master)
@@ -338,7 +347,7 @@ def _live(
             wakes: list[int] = []
             transport.wake_lateness_ns = wakes
             interrupted = _run(master, options, progress, stop, wall0)
-            app.last_cycle = master.stats.cycles
+            app.last_cycle, app.last_skipped = master.stats.cycles, master.stats.skipped_cycles
             transport.wake_lateness_ns = None
             clock.active = False
             cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
@@ -347,7 +356,7 @@ def _live(
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        doc.update(_timing(master, clock, skipped0))
+        doc.update(_timing(master, clock, app.last_skipped - skipped0))
         wake = summarize_array(wakes)
         doc["wakeup_lateness_us"] = wake.to_dict(scale=1e-3) if wake is not None else None
         doc.update(
@@ -431,11 +440,18 @@ def _check_live(options: SimulateOptions) -> None:
         )
     if options.pace:
         raise UsageError("--pace: a live bus runs in real time anyway")
-    if options.busy_wait_us < 0 or options.busy_wait_us * 1000 > 1e9 / options.rate_hz:
+    busy = options.busy_wait_us
+    if busy is not None and (busy < 0 or busy * 1000 > 1e9 / options.rate_hz):
         raise UsageError(
-            f"--busy-wait-us {options.busy_wait_us:g}: expected 0 to one cycle time "
-            f"({1e6 / options.rate_hz:g} µs)"
+            f"--busy-wait-us {busy:g}: expected 0 to one cycle time ({1e6 / options.rate_hz:g} µs)"
         )
+
+
+def busy_wait_us(options: SimulateOptions) -> float:
+    """The busy-wait of a live cycle: as given, else 200 µs but at most 40% of a cycle."""
+    if options.busy_wait_us is not None:
+        return options.busy_wait_us
+    return min(200.0, 0.4 * 1e6 / options.rate_hz)
 
 
 def _open_recorders(options: SimulateOptions) -> tuple[Any, Any]:
@@ -471,6 +487,7 @@ class _Application:
         # the cycle count when the run's own cycles ended (a live run's closing reads of
         # the AL states go on cycling, and those cycles are not the run's)
         self.last_cycle: int | None = None
+        self.last_skipped = 0
         image = master.image
         for name in options.watch:
             self.watch[name] = image.link(name, variable_for(image.find(name)))
@@ -690,7 +707,9 @@ def _report(
     run_cycles = (stats.cycles if app.last_cycle is None else app.last_cycle) - first
     simulated_s = run_cycles * master.cycle_time_ns / 1e9
     emulation = summarize_array(master.bus_emulation_ns[timed_from:])
-    rt_mean = rt.mean if rt is not None else None
+    # the rate the bus holds in a typical cycle: the median round trip (late frames that
+    # waited behind others in a queue would drag a mean far from it)
+    rt_typical = rt.median if rt is not None else None
     dc_errors = [e for t, e in stats.dc_errors_ns if t >= start_ns]
     pcap, mcap = recorders
     return {
@@ -722,9 +741,9 @@ def _report(
         "sections_us": sections,
         "software_us_per_cycle": round(software_ns / 1000, 3) if sections else None,
         "bus_emulation_us": emulation.to_dict(scale=1e-3) if emulation is not None else None,
-        "max_rate_hz": round(1e9 / rt_mean) if rt_mean else None,
-        "max_rate_with_software_hz": round(1e9 / (rt_mean + software_ns))
-        if rt_mean and sections
+        "max_rate_hz": round(1e9 / rt_typical) if rt_typical else None,
+        "max_rate_with_software_hz": round(1e9 / (rt_typical + software_ns))
+        if rt_typical and sections
         else None,
         "realtime_factor": round(simulated_s / wall_s, 3) if wall_s > 0 else None,
         "simulated_s": simulated_s,

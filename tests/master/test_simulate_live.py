@@ -7,13 +7,17 @@ from __future__ import annotations
 import gc
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from lolacli.files import load_eni
 from lolacli.master.simulate import SimulateOptions, simulate
-from tests.live import LOLA, inside, run, run_json, start_emulator, stop_emulator
+from tests.live import LOLA, ROOT, inside, run, run_json, start_emulator, stop_emulator
 
 pytestmark = [pytest.mark.root, pytest.mark.slow]
 CYCLE_US = 500.0
@@ -35,6 +39,8 @@ def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
             "--max-lost",
             "200",
             "--max-wkc-mismatches",
+            "200",
+            "--max-overruns",
             "200",
             "--pcap",
             str(pcap),
@@ -106,3 +112,47 @@ def test_no_bus_behind_the_interface_is_exit_4(bus) -> None:
     assert done.returncode == 4
     assert done.stderr.startswith("lolacli: error: no answer to ")
     assert done.stderr.count("\n") == 1
+
+
+def test_a_rate_the_bus_cannot_hold_ends_in_time_with_a_verdict(bus) -> None:
+    """20 kHz over veth: frames come back late or not at all; the run still ends after
+    its duration, and the verdict names the cycles not kept."""
+    proc = start_emulator(bus)
+    try:
+        t0 = time.monotonic()
+        code, doc, err = run_json(
+            "bus", "simulate", "--iface", bus.master, "--rate", "20000", "--duration", "2s",
+            bus=bus, timeout=60,
+        )
+        wall = time.monotonic() - t0
+    finally:
+        stop_emulator(proc)
+    assert wall < 2 * 2.0 + 6.0, wall  # twice the duration plus start-up
+    assert (code, doc["verdict"]) == (1, "fail"), err
+    assert doc["cycles"] + doc["skipped_cycles"] in (40000, 40001)
+    overrun = next(f for f in doc["findings"] if f["kind"] == "overrun")
+    assert "holds at most" in overrun["message"] and overrun["severity"] == "failure"
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_stops_a_live_run_within_a_second(bus, sig: int, code: int) -> None:
+    proc = start_emulator(bus)
+    try:
+        run_proc = subprocess.Popen(
+            bus.command(sys.executable, "-m", "lolacli", "bus", "simulate", "--iface",
+                        bus.master, "--duration", "600s", "-f", "json"),
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )
+        time.sleep(3.0)  # up and cycling
+        assert run_proc.poll() is None, run_proc.communicate()
+        t0 = time.monotonic()
+        run_proc.send_signal(sig)
+        out, err = run_proc.communicate(timeout=30)
+        took = time.monotonic() - t0
+    finally:
+        stop_emulator(proc)
+    assert run_proc.returncode == code, err
+    assert took < 1.0, took
+    doc = json.loads(out)
+    assert doc["interrupted"] is True and doc["cycles"] > 0 and doc["mode"] == "realtime"
+    assert any(f["kind"] == "interrupted" for f in doc["findings"])
