@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,6 +21,29 @@ def corpus_files(kind: str, pattern: str = "*") -> list[Path]:
 
 def corpus_ids(paths: list[Path]) -> list[str]:
     return [p.name for p in paths]
+
+
+@pytest.fixture(autouse=True)
+def _no_process_left_behind(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """Every process a test starts (subprocess.Popen, also under run()) is gone when the
+    test ends, however it ends: a failed assertion before a test's own clean-up must not
+    leave a 600 s simulation or an emulator running into the next tests."""
+    started: list[subprocess.Popen[bytes]] = []
+    original = subprocess.Popen.__init__
+
+    def tracking_init(self: subprocess.Popen[bytes], *args: object, **kwargs: object) -> None:
+        original(self, *args, **kwargs)  # type: ignore[arg-type]
+        started.append(self)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", tracking_init)
+    yield
+    for proc in started:
+        if proc.poll() is None:
+            proc.kill()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
 
 
 @pytest.fixture

@@ -66,9 +66,10 @@ def _sdist_build() -> tuple[dict[str, Path] | None, str]:
     archive = out / f"pysoem-{version}.tar.gz"
     if not archive.is_file():
         done = subprocess.run(
+            # offline, pip's default retries stall for minutes: one try of 10 s at most
             [sys.executable, "-m", "pip", "download", "--no-deps", "--no-binary", ":all:",
-             f"pysoem=={version}", "-d", str(out)],
-            capture_output=True, text=True, timeout=600,
+             "--retries", "0", "--timeout", "10", f"pysoem=={version}", "-d", str(out)],
+            capture_output=True, text=True, timeout=120,
         )  # fmt: skip
         if done.returncode != 0 or not archive.is_file():
             return None, f"cannot download the pysoem {version} sdist: {done.stderr[-300:]}"
