@@ -38,10 +38,20 @@ def read_eni_bytes(path: str | Path) -> bytes:
         raise EniError(f"cannot read: {exc.strerror or exc}", path=name) from None
 
 
-def load_eni(path: str | Path) -> Eni:
-    """Read and parse an ENI file. Every failure is an :class:`EniError` naming the file."""
+def lola_path() -> Path:
+    """Where the embedded LOLA chain's ENI is (package data: works from any directory)."""
+    from importlib.resources import files
+
+    return Path(str(files("lolacli.eni_examples").joinpath("lola.xml")))
+
+
+def load_eni(path: str | Path | None = None) -> Eni:
+    """Read and parse an ENI file (``None``: the embedded LOLA chain). Every failure is an
+    :class:`EniError` naming the file."""
     from lolacli.eni.parser import parse_eni
 
+    if path is None:
+        path = lola_path()
     return parse_eni(read_eni_bytes(path), source=str(path))
 
 
@@ -52,4 +62,4 @@ def load_esi(path: str | Path) -> EsiFile:
     return parse_esi(read_eni_bytes(path), source=str(path))
 
 
-__all__ = ["MAX_ENI_BYTES", "load_eni", "load_esi", "read_eni_bytes"]
+__all__ = ["MAX_ENI_BYTES", "load_eni", "load_esi", "lola_path", "read_eni_bytes"]

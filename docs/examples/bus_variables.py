@@ -1,10 +1,10 @@
 """Bus Variables in a dozen lines: the LOLA chain in virtual time, one knee moved 5000 counts."""
 
+import lolacli
 from lolacli.emulator.slave import build_chain
-from lolacli.files import load_eni
 from lolacli.master import BusInt32, ChainTransport, Cia402Drive, Master
 
-eni = load_eni("lolacli/eni_examples/lola.xml")
+eni = lolacli.load_eni()  # the embedded LOLA chain
 master = Master(eni, ChainTransport(build_chain(eni)))  # the emulated chain, virtual time
 actual = master.link("Joint04 L Knee.Inputs.Position actual value", BusInt32.input())
 knee = Cia402Drive(master, "Joint04 L Knee")  # statusword, controlword, target position

@@ -35,9 +35,9 @@ EniArgument = Annotated[
 
 def default_eni() -> Path:
     """The embedded LOLA chain, used wherever an ENI is optional."""
-    from importlib.resources import files
+    from lolacli.files import lola_path
 
-    return Path(str(files("lolacli.eni_examples").joinpath("lola.xml")))
+    return lola_path()
 
 
 def silence_stdout() -> None:

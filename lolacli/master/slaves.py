@@ -72,8 +72,9 @@ def bus_field(
 class BusSlave:
     """Base of the device abstraction classes (see the module docstring)."""
 
-    def __init__(self, image: ProcessImage | Master, slave: str) -> None:
+    def __init__(self, image: ProcessImage | Master, slave: str | int) -> None:
         target = image if isinstance(image, ProcessImage) else image.image
+        slave = target.slave_name(slave)
         self.slave = slave
         self.image = target
         for attr, spec in _fields(type(self)):
@@ -197,7 +198,7 @@ class Cia402Drive(BusSlave):
     )
     mode = bus_field(BusInt8, _OUT, "Outputs.Modes of operation", optional=True, obj=(MODES, 0))
 
-    def __init__(self, image: ProcessImage | Master, slave: str) -> None:
+    def __init__(self, image: ProcessImage | Master, slave: str | int) -> None:
         super().__init__(image, slave)
         self.want_enabled = False
         self.state: Cia402State | int = Cia402State.NOT_READY_TO_SWITCH_ON
@@ -274,8 +275,9 @@ class ForceTorqueSensor(BusSlave):
     """One foot's 6-axis force/torque sensor behind the CAN gateway (``side``: "left"
     or "right", the ENI's "FTS left"/"FTS right")."""
 
-    def __init__(self, image: ProcessImage | Master, slave: str, side: str) -> None:
+    def __init__(self, image: ProcessImage | Master, slave: str | int, side: str) -> None:
         target = image if isinstance(image, ProcessImage) else image.image
+        slave = target.slave_name(slave)
         self.axes = {
             axis: target.link(f"{slave}.FTS {side}.{axis}", BusReal32.input())
             for axis in ("Force X", "Force Y", "Force Z", "Torque X", "Torque Y", "Torque Z")

@@ -333,6 +333,7 @@ class ProcessImage:
         self.snapshot = Snapshot(-1, bytes(inputs_bytes))
         self.variables = {v.name: v for v in eni_image.variables}
         self.linked: list[BusVariable] = []
+        self.slave_names = [s.name for s in slaves]  # by 1-based position
         #: (slave name, object index, subindex, direction) -> the variable an assigned PDO
         #: maps it to (ENI variables are named "<slave>.<PDO name>.<entry name>", ETG.2100)
         self.objects: dict[tuple[str, int, int, Direction], str] = {}
@@ -349,6 +350,16 @@ class ProcessImage:
     def publish(self, cycle: int) -> None:
         """copyRXData: the inputs as they are now become the snapshot of ``cycle``."""
         self.snapshot = Snapshot(cycle, bytes(self.inputs))
+
+    def slave_name(self, slave: str | int) -> str:
+        """The ENI name of ``slave``: given by name, or by its 1-based position (an int)."""
+        if isinstance(slave, bool) or not isinstance(slave, int):
+            return str(slave)
+        if not 1 <= slave <= len(self.slave_names):
+            raise LinkError(
+                f"slave {slave}", f"no slave at position {slave} (1 to {len(self.slave_names)})"
+            )
+        return self.slave_names[slave - 1]
 
     def find(self, name: str) -> Variable:
         """The ENI variable ``name``; LinkError with the closest names when unknown."""
