@@ -16,6 +16,9 @@ from lolacli.eni.model import Eni, Slave
 from lolacli.errors import EniError, UsageError
 from lolacli.timing.model import parse_duration_ns
 
+#: clock drift along the line: a crystal drifts about ±100 ppm; ten times that at most
+MAX_DRIFT_PPB = 1_000_000
+
 
 @dataclass(frozen=True, slots=True)
 class EmulateOptions:
@@ -86,6 +89,11 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
         raise EniError(
             f"cannot emulate: a number does not fit its EtherCAT field ({exc})", path=eni.source
         ) from None
+    if abs(options.drift_ppb) > MAX_DRIFT_PPB:
+        raise UsageError(
+            f"--drift-ppb {options.drift_ppb}: expected -{MAX_DRIFT_PPB:,} to "
+            f"{MAX_DRIFT_PPB:,} ppb (a crystal drifts about ±100,000 ppb)"
+        )
     for position in options.stuck_safeop:
         if not 1 <= position <= len(chain.slaves):
             raise UsageError(

@@ -381,12 +381,12 @@ def _live(
 #: (about 100 B a cycle), so a longer run would outgrow the memory of a small host
 MAX_CYCLES = 20_000_000
 MAX_RATE_HZ = 100_000.0
-#: clock drift along the line: a crystal drifts about ±100 ppm; ten times that at most
-MAX_DRIFT_PPB = 1_000_000
 
 
 def _check(eni: Eni, options: SimulateOptions) -> None:
     """Options no bus can have: UsageError naming the option and its range (exit 2)."""
+    from lolacli.emulator.run import MAX_DRIFT_PPB
+
     if not eni.cyclic_frames:
         raise EniError("the ENI has no cyclic frame: nothing to simulate", path=eni.source)
     if not eni.slaves:

@@ -78,6 +78,8 @@ NS_PER_S = 1_000_000_000
 MAX_INT64 = 2**63 - 1
 #: Slaves of one segment are addressed by a 16-bit position (ETG.1000.4, ADP).
 MAX_SLAVES = 0xFFFF
+#: the longest Ethernet frame, FCS included (no VLAN tag: EtherCAT frames carry none)
+MAX_FRAME_BYTES = 1518
 
 
 class DelaySource(StrEnum):
@@ -313,6 +315,11 @@ def _check_bounds(
     """:class:`UsageError` for values no bus has (and that would overflow a float)."""
     if slaves > MAX_SLAVES:
         raise UsageError(f"{slaves} slaves: a segment has at most {MAX_SLAVES}")
+    if frame_bytes > MAX_FRAME_BYTES:
+        raise UsageError(
+            f"{frame_bytes} frame bytes: one Ethernet frame is at most {MAX_FRAME_BYTES} B "
+            "with its FCS (64 at least; shorter frames are padded)"
+        )
     if max(frame_bytes, link_bit_s) > MAX_INT64:
         raise UsageError(f"frame bytes and link rate must be below {MAX_INT64}")
     if any(v is not None and not 0 <= v <= MAX_INT64 for v in ns_values):
