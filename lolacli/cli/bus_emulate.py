@@ -105,6 +105,7 @@ def emulate_cmd(
     from lolacli.errors import UsageError
     from lolacli.files import load_eni, load_esi
     from lolacli.interrupt import stop_signals
+    from lolacli.text import plural
 
     placement: int | str = cpu
     if cpu not in ("follow", "any"):
@@ -145,11 +146,11 @@ def emulate_cmd(
     def ready(scheduling: str) -> None:
         arm_link_loss(chain, options, time.monotonic_ns())  # the server's time base
         console.print(
-            f"emulating {len(chain.slaves)} slaves of {model.source} on {iface} "
-            f"(scheduling: {scheduling})",
+            f"emulating {plural(len(chain.slaves), 'slave')} of {model.source} on {iface}",
             highlight=False,
-            soft_wrap=True,  # one line: scripts wait for it
+            soft_wrap=True,  # one line (a long path is not broken): scripts wait for it
         )
+        console.print(f"scheduling: {scheduling}", highlight=False)
         if esi_note:
             console.print(esi_note, highlight=False)
 
@@ -186,12 +187,12 @@ def emulate_cmd(
         f"stopped: {stats.received} frames received, {stats.answered} answered{drops}"
     )
     if stats.answered:
-        console.print(_latency_line(stats), highlight=False, soft_wrap=True)
+        for line in _latency_lines(stats):
+            console.print(line, highlight=False, soft_wrap=True)  # whole lines: parsed
     if stats.moves or stats.backoffs:
         console.print(
-            f"placement: moved to the CPU of the master's frames {stats.moves} times, "
-            f"left it to the OS {stats.backoffs} times (frames held there, or the master "
-            "moved away)",
+            f"placement: moved to the master's CPU {stats.moves} times, left it to the OS "
+            f"{stats.backoffs} times",
             highlight=False,
             soft_wrap=True,
         )
@@ -199,14 +200,15 @@ def emulate_cmd(
         raise typer.Exit(stop.exit_code)
 
 
-def _latency_line(stats: object) -> str:
-    """Reply time inside the emulator: kernel receive -> server, server -> answer sent."""
-    parts = []
+def _latency_lines(stats: object) -> list[str]:
+    """Reply time inside the emulator, a line each: kernel receive -> server (wake-up),
+    server -> answer sent (answer)."""
+    lines = []
     for label, name in (("wake-up", "wake"), ("answer", "service")):
         summary = getattr(stats, name).summary()
         if summary["count"]:
-            parts.append(
-                f"{label} p50 {summary['p50_us']:.0f} µs, p99 {summary['p99_us']:.0f} µs, "
-                f"max {summary['max_us']:.0f} µs"
+            lines.append(
+                f"reply time: {label} p50 {summary['p50_us']:.0f} µs, p99 "
+                f"{summary['p99_us']:.0f} µs, max {summary['max_us']:.0f} µs"
             )
-    return "reply time: " + "; ".join(parts)
+    return lines

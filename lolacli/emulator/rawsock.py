@@ -96,7 +96,10 @@ class LatencyHistogram:
         for i, c in enumerate(self.counts):
             seen += c
             if seen >= rank:
-                return self.max_ns / 1000 if i == self.BINS else float(i + 1)
+                # the bin's upper edge, but never past the largest value seen
+                return self.max_ns / 1000 if i == self.BINS else min(
+                    float(i + 1), self.max_ns / 1000
+                )
         return self.max_ns / 1000
 
     def summary(self) -> dict[str, float | int | None]:

@@ -573,7 +573,7 @@ def _judge(
     note += f"master time-outs {len(errors)} {[e.message for e in errors[:2]]}, slowest "
     note += f"answer in their windows {sorted(slowest)[-5:]} µs; emulator {times}"
     placement = re.search(
-        r"placement: moved .* frames (\d+) times, left it to the OS (\d+)", emulator
+        r"placement: moved .*? (\d+) times, left it to the OS (\d+)", emulator
     )
     if placement:
         note += f"; moved to the master's CPU {placement[1]} times, left it {placement[2]}"

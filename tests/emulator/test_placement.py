@@ -76,7 +76,7 @@ def _master_socket(bus: LiveBus) -> socket.socket:
 
 def _placement_counts(stderr: str) -> tuple[int, int]:
     """(moves, backoffs) from the emulator's stop lines (0, 0 when it did not say)."""
-    found = re.search(r"placement: moved .* frames (\d+) times, left it to the OS (\d+)", stderr)
+    found = re.search(r"placement: moved .*? (\d+) times, left it to the OS (\d+)", stderr)
     return (int(found[1]), int(found[2])) if found else (0, 0)
 
 
@@ -122,7 +122,7 @@ def test_the_emulator_runs_on_the_cpu_of_the_masters_frames(bus: LiveBus) -> Non
     finally:
         sock.close()
         err = stop_emulator(proc)
-    assert "on the CPU of the master's frames" in err.splitlines()[0], err
+    assert "on the CPU of the master's frames" in " ".join(err.split()), err
     assert seen == [{0}, {1}, {0}], err
     moves, _backoffs = _placement_counts(err)
     assert moves >= 3, err
@@ -201,7 +201,7 @@ def test_any_and_a_pinned_cpu(bus: LiveBus) -> None:
         assert after == (expected or before), (extra, err)
         assert _placement_counts(err) == (0, 0), err
         if expected:
-            assert "on CPU 1" in err.splitlines()[0], err
+            assert "on CPU 1" in " ".join(err.split()), err
 
 
 def test_a_cpu_it_may_not_run_on_is_a_usage_error() -> None:
