@@ -3,7 +3,9 @@
 Station addresses print as hex with the decimal in brackets (``0x03E9 (1001)``): hex
 as in the ESC's registers and in Wireshark, decimal as in the ENI's ``<PhysAddr>``
 and as ``@1001`` is typed. Counts agree with their noun (``1 slave``, ``2 slaves``).
-Numbers carry their unit, separated by a space (``92.9 µs``, ``846 B``).
+Numbers carry their unit, separated by a space (``92.9 µs``, ``846 B``). Identity
+values (vendor ID, product code, revision, serial) are 32-bit hex (``0x00010420``), object
+dictionary entries index:subindex (``0x6041:00``).
 """
 
 from __future__ import annotations
@@ -12,6 +14,16 @@ from __future__ import annotations
 def station(address: int) -> str:
     """``0x03E9 (1001)``."""
     return f"0x{address:04X} ({address})"
+
+
+def hex32(value: int) -> str:
+    """``0x0000009A``: a vendor ID, product code, revision or serial number."""
+    return f"0x{value:08X}"
+
+
+def object_entry(index: int, subindex: int) -> str:
+    """``0x6041:00``: an object dictionary entry (a PDO entry, an SDO's object)."""
+    return f"0x{index:04X}:{subindex:02X}"
 
 
 def plural(n: int, noun: str, nouns: str | None = None) -> str:
@@ -25,4 +37,4 @@ def number(value: float, unit: str, digits: int = 3) -> str:
     return f"{text} {unit}" if unit else text
 
 
-__all__ = ["number", "plural", "station"]
+__all__ = ["hex32", "number", "object_entry", "plural", "station"]

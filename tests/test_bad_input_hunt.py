@@ -138,7 +138,7 @@ def test_timing_capture_with_zero_round_trips_is_exit_3(cli, corpus: Path) -> No
     path = corpus / "pcap" / "DERIVED__ethercrab__twincat-run-ek1100-el1004.classic.pcap"
     code, out, err = cli("bus", "timing", "--capture", path)
     assert code == 3
-    assert "0 us" in _one_line(err)
+    assert "0 µs" in _one_line(err)
 
 
 # --------------------------------------------------------------------------- endless "files"

@@ -74,12 +74,6 @@ def scan_cmd(
         raise typer.Exit(1)
 
 
-def _identity(s: dict[str, Any]) -> tuple[str, str]:
-    if s["vendor_id"] is None:
-        return "?", "?"
-    return f"0x{s['vendor_id']:X}:0x{s['product_code']:X}", f"0x{s['revision']:X}"
-
-
 def _ports(s: dict[str, Any]) -> str:
     return " ".join(
         f"{p['port']}{'+' if p['open'] else '-'}"
@@ -89,9 +83,11 @@ def _ports(s: dict[str, Any]) -> str:
 
 
 def _errors(s: dict[str, Any]) -> str:
+    from lolacli.text import plural
+
     c = s["error_counters"]
     if c is None:
-        return "?"
+        return "not read"
     total = (
         sum(c["invalid_frame"])
         + sum(c["rx_error"])
@@ -100,46 +96,69 @@ def _errors(s: dict[str, Any]) -> str:
         + c["pdi_error"]
     )
     lost = sum(c["lost_link"])
-    return f"{total}" + (f" (lost link {lost})" if lost else "")
+    text = plural(total, "error") if total else "none"
+    return text + (f", {plural(lost, 'lost link')}" if lost else "")
+
+
+def _al_state(s: dict[str, Any]) -> str:
+    if s["al_error"] or s["al_status_code"] != "0x0000":
+        return f"{s['al_state']} {s['al_status_code']} {s['al_status_text']}"
+    return str(s["al_state"])
 
 
 def _render(doc: dict[str, Any]) -> None:
-    from rich.table import Table
-
-    from lolacli.cli.common import stdout_console
+    from lolacli.cli.common import data_table, say, stdout_console
+    from lolacli.master.scan import transition_text
+    from lolacli.text import hex32, plural, station
 
     console = stdout_console()
-    table = Table(title=f"Bus on {doc['iface']}", title_justify="left")
-    columns = ("pos", "station", "name", "vendor:product", "revision", "AL state", "ports")
-    for column in (*columns, "parent", "errors"):
-        table.add_column(column, justify="right" if column in ("pos", "parent") else "left")
+    table = data_table(f"Bus on {doc['iface']}")
+    for column in ("#", "station", "name", "AL state", "ports", "parent", "errors"):
+        table.add_column(column, justify="right" if column == "#" else "left")
     for s in doc["slaves"]:
-        al = s["al_state"]
-        if s["al_error"] or s["al_status_code"] != "0x0000":
-            al += f" {s['al_status_code']} {s['al_status_text']}"
         table.add_row(
             str(s["position"]),
-            f"0x{s['station_address']:04X}",
-            s["name"] or ("-" if s["answered"] else "no answer"),
-            *_identity(s),
-            al,
+            station(s["station_address"]) if s["station_address"] else "none",
+            _text(" ".join((s["name"] or ("-" if s["answered"] else "no answer")).split())),
+            _al_state(s),
             _ports(s),
-            str(s["parent_position"]),
+            str(s["parent_position"]) if s["parent_position"] else "master",
             _errors(s),
         )
     console.print(table)
+    say(console, "ports: + a frame leaves and comes back, - closed; parent: the position "
+                 "of the slave it hangs off")
+    console.print()
+    idents = data_table("Identities (SII)")
+    for column in ("#", "vendor ID", "product code", "revision", "serial", "mailbox"):
+        idents.add_column(column, justify="right" if column == "#" else "left")
+    for s in doc["slaves"]:
+        if s["vendor_id"] is None:
+            idents.add_row(str(s["position"]), "not read", "", "", "", "")
+            continue
+        idents.add_row(str(s["position"]), hex32(s["vendor_id"]), hex32(s["product_code"]),
+                       hex32(s["revision"]), hex32(s["serial"]),
+                       " ".join(s["mailbox_protocols"]) or "none")
+    console.print(idents)
+    console.print()
     for r in doc["refusals"]:
         if r["position"] > doc["slaves_counted"]:
             continue  # a missing slave: named below
-        console.print(
-            f"refused: slave {r['position']} ({r['slave']}) {r['transition']}: {r['text']}"
-        )
+        say(console, f"refused: slave {r['position']} ({r['slave']}) "
+                     f"{transition_text(r['transition'])}: {r['text']}")
     for f in doc["findings"]:
-        console.print(f"note: {f['message']}")
+        say(console, f"note: {f['message']}")
     for d in doc["differences"]:
-        console.print(f"differs: {d['message']}")
-    summary = f"{doc['slaves_counted']} slaves on {doc['iface']}"
+        say(console, f"differs: {d['message']}")
+    summary = f"{plural(doc['slaves_counted'], 'slave')} on {doc['iface']}"
     if doc["eni"] is not None:
         n = len(doc["differences"])
-        summary += "; matches the ENI" if n == 0 else f"; {n} differences from the ENI"
-    console.print(summary)
+        summary += ("; matches the ENI" if n == 0
+                    else f"; {plural(n, 'difference')} from the ENI")
+    say(console, summary)
+
+
+def _text(value: str) -> Any:
+    from rich.text import Text
+
+    return Text(value)  # names are data, not rich markup

@@ -97,7 +97,7 @@ def timing_cmd(
     cable (5 ns/m, out and back) + host latency. The prediction uses the assumed (or given)
     per-slave delay; with --measured or --capture the per-slave delay is calibrated apart,
     as (measured - wire - cable - host latency) / slaves, and a warning says when it lies
-    outside what ESCs do (0.3-3 us). The maximum update rate is 1 / round trip (measured if
+    outside what ESCs do (0.3-3 µs). The maximum update rate is 1 / round trip (measured if
     given, else predicted): the fastest cycle whose frame is back before the next one
     leaves, without master computing time or acyclic traffic. Without --eni, --frame-bytes
     and --capture the embedded LOLA chain is used.
@@ -243,7 +243,7 @@ def _capture_round_trip_ns(path: Path, report: dict[str, Any],
         if key in report["unusable_stats"] or float(stats[statistic.value]) <= 0:
             zero = [f for f in report["findings"] if f["kind"] == "timestamps-quantised"]
             why = zero[0]["message"] if zero else "they are not positive"
-            raise InputError(f"round trips of 0 us cannot measure one: {why}", path=str(path))
+            raise InputError(f"round trips of 0 µs cannot measure one: {why}", path=str(path))
         value = round(float(stats[statistic.value]) * 1000)
         label = "minimum" if statistic is Statistic.min else "median"
         return value, f"capture: {label} of {stats['count']} {what}"
@@ -255,49 +255,61 @@ def _calibration_warning(result: Any) -> str | None:
         return None
     lo, hi = (v / 1000 for v in result.to_dict()["esc_delay_range_ns"])
     return (f"the calibrated per-slave delay ({result.calibrated_per_slave_delay_ns} ns) is "
-            f"outside what ESCs do ({lo:g}-{hi:g} us): the measured round trip holds more than "
+            f"outside what ESCs do ({lo:g}-{hi:g} µs): the measured round trip holds more than "
             "the slaves (the master's stack and NIC, a switch; see --host-latency-us), or the "
             "slave count is off")
 
 
 def _render(doc: dict[str, Any]) -> None:
-    from rich.table import Table
-
-    from lolacli.cli.common import stdout_console
+    from lolacli.cli.common import data_table, say, stdout_console
 
     console = stdout_console()
-    src = doc["sources"]
-    table = Table(title=f"Frame timing ({doc['source']})", show_header=False,
-                  title_justify="left")
+    what = {"options": "the options given", "capture": "the capture",
+            "embedded LOLA chain": "the embedded LOLA chain"}
+    say(console, f"Frame timing of {what.get(doc['source'], doc['source'])}")
+    table = data_table()
     table.add_column("quantity")
     table.add_column("value", justify="right")
     table.add_column("from")
-    pred = doc["prediction"]
+    for row in _rows(doc):
+        table.add_row(*row)
+    console.print(table)
+
+
+def _rows(doc: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """(quantity, value with its unit, where it comes from) for each line of the table."""
+    from lolacli.text import number, plural
+
+    def source(text: str) -> str:  # "lola.xml: first cyclic frame" -> "ENI: first …"
+        if doc["source"] in ("capture", "options"):
+            return text
+        return text.replace(f"{doc['source']}: ", "ENI: ", 1)
+
+    src, pred = doc["sources"], doc["prediction"]
     rows = [
-        ("frame", f"{doc['frame_bytes']} B at {doc['link_mbit_s']:g} Mbit/s",
-         src["frame_bytes"]),
-        ("wire time", f"{doc['wire_time_us']:g} µs", "8 x bytes / rate"),
-        ("wire time incl. preamble + IFG", f"{doc['wire_time_with_overhead_us']:g} µs",
-         "+ 20 B"),
-        ("slaves", str(doc["slaves"]), src["slaves"]),
-        ("cable (out and back)", f"{doc['cable_delay_ns']} ns",
-         f"{doc['cable_m_per_segment']:g} m per slave"),
-        ("host latency", f"{doc['host_latency_us']:g} µs", "--host-latency-us"),
-        ("per-slave delay (a priori)", f"{pred['per_slave_delay_ns']} ns",
-         pred["per_slave_delay_source"]),
-        ("predicted round trip", f"{doc['predicted_total_us']:g} µs", "model, a priori"),
+        ("frame", number(doc["frame_bytes"], "B", 0), source(src["frame_bytes"])),
+        ("link rate", number(doc["link_mbit_s"], "Mbit/s"), "--link-mbit"),
+        ("wire time", number(doc["wire_time_us"], "µs"), "8 x frame / link rate"),
+        ("with preamble and gap", number(doc["wire_time_with_overhead_us"], "µs"),
+         "+ 20 B (preamble 8 B, gap 12 B)"),
+        ("slaves", plural(doc["slaves"], "slave"), source(src["slaves"])),
+        ("cable, out and back", number(doc["cable_delay_ns"], "ns", 0),
+         f"{number(doc['cable_m_per_segment'], 'm')} per slave, 5 ns/m"),
+        ("host latency", number(doc["host_latency_us"], "µs"), "--host-latency-us"),
+        ("per-slave delay", number(pred["per_slave_delay_ns"], "ns", 0),
+         f"a priori: {pred['per_slave_delay_source']}"),
+        ("predicted round trip", number(doc["predicted_total_us"], "µs"), "model, a priori"),
     ]
     if doc["measured_total_us"] is not None:
-        rows.append(("measured round trip", f"{doc['measured_total_us']:g} µs",
+        rows.append(("measured round trip", number(doc["measured_total_us"], "µs"),
                      doc["measured_from"]))
-        plausible = "" if doc["calibration_plausible"] else ", outside 0.3-3 µs: see warning"
-        rows.append(("calibrated per-slave delay", f"{doc['calibrated_per_slave_delay_ns']} ns",
+        plausible = "" if doc["calibration_plausible"] else "; outside 0.3-3 µs: see warning"
+        rows.append(("calibrated per-slave delay",
+                     number(doc["calibrated_per_slave_delay_ns"], "ns", 0),
                      f"(measured - wire - cable - host) / slaves{plausible}"))
-    rows.append((f"max update rate ({doc['total_source']})", f"{doc['max_rate_hz']:,.0f} Hz",
-                 "1 / round trip"))
+    rows.append((f"max update rate ({doc['total_source']})",
+                 number(doc["max_rate_hz"], "Hz", 0), "1 / round trip"))
     if doc["budget_us"] is not None:
-        verdict = "ok" if doc["within_budget"] else "EXCEEDED"
-        rows.append(("cycle budget", f"{doc['budget_us']:g} µs", verdict))
-    for name, value, where in rows:
-        table.add_row(name, value, where)
-    console.print(table)
+        verdict = "within it" if doc["within_budget"] else "EXCEEDED"
+        rows.append(("cycle budget", number(doc["budget_us"], "µs"), verdict))
+    return rows

@@ -62,8 +62,8 @@ def stdout_console() -> Any:
     """The console every command group prints data with, and its width rule: the
     terminal's width, ``$COLUMNS``, or 80 columns when piped. Tables fit it by wrapping
     names and headers, never by cutting numbers; a table that cannot fit is printed whole,
-    wider than that, rather than cropped (:func:`fit_table`). Lines of text are not broken
-    (they stay one line for grep; a terminal wraps them)."""
+    wider than that, rather than cropped (:func:`fit_table`). ``print`` does not break a
+    line of text; prose goes through :func:`say`, which wraps it between words."""
     from rich.console import Console
     from rich.measure import Measurement
     from rich.table import Table
@@ -77,7 +77,7 @@ def stdout_console() -> Any:
             if not tables:
                 kwargs.setdefault("soft_wrap", True)  # a line of text is never broken
             for table in tables:
-                fit_table(table)
+                fit_table(table, self, kwargs.get("width") or self.width)
             if len(objects) == 1 and tables and "width" not in kwargs:
                 wide = self.options.update(width=1 << 16)
                 need = Measurement.get(self, wide, tables[0]).minimum
@@ -88,20 +88,132 @@ def stdout_console() -> Any:
     return _Console(highlight=False, soft_wrap=False)
 
 
-def fit_table(table: Any) -> None:
+def fit_table(table: Any, console: Any = None, width: int | None = None) -> None:
     """The width rule for a rich table: names and headers wrap between words (a word is
     never split, nor cut with an ellipsis), and right-aligned (number) columns are never
-    narrower than their widest cell."""
+    narrower than their widest cell.
+
+    Given the ``console`` and the ``width`` to fit, a table wider than that gets its column
+    widths here: each column its narrowest, then the room left shared out, the columns
+    that need least first (rich's own sharing narrows the widest column below the words
+    it holds, and the table then overflows and is cropped)."""
     from rich.cells import cell_len
+    from rich.text import Text
 
     for column in table.columns:
         column.overflow = "fold"
-        texts = [c for c in column.cells if isinstance(c, str)]
+        texts = [c.plain if isinstance(c, Text) else c for c in column.cells
+                 if isinstance(c, str | Text)]
         words = [w for t in [*texts, str(column.header)] for w in t.split()]
         widest = max((cell_len(w) for w in words), default=0)
         if column.justify == "right":
             widest = max([widest, *(cell_len(t) for t in texts)])
         column.min_width = max(column.min_width or 0, widest)
+    if console is not None and width is not None:
+        _share_width(table, console, width)
+
+
+def _share_width(table: Any, console: Any, width: int) -> None:
+    from rich.measure import Measurement
+
+    wide = console.options.update(width=1 << 16)
+    if any(c.width is not None for c in table.columns):
+        return  # widths chosen by the command
+    most = [
+        max(Measurement.get(console, wide, cell).maximum for cell in (c.header, *c.cells))
+        for c in table.columns
+    ]
+    least = [min(c.min_width or 0, m) for c, m in zip(table.columns, most, strict=True)]
+    extra = Measurement.get(console, wide, table).maximum - sum(most)  # padding, rules
+    room = width - extra - sum(least)
+    if sum(most) + extra <= width or room < 0:
+        return  # fits as it is; or cannot fit, and is printed whole, wider
+    given = list(least)
+    wanting = sorted(range(len(most)), key=lambda i: most[i] - least[i])
+    for n, i in enumerate(wanting):
+        share = min(most[i] - least[i], room // (len(wanting) - n))
+        given[i] += share
+        room -= share
+    for column, w in zip(table.columns, given, strict=True):
+        column.width = w
+
+
+def data_table(title: str | None = None) -> Any:
+    """A table of data as every command prints it: a rule under the header, no frame, two
+    spaces between columns (80 columns hold seven or eight of them); a title, if any, on
+    the line above, left."""
+    from rich import box
+    from rich.table import Table
+
+    return Table(
+        title=title,
+        title_justify="left",
+        box=box.SIMPLE_HEAD,
+        show_edge=False,
+        pad_edge=False,
+        collapse_padding=True,
+    )
+
+
+def say(console: Any, text: Any, *, hang: int = 2) -> None:
+    """Print a paragraph (a ``str``, or a rich ``Text`` for colour) wrapped between words
+    at the console's width, continuation lines indented by ``hang``. A word is never split:
+    a word wider than the line (a long file path) gets a line of its own."""
+    from rich.text import Text
+
+    text = text if isinstance(text, Text) else Text(str(text))
+    for paragraph in text.split("\n"):
+        breaks = _breaks(paragraph.plain, console.width, hang)
+        for i, line in enumerate(paragraph.divide(breaks)):
+            line.rstrip()
+            console.print(Text(" " * hang) + line if i else line, soft_wrap=True, crop=False)
+
+
+def break_long_words(text: str, width: int, after: str = ".") -> str:
+    """``text`` with each word wider than ``width`` broken into lines after an ``after``
+    character (``SyncUnits.<default>.<unreferenced>.WcState.WcState`` into
+    ``SyncUnits.<default>.`` and ``<unreferenced>.WcState.WcState``), so that a table cell
+    can wrap it; a word with no such place stays whole."""
+    import re
+
+    from rich.cells import cell_len
+
+    def pieces(word: str) -> str:
+        if cell_len(word) <= width:
+            return word
+        lines, line = [], ""
+        for part in re.findall(rf"[^{re.escape(after)}]*[{re.escape(after)}]?", word):
+            if line and cell_len(line + part) > width:
+                lines.append(line)
+                line = ""
+            line += part
+        return "\n".join([*lines, line] if line else lines)
+
+    return " ".join(pieces(w) for w in text.split(" "))
+
+
+def _breaks(plain: str, width: int, hang: int) -> list[int]:
+    """Offsets of the words that start a new line when ``plain`` is filled greedily."""
+    import re
+
+    from rich.cells import cell_len
+
+    breaks: list[int] = []
+    starts: list[int] = []  # where each word starts
+    start, room = 0, width
+    for word in re.finditer(r"\S+", plain):
+        if word.start() > start and cell_len(plain[start : word.end()]) > room:
+            breaks.append(word.start())
+            start, room = word.start(), width - hang
+        starts.append(word.start())
+    if breaks and starts[-1] == breaks[-1]:  # a last line of one word: take one more
+        before = [w for w in starts if w < breaks[-1]]
+        earlier = breaks[-2] if len(breaks) > 1 else 0
+        if len(before) > 1 and before[-1] > earlier:
+            tail = plain[before[-1] :].rstrip()
+            if cell_len(tail) <= width - hang:
+                breaks[-1] = before[-1]
+    return breaks
 
 
 def stderr_console() -> Any:

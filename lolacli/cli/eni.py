@@ -6,12 +6,21 @@ Each command: an ``Annotated`` signature, one library call, rendering. The libra
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json
+from lolacli.cli.common import (
+    FormatOption,
+    OutputFormat,
+    break_long_words,
+    data_table,
+    default_eni,
+    emit_json,
+    say,
+)
 
 app = typer.Typer(no_args_is_help=True, help="Read, check and compare ENI files.")
 
@@ -37,85 +46,98 @@ def _one_line(text: str) -> str:
 
 @app.command("inspect")
 def inspect_cmd(file: OptionalEni = None, fmt: FormatOption = OutputFormat.human) -> None:
-    """Slaves, cyclic frames with their datagrams (expected WKC, wire bytes and time at
-    100 Mbit/s) and the process image of an ENI."""
+    """Slaves (station address, name, process data, mailbox, DC; then their identities),
+    cyclic frames with their datagrams (expected WKC, wire bytes and time at 100 Mbit/s)
+    and the process image of an ENI."""
     from lolacli.eni.report import inspect_report
 
-    report = inspect_report(_load(file))
+    eni = _load(file)
+    report = inspect_report(eni)
     if fmt is OutputFormat.json:
         emit_json(report)
         return
-    _render_inspect(report)
+    _render_inspect(eni, report)
 
 
-def _render_inspect(report: dict[str, Any]) -> None:
-    from rich.table import Table
+def _render_inspect(eni: Any, report: dict[str, Any]) -> None:
+    from lolacli.text import number, plural
 
     console = _console()
     cycle = report["cycle_time_us"]
-    console.print(
-        f"{report['source']}  ({report['root']})  {report['slave_count']} slaves, "
-        f"cycle time {'—' if cycle is None else f'{cycle:g} µs'}"
-    )
-    slaves = Table(title="Slaves", title_justify="left")
-    for col in (
-        "#",
-        "name",
-        "vendor",
-        "product",
-        "revision",
-        "station",
-        "auto-inc",
-        "in bits",
-        "out bits",
-        "mailbox",
-        "DC",
-    ):
-        slaves.add_column(col, justify="left" if col in ("name", "mailbox") else "right")
-    for s in report["slaves"]:
-        dc = s["dc"]
-        slaves.add_row(
-            str(s["position"]),
-            _one_line(s["name"]),
-            f"0x{s['vendor_id']:X}",
-            f"0x{s['product_code']:X}",
-            f"0x{s['revision']:X}",
-            str(s["station_address"]),
-            f"0x{s['auto_inc_address']:04X}",
-            str(s["inputs_bits"]),
-            str(s["outputs_bits"]),
-            ",".join(s["mailbox_protocols"]) or "-",
-            "-" if dc is None else ("ref" if dc["reference_clock"] else "yes"),
-        )
-    console.print(slaves)
-    for i, frame in enumerate(report["cyclic_frames"], 1):
-        # the heading as a line of text (never broken inside a number), the table below
-        console.print(
-            f"Cyclic frame {i}: {frame['frame_bytes']} B on the wire, "
-            f"{frame['wire_time_us']} µs at 100 Mbit/s "
-            f"({frame['wire_time_with_overhead_us']} µs with preamble and gap)"
-        )
-        console.print(_frame_table(frame))
+    cycle_text = "not given" if cycle is None else number(cycle, "µs")
+    say(console, report["source"])
+    say(console, f"{report['root']}: {plural(report['slave_count'], 'slave')}, "
+                 f"cycle time {cycle_text}")
+    console.print()
+    console.print(_slaves_table(report["slaves"]))
+    console.print()
+    console.print(_identities_table(report["slaves"]))
+    for i, (frame, model) in enumerate(zip(report["cyclic_frames"], eni.cyclic_frames,
+                                           strict=True), 1):
+        console.print()
+        say(console, f"Cyclic frame {i}: {number(frame['frame_bytes'], 'B', 0)}, "
+                     f"{number(frame['wire_time_us'], 'µs')} on the wire at 100 Mbit/s "
+                     f"({number(frame['wire_time_with_overhead_us'], 'µs')} with preamble "
+                     "and inter-frame gap)")
+        console.print(_frame_table(frame, model))
     pi = report["process_image"]
-    console.print(
-        f"Process image: inputs {pi['inputs_bytes']} B, outputs {pi['outputs_bytes']} B, "
-        f"{pi['variable_count']} variables"
-    )
+    console.print()
+    say(console, f"Process image: inputs {number(pi['inputs_bytes'], 'B', 0)}, outputs "
+                 f"{number(pi['outputs_bytes'], 'B', 0)}, "
+                 f"{plural(pi['variable_count'], 'variable')} (eni vars lists them)")
 
 
-def _frame_table(frame: dict[str, Any]) -> Any:
-    from rich.table import Table
+def _slaves_table(slaves: list[dict[str, Any]]) -> Any:
+    from rich.text import Text
 
-    table = Table()
+    from lolacli.text import number, station
+
+    table = data_table("Slaves")
+    for col in ("#", "station", "name", "inputs", "outputs", "mailbox", "DC"):
+        table.add_column(col, justify="right" if col in ("#", "inputs", "outputs") else "left")
+    for s in slaves:
+        dc = s["dc"]
+        table.add_row(
+            str(s["position"]),
+            station(s["station_address"]),
+            Text(_one_line(s["name"])),
+            number(s["inputs_bits"], "bit", 0),
+            number(s["outputs_bits"], "bit", 0),
+            " ".join(s["mailbox_protocols"]) or "none",
+            "no" if dc is None else ("ref" if dc["reference_clock"] else "yes"),
+        )
+    return table
+
+
+def _identities_table(slaves: list[dict[str, Any]]) -> Any:
+    from lolacli.text import hex32, station
+
+    table = data_table("Slave identities")
+    for col in ("#", "station", "vendor ID", "product code", "revision", "auto-inc"):
+        table.add_column(col, justify="right" if col == "#" else "left")
+    for s in slaves:
+        table.add_row(
+            str(s["position"]),
+            station(s["station_address"]),
+            hex32(s["vendor_id"]),
+            hex32(s["product_code"]),
+            hex32(s["revision"]),
+            f"0x{s['auto_inc_address']:04X}",
+        )
+    return table
+
+
+def _frame_table(frame: dict[str, Any], model: Any) -> Any:
+    from lolacli.eni.report import datagram_where
+    from lolacli.text import number
+
+    table = data_table()
     for col in ("cmd", "address", "length", "expected WKC", "states"):
-        table.add_column(col, justify="left" if col in ("cmd", "address", "states") else "right")
-    for d in frame["datagrams"]:
-        if d["logical_address"] is not None:
-            address = f"0x{d['logical_address']:08X}"
-        else:
-            address = f"{d['adp']}:0x{d['ado']:04X}"
-        wkc = "-" if d["expected_wkc"] is None else str(d["expected_wkc"])
-        table.add_row(d["cmd"], address, str(d["length_bytes"]), wkc, ",".join(d["states"]))
+        table.add_column(col, justify="right" if col in ("length", "expected WKC") else "left")
+    for d, c in zip(frame["datagrams"], model.commands, strict=True):
+        wkc = "none" if d["expected_wkc"] is None else str(d["expected_wkc"])
+        table.add_row(d["cmd"], datagram_where(c), number(d["length_bytes"], "B", 0), wkc,
+                      ", ".join(d["states"]) or "any")
     return table
 
 
@@ -125,6 +147,12 @@ def _console() -> Any:
     return stdout_console()  # one width rule for every command group (cli/common.py)
 
 
+class VarsFormat(StrEnum):
+    human = "human"
+    json = "json"
+    csv = "csv"
+
+
 @app.command("vars")
 def vars_cmd(
     file: OptionalEni = None,
@@ -132,30 +160,80 @@ def vars_cmd(
         str | None,
         typer.Option("--filter", help="Glob on variable names, case-insensitive ('*Status*')."),
     ] = None,
-    fmt: FormatOption = OutputFormat.human,
+    fmt: Annotated[
+        VarsFormat,
+        typer.Option(
+            "--format",
+            "-f",
+            help="human (a table), json (lolacli.eni-vars/1) or csv: a header row, then a "
+            "row per variable with the JSON's keys name, direction, bit_offset, byte_offset, "
+            "bit_size, data_type, pdo_index, pdo_entry, slave_station_address, comment "
+            "(empty where the ENI does not say).",
+        ),
+    ] = VarsFormat.human,
 ) -> None:
-    """Process-image variables: name, direction, bit offset and size, data type."""
+    """Process-image variables: direction, offset (byte.bit) and size, data type, the PDO
+    entry (index:subindex) where the ENI gives it, and name. bit_offset counts from the
+    start of the inputs or the outputs image; pdo_index is the PDO (0x1A00), pdo_entry
+    its entry (0x6041:00), slave_station_address the slave whose PDO it is."""
     from lolacli.eni.report import vars_report
 
     report = vars_report(_load(file), filter_)
-    if fmt is OutputFormat.json:
+    if fmt is VarsFormat.json:
         emit_json(report)
-        return
-    from rich.table import Table
+    elif fmt is VarsFormat.csv:
+        _emit_csv(report["variables"])
+    else:
+        _render_vars(report)
 
-    table = Table(title=f"{report['count']} variables", title_justify="left")
-    for col in ("name", "dir", "bit offset", "byte.bit", "bits", "type"):
-        table.add_column(col, justify="left" if col in ("name", "dir", "type") else "right")
-    for v in report["variables"]:
-        table.add_row(
-            _one_line(v["name"]),
-            v["direction"][:3],
-            str(v["bit_offset"]),
+
+def _emit_csv(rows: list[dict[str, Any]]) -> None:
+    import csv
+    import sys
+
+    from lolacli.cli.common import silence_stdout
+    from lolacli.eni.report import VARS_FIELDS
+
+    writer = csv.DictWriter(sys.stdout, fieldnames=VARS_FIELDS, lineterminator="\n")
+    try:
+        writer.writeheader()
+        writer.writerows(rows)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        silence_stdout()
+
+
+def _render_vars(report: dict[str, Any]) -> None:
+    from rich.text import Text
+
+    from lolacli.text import number, plural
+
+    console = _console()
+    title = plural(report["count"], "variable")
+    if report["filter"]:
+        title += f" matching {report['filter']}"
+    table = data_table(title)
+    columns = ("dir", "byte.bit", "size", "type", "PDO entry")
+    rows = [
+        (
+            "in" if v["direction"] == "input" else "out",
             f"{v['bit_offset'] // 8}.{v['bit_offset'] % 8}",
-            str(v["bit_size"]),
-            v["data_type"],
+            number(v["bit_size"], "bit", 0),
+            v["data_type"] or "-",
+            v["pdo_entry"] or "-",
         )
-    _console().print(table)
+        for v in report["variables"]
+    ]
+    # the room a name has beside the narrowest other columns (two spaces between columns);
+    # a name wider than that with no space in it wraps after a dot
+    narrowest = [max(len(w) for cell in (col, *cells) for w in cell.split())
+                 for col, *cells in zip(columns, *rows, strict=True)] if rows else []
+    room = console.width - sum(narrowest) - 2 * len(columns)
+    for col in (*columns, "name"):
+        table.add_column(col, justify="right" if col in ("byte.bit", "size") else "left")
+    for row, v in zip(rows, report["variables"], strict=True):
+        table.add_row(*row, Text(break_long_words(_one_line(v["name"]), max(room, 20))))
+    console.print(table)
 
 
 @app.command("validate")
@@ -170,10 +248,7 @@ def validate_cmd(
 
     Exit 0 when clean, 1 when there are errors (or warnings with --strict), 3 when the
     file cannot be read."""
-    from rich.markup import escape
-
     from lolacli.eni.validate import validate_eni, validate_report
-    from lolacli.findings import Severity
 
     eni = _load(file)
     findings = validate_eni(eni)
@@ -181,14 +256,7 @@ def validate_cmd(
     if fmt is OutputFormat.json:
         emit_json(report)
     else:
-        console = _console()
-        for f in findings:
-            where = escape(f" [slave {f.slave}]") if f.slave is not None else ""
-            style = "red" if f.severity is Severity.FAILURE else "yellow"
-            console.print(
-                f"[{style}]{f.severity.value}[/{style}] {f.kind}{where}: {f.message}", markup=True
-            )
-        console.print(f"{eni.source}: {report['errors']} error(s), {report['warnings']} warning(s)")
+        _render_findings(eni, findings, report)
     failed = report["errors"] > 0 or (strict and report["warnings"] > 0)
     if failed:
         raise typer.Exit(1)
@@ -212,17 +280,54 @@ def diff_cmd(
     if fmt is OutputFormat.json:
         emit_json(report)
     else:
-        console = _console()
-        marks = {"added": "+", "removed": "-", "changed": "~"}
-        for c in changes:
-            detail = (
-                c.after
-                if c.kind == "added"
-                else c.before
-                if c.kind == "removed"
-                else (", ".join(f"{k}: {c.before[k]!r} -> {c.after[k]!r}" for k in c.before))
-            )
-            console.print(f"{marks[c.kind]} {c.area} {_one_line(c.key)}: {detail}", markup=False)
-        console.print(f"{len(changes)} difference(s)" if changes else "no differences")
+        _render_diff(eni_a, eni_b, changes)
     if changes:
         raise typer.Exit(1)
+
+
+def _render_findings(eni: Any, findings: Any, report: dict[str, Any]) -> None:
+    """A paragraph per finding, its severity in colour; the slave by station address."""
+    from rich.text import Text
+
+    from lolacli.findings import Severity
+    from lolacli.text import plural, station
+
+    console = _console()
+    for f in findings:
+        style = "red" if f.severity is Severity.FAILURE else "yellow"
+        line = Text(f.severity.value, style=style)
+        line.append(f" {f.kind}")
+        if f.slave is not None and 0 < f.slave <= len(eni.slaves):
+            line.append(f" at {station(eni.slaves[f.slave - 1].station_address)}")
+        line.append(f": {f.message}")
+        say(console, line)
+    say(console, f"{plural(report['errors'], 'error')}, {plural(report['warnings'], 'warning')}"
+                 f" in {eni.source}")
+
+
+_AREA_NOUNS = {
+    "cycle_time": "cycle time",
+    "slave": "slave",
+    "cyclic": "cyclic command",
+    "process_image": "process image",
+    "variable": "variable",
+}
+
+
+def _render_diff(a: Any, b: Any, changes: Any) -> None:
+    """The files, then each difference in words, a line per field, then the count."""
+    from lolacli.eni.diff import AREAS
+    from lolacli.text import plural
+
+    console = _console()
+    say(console, f"A is {a.source}")
+    say(console, f"B is {b.source}")
+    for change in changes:
+        for line in change.describe():
+            say(console, line)
+    if not changes:
+        say(console, "no differences")
+        return
+    counts = {area: sum(c.area == area for c in changes) for area in AREAS}
+    parts = [plural(n, _AREA_NOUNS[area]) for area, n in counts.items() if n]
+    say(console, f"{plural(len(changes), 'difference')}: {', '.join(parts)}")

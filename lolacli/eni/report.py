@@ -9,6 +9,7 @@ with overhead adds preamble+SFD (8 B) and the inter-frame gap (12 B).
 from __future__ import annotations
 
 import fnmatch
+from dataclasses import dataclass
 from typing import Any
 
 from lolacli.eni.model import (
@@ -17,10 +18,13 @@ from lolacli.eni.model import (
     CyclicCommand,
     CyclicFrame,
     Eni,
+    Pdo,
+    PdoEntry,
     Slave,
     Variable,
 )
-from lolacli.wire.commands import mnemonic
+from lolacli.text import object_entry, station
+from lolacli.wire.commands import AUTO_INCREMENT, BROADCAST, CONFIGURED, mnemonic
 
 INSPECT_SCHEMA = "lolacli.eni/1"
 VARS_SCHEMA = "lolacli.eni-vars/1"
@@ -55,6 +59,22 @@ def datagram_dict(c: CyclicCommand) -> dict[str, Any]:
         "output_offset_bytes": c.output_offset_bytes,
         "states": list(c.states),
     }
+
+
+def datagram_where(c: CyclicCommand) -> str:
+    """Where a datagram reads or writes, in words: ``logical 0x00010000``, ``0x0130 at
+    0x03E9 (1001)`` (configured address), ``0x0910 at position 1`` (auto-increment),
+    ``0x0130 of every slave`` (broadcast)."""
+    if c.logical_address is not None:
+        return f"logical 0x{c.logical_address:08X}"
+    adp, ado = c.adp or 0, c.ado or 0
+    if c.cmd in CONFIGURED:
+        return f"0x{ado:04X} at {station(adp)}"
+    if c.cmd in AUTO_INCREMENT:
+        return f"0x{ado:04X} at position {((-adp) & 0xFFFF) + 1}"
+    if c.cmd in BROADCAST:
+        return f"0x{ado:04X} of every slave"
+    return f"ADP 0x{adp:04X} ADO 0x{ado:04X}"
 
 
 def frame_dict(frame: CyclicFrame) -> dict[str, Any]:
@@ -137,13 +157,63 @@ def _dc_dict(s: Slave) -> dict[str, Any] | None:
     }
 
 
-def variable_dict(v: Variable) -> dict[str, Any]:
+@dataclass(frozen=True, slots=True)
+class VariableSource:
+    """Where a process-image variable comes from: a PDO entry of an assigned PDO."""
+
+    slave: Slave
+    pdo: Pdo
+    entry: PdoEntry
+
+
+def variable_sources(eni: Eni) -> dict[tuple[str, str], VariableSource]:
+    """The PDO entry behind each variable, by (direction, name), where the ENI gives it.
+
+    An ENI's <ProcessImage> names a variable ``<slave>.<PDO>.<entry>`` (ETG.2100, as
+    TwinCAT and the EC-Engineer write it) without its index; the entry is the one of that
+    name in a PDO its slave assigns to a sync manager, of the variable's direction and bit
+    size and, where the slave gives its <ProcessData> areas, inside them. A name that fits
+    no entry (TwinCAT's WcState and frame-state variables) or two different ones has none.
+    """
+    variables = {(v.direction.value, v.name): v for v in eni.process_image.variables}
+    found: dict[tuple[str, str], list[VariableSource]] = {}
+    for s in eni.slaves:
+        for pdo in s.pdos:
+            if pdo.sync_manager is None:
+                continue
+            for e in pdo.entries:
+                key = (pdo.direction.value, f"{s.name}.{pdo.name}.{e.name}")
+                v = variables.get(key)
+                if e.index and v is not None and v.bit_size == e.bit_size and _inside(v, s):
+                    found.setdefault(key, []).append(VariableSource(s, pdo, e))
+    return {
+        key: sources[0]
+        for key, sources in found.items()
+        if len({(x.pdo.index, x.entry.index, x.entry.subindex) for x in sources}) == 1
+    }
+
+
+def _inside(v: Variable, s: Slave) -> bool:
+    """Within one of the slave's <ProcessData> areas of that direction (True without any)."""
+    areas = s.inputs if v.direction.value == "input" else s.outputs
+    return not areas or any(
+        a.bit_start <= v.bit_offset and v.bit_offset + v.bit_size <= a.bit_start + a.bit_length
+        for a in areas
+    )
+
+
+def variable_dict(v: Variable, source: VariableSource | None = None) -> dict[str, Any]:
+    """A variable's keys: name, direction, bit offset and size, data type, and its PDO
+    (``pdo_index`` "0x1A00") and PDO entry (``pdo_entry`` "0x6041:00"), null where the ENI
+    does not give them."""
     return {
         "name": v.name,
         "direction": v.direction.value,
         "bit_offset": v.bit_offset,
         "bit_size": v.bit_size,
         "data_type": v.data_type,
+        "pdo_index": f"0x{source.pdo.index:04X}" if source else None,
+        "pdo_entry": object_entry(source.entry.index, source.entry.subindex) if source else None,
     }
 
 
@@ -151,6 +221,7 @@ def inspect_report(eni: Eni) -> dict[str, Any]:
     """The ``lolacli.eni/1`` document of ``eni inspect``."""
     frames = [frame_dict(f) for f in eni.cyclic_frames]
     pi = eni.process_image
+    sources = variable_sources(eni)
     return {
         "schema": INSPECT_SCHEMA,
         "source": eni.source,
@@ -172,7 +243,8 @@ def inspect_report(eni: Eni) -> dict[str, Any]:
             "inputs_bytes": pi.inputs_bytes,
             "outputs_bytes": pi.outputs_bytes,
             "variable_count": len(pi.variables),
-            "variables": [variable_dict(v) for v in pi.variables],
+            "variables": [variable_dict(v, sources.get((v.direction.value, v.name)))
+                          for v in pi.variables],
         },
     }
 
@@ -189,24 +261,50 @@ def filter_variables(eni: Eni, pattern: str | None) -> tuple[Variable, ...]:
 def vars_report(eni: Eni, pattern: str | None = None) -> dict[str, Any]:
     """The ``lolacli.eni-vars/1`` document of ``eni vars``."""
     chosen = filter_variables(eni, pattern)
+    sources = variable_sources(eni)
     return {
         "schema": VARS_SCHEMA,
         "source": eni.source,
         "filter": pattern,
         "count": len(chosen),
-        "variables": [
-            {**variable_dict(v), "byte_offset": v.bit_offset // 8, "comment": v.comment}
-            for v in chosen
-        ],
+        "variables": [_vars_row(v, sources.get((v.direction.value, v.name))) for v in chosen],
     }
+
+
+#: the keys of each ``eni vars`` variable, in order: the columns of ``--format csv``
+VARS_FIELDS = (
+    "name",
+    "direction",
+    "bit_offset",
+    "byte_offset",
+    "bit_size",
+    "data_type",
+    "pdo_index",
+    "pdo_entry",
+    "slave_station_address",
+    "comment",
+)
+
+
+def _vars_row(v: Variable, source: VariableSource | None) -> dict[str, Any]:
+    row = variable_dict(v, source) | {
+        "byte_offset": v.bit_offset // 8,
+        "slave_station_address": source.slave.station_address if source else None,
+        "comment": v.comment,
+    }
+    return {key: row[key] for key in VARS_FIELDS}
 
 
 __all__ = [
     "INSPECT_SCHEMA",
+    "VARS_FIELDS",
     "VARS_SCHEMA",
+    "VariableSource",
+    "datagram_where",
     "filter_variables",
     "frame_dict",
     "inspect_report",
+    "variable_sources",
     "vars_report",
     "wire_time_ns",
 ]

@@ -24,6 +24,7 @@ from lolacli.eni.model import (
     Slave,
 )
 from lolacli.findings import Finding, Severity
+from lolacli.text import plural, station
 from lolacli.wire.commands import LOGICAL, Command, addressed_wkc, mnemonic, wkc_increment
 from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, MAX_DATAGRAM_DATA
 from lolacli.wire.registers import Fmmu, FmmuType
@@ -92,7 +93,8 @@ def check_station_addresses(eni: Eni) -> Iterator[Finding]:
             yield _error(
                 "duplicate-station-address",
                 f"slave {s.position} ({s.name.strip()}) shares station address "
-                f"{s.station_address} with slave(s) {others}",
+                f"{station(s.station_address)} with {'slave' if len(others) == 1 else 'slaves'} "
+                f"{', '.join(map(str, others))}",
                 s.position,
             )
 
@@ -112,7 +114,7 @@ def check_chain(eni: Eni) -> Iterator[Finding]:
         if prev is not None and prev not in stations:
             yield _error(
                 "unknown-previous-port",
-                f"slave {s.position}: PreviousPort names unknown station {prev}",
+                f"slave {s.position}: PreviousPort names unknown station {station(prev)}",
                 s.position,
             )
 
@@ -128,8 +130,9 @@ def check_fmmu_types(eni: Eni) -> Iterator[Finding]:
             )
             yield _warning(
                 "fmmu-undecodable",
-                f"slave {s.position}: {len(bad)} FMMU register write(s) do not decode "
-                f"(type {sorted({f.type for f in bad})}){hint}; not checked",
+                f"slave {s.position}: {plural(len(bad), 'FMMU register write')} not decoded "
+                f"(type {', '.join(str(t) for t in sorted({f.type for f in bad}))}){hint}; "
+                "not checked",
                 s.position,
             )
 
@@ -315,7 +318,7 @@ def check_process_image(eni: Eni) -> Iterator[Finding]:
         if v.bit_offset < 0 or end > limits[v.direction]:
             yield _error(
                 "variable-outside-image",
-                f"variable {v.name!r} ({v.direction.value}, bits {v.bit_offset}..{end - 1}) "
+                f"variable \"{v.name}\" ({v.direction.value}, bits {v.bit_offset}..{end - 1}) "
                 f"lies outside the {limits[v.direction] // 8}-byte {v.direction.value} image",
             )
     for s in eni.slaves:

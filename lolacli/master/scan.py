@@ -584,7 +584,7 @@ def state_differences(
         if not s.answered or ((s.al_status & 0x0F) == state and not s.al_error):
             continue
         r = refused.get(s.position)
-        why = f"; refused {r.transition}: {r.text}" if r is not None else ""
+        why = f"; refused {transition_text(r.transition)}: {r.text}" if r is not None else ""
         out.append(
             Difference(
                 "state_not_reached",
@@ -659,6 +659,17 @@ def _counter_text(c: ErrorCounters) -> str:
     return ", ".join(parts)
 
 
+_STATE_LETTERS = {"I": "INIT", "P": "PREOP", "S": "SAFEOP", "O": "OP", "B": "BOOT"}
+
+
+def transition_text(code: str) -> str:
+    """An ENI transition in words: ``SO`` -> ``SAFEOP to OP`` (ETG.2100 names each by the
+    first letters of its two states); anything else as it is."""
+    if len(code) == 2 and all(c in _STATE_LETTERS for c in code):
+        return f"{_STATE_LETTERS[code[0]]} to {_STATE_LETTERS[code[1]]}"
+    return code
+
+
 def parse_state(text: str) -> AlState:
     """``init``, ``preop``, ``safeop``, ``op`` (any case) -> AlState; UsageError."""
     names = {"INIT": AlState.INIT, "PREOP": AlState.PREOP, "SAFEOP": AlState.SAFEOP}
@@ -686,4 +697,5 @@ __all__ = [
     "read_sii",
     "scan",
     "state_differences",
+    "transition_text",
 ]

@@ -46,6 +46,33 @@ MNEMONIC = {
 }
 
 
+def pdo_entries(config) -> dict[tuple[str, str], list[tuple[str, str, int]]]:
+    """(direction, "<slave>.<PDO>.<entry>") -> [(PDO index, "index:subindex", bits)] of the
+    PDOs each slave assigns to a sync manager (an Sm attribute, or listed in <SmN><Pdo>)."""
+    out: dict[tuple[str, str], list[tuple[str, str, int]]] = {}
+    for s in config.findall("Slave"):
+        pd = s.find("ProcessData")
+        if pd is None:
+            continue
+        listed = {num(p.text) for sm in pd if sm.tag.startswith("Sm") for p in sm.findall("Pdo")}
+        for tag, direction in (("RxPdo", "output"), ("TxPdo", "input")):
+            for pdo in pd.findall(tag):
+                index = num(pdo.findtext("Index"))
+                if pdo.get("Sm") is None and index not in listed:
+                    continue
+                for e in pdo.findall("Entry"):
+                    if not num(e.findtext("Index")):
+                        continue  # padding
+                    name = f"{s.findtext('Info/Name')}.{pdo.findtext('Name').strip()}."
+                    name += e.findtext("Name").strip()
+                    sub = num(e.findtext("SubIndex") or "0")
+                    entry = f"0x{num(e.findtext('Index')):04X}:{sub:02X}"
+                    out.setdefault((direction, name), []).append(
+                        (f"0x{index:04X}", entry, num(e.findtext("BitLen")))
+                    )
+    return out
+
+
 def oracle(path: Path) -> dict:
     root = ET.parse(path).getroot()
     config = root.find("Config")
@@ -89,16 +116,23 @@ def oracle(path: Path) -> dict:
             wire = 14 + 2 + sum(10 + d["length_bytes"] + 2 for d in datagrams) + 4
             frames.append({"datagrams": datagrams, "frame_bytes": max(64, wire)})
     pi = config.find("ProcessImage")
+    entries = pdo_entries(config)
     variables = []
     for section, direction in (("Inputs", "input"), ("Outputs", "output")):
         for v in pi.findall(f"{section}/Variable"):
+            bits = num(v.findtext("BitSize"))
+            candidates = entries.get((direction, v.findtext("Name")), [])
+            found = {e[:2] for e in candidates if e[2] == bits}
+            pdo, entry = found.pop() if len(found) == 1 else (None, None)
             variables.append(
                 {
                     "name": v.findtext("Name"),
                     "direction": direction,
                     "bit_offset": num(v.findtext("BitOffs")),
-                    "bit_size": num(v.findtext("BitSize")),
+                    "bit_size": bits,
                     "data_type": v.findtext("DataType"),
+                    "pdo_index": pdo,
+                    "pdo_entry": entry,
                 }
             )
     return {
@@ -170,8 +204,9 @@ def test_human_inspect_renders(cli, eni_path):
     code, out, err = cli("eni", "inspect", str(eni_path))
     assert code == 0, err
     want = oracle(eni_path)
-    assert f"{len(want['slaves'])} slaves" in out
-    assert f"{want['frames'][0]['frame_bytes']} B on the wire" in out
+    n = len(want["slaves"])
+    assert f"{n} slave{'s' if n != 1 else ''}, cycle time" in out
+    assert f"Cyclic frame 1: {want['frames'][0]['frame_bytes']:,} B," in out
 
 
 def test_corpus_validates_without_errors(cli, eni_path):

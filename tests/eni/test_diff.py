@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from lolacli.eni.diff import diff_eni
 from lolacli.eni.parser import parse_eni
 from tests.conftest import corpus_files
@@ -53,6 +55,7 @@ def test_changed_identity_and_address(cli, tmp_path):
             "key": "station 1002",
             "before": {"revision": 66592},
             "after": {"revision": 66593},
+            "message": "slave 0x03EA (1002): revision 0x00010420 in A, 0x00010421 in B",
         }
     ]
 
@@ -88,16 +91,16 @@ def test_removed_slave_and_cycle_time(cli, tmp_path):
     assert [c.key for c in removed] == ["station 1003"]
     code, out, _ = cli("eni", "diff", str(VALID_PATH), str(write(tmp_path, "b.xml", b)))
     assert code == 1
-    assert "- slave station 1003" in out
-    assert "difference(s)" in out
+    name = eni_a.slaves[2].name
+    assert f"slave 0x03EB (1003) {name}: only in A" in out.splitlines()
+    assert "cycle time: 500 µs in A, 1,000 µs in B" in out.splitlines()
+    assert out.splitlines()[-1].startswith(f"{len(changes)} differences: 1 cycle time, 1 slave")
 
 
 def test_corpus_pair(cli):
     """rocos eni4 (4 drives) against eni7 (7 drives): three slaves added, LRW grown."""
     files = {p.name: p for p in corpus_files("eni", "rocos-ethercat__eni[47].xml")}
     if len(files) < 2:
-        import pytest
-
         pytest.skip("corpus not found")
     code, report = diff_json(
         cli, files["rocos-ethercat__eni4.xml"], files["rocos-ethercat__eni7.xml"]
@@ -116,3 +119,57 @@ def test_diff_help_states_exit_codes(cli):
     code, out, _ = cli("eni", "diff", "--help")
     assert code == 0
     assert "Exit 0 when the two are equal, 1 when they differ" in " ".join(out.split())
+
+
+def test_each_difference_in_words(cli, tmp_path):
+    """The human output says each difference as a sentence: the thing, the field, its
+    value in A and in B, with units; no Python values."""
+    b = (
+        VALID.replace("<RevisionNo>66592</RevisionNo>", "<RevisionNo>66593</RevisionNo>")
+        .replace("<Cnt>4</Cnt>", "<Cnt>5</Cnt>")
+        .replace("<Name>EL1809.Channel 1-16.Input</Name>", "<Name>EL1809.Inputs</Name>")
+    )
+    code, out, _ = cli("eni", "diff", str(VALID_PATH), str(write(tmp_path, "b.xml", b)))
+    assert code == 1
+    lines = out.splitlines()
+    assert lines[:2] == [f"A is {VALID_PATH}", f"B is {tmp_path / 'b.xml'}"]
+    assert lines[2:] == [
+        "slave 0x03EA (1002): revision 0x00010420 in A, 0x00010421 in B",
+        "cyclic frame 1, command 1 (LRW): expected WKC 4 in A, 5 in B",
+        "input EL1809.Channel 1-16.Input: only in A",
+        "input EL1809.Inputs: only in B",
+        "4 differences: 1 slave, 1 cyclic command, 2 variables",
+    ]
+
+
+CORPUS_ENIS = corpus_files("eni", "*.xml")
+EXAMPLE_ENIS = sorted((VALID_PATH.parents[3] / "lolacli" / "eni_examples").glob("*.xml"))
+
+
+@pytest.mark.parametrize("other", CORPUS_ENIS + EXAMPLE_ENIS, ids=lambda p: p.name)
+def test_no_python_values_in_the_words(cli, other):
+    """Against the LOLA chain, every corpus ENI differs in many ways (slaves only in one,
+    names, identities, cyclic commands, variables): each line is words and numbers with
+    units, and the JSON's messages say the same."""
+    lola = EXAMPLE_ENIS[[p.name for p in EXAMPLE_ENIS].index("lola.xml")]
+    code, out, _ = cli("eni", "diff", str(lola), str(other))
+    assert code == (0 if other == lola else 1)
+    for bad in ("{", "}", "None", "': ", "->", "(s)"):
+        assert bad not in out, (bad, [line for line in out.splitlines() if bad in line])
+    code, report = diff_json(cli, lola, other)
+    said = " ".join(out.split())
+    assert all(c["message"].split("; ")[0] in said for c in report["changes"])
+    assert ("no differences" in out) == (other == lola)
+
+
+def test_a_changed_slave_says_each_field(tmp_path):
+    """Identity, address, sizes: one line each, in the form of every other command."""
+    eni_a = parse_eni(VALID.encode())
+    b = (
+        VALID.replace("<RevisionNo>66592</RevisionNo>", "<RevisionNo>66593</RevisionNo>", 1)
+        .replace("<AutoIncAddr>65535</AutoIncAddr>", "<AutoIncAddr>65534</AutoIncAddr>", 1)
+    )
+    changes = diff_eni(eni_a, parse_eni(b.encode()))
+    lines = [line for c in changes for line in c.describe()]
+    assert any("revision 0x00010420 in A, 0x00010421 in B" in line for line in lines), lines
+    assert any("auto-increment address 0xFFFF in A, 0xFFFE in B" in line for line in lines)

@@ -125,8 +125,8 @@ def test_human_output_names_code_and_slave(cli, tmp_path):
     path.write_text(DEFECTS["duplicate-station-address"])
     code, out, _ = cli("eni", "validate", str(path))
     assert code == 1
-    assert "duplicate-station-address [slave 2]" in out
-    assert "2 error(s)" in out
+    assert "duplicate-station-address at 0x03EA (1002): slave 2 (Drive 1)" in out
+    assert "2 errors, 0 warnings" in out
 
 
 def test_fmmu_outside_any_cyclic_command():

@@ -169,6 +169,7 @@ def test_stuck_in_safeop_shows_only_after_op_was_asked_for(lola: Eni) -> None:
     assert [(d.kind, d.position) for d in report.differences] == [("state_not_reached", 5)]
     message = report.differences[0].message
     assert "SAFEOP+ERR, not OP, AL status code 0x0019 No valid outputs" in message
+    assert message.endswith("refused SAFEOP to OP: No valid outputs")
     assert [(r.position, r.transition, r.al_status_code) for r in report.refusals] == [
         (5, "SO", 0x0019)
     ]

@@ -71,6 +71,12 @@ def test_human_output(cli):
     code, out, _ = cli("bus", "timing", "--measured", "124.1us")
     assert code == 0
     assert "67.68 µs" in out and "69.28 µs" in out and "calibrated" in out
+    rows = {line[:28].strip(): line[28:].strip().split(None, 2) for line in out.splitlines()[3:]}
+    assert rows["frame"][:2] == ["846", "B"] and rows["slaves"][:2] == ["25", "slaves"]
+    assert rows["per-slave delay"][:2] == ["1,000", "ns"]
+    assert rows["calibrated per-slave delay"][:2] == ["2,247", "ns"]
+    assert rows["max update rate (measured)"][:2] == ["8,058", "Hz"]
+    assert rows["cycle budget"] == ["500", "µs", "within it"]
 
 
 @pytest.mark.parametrize(
