@@ -26,6 +26,17 @@ def object_entry(index: int, subindex: int) -> str:
     return f"0x{index:04X}:{subindex:02X}"
 
 
+_STATE_LETTERS = {"I": "INIT", "P": "PREOP", "S": "SAFEOP", "O": "OP", "B": "BOOT"}
+
+
+def transition_text(code: str) -> str:
+    """An ENI transition in words: ``SO`` -> ``SAFEOP to OP`` (ETG.2100 names each by the
+    first letters of its two states); anything else as it is."""
+    if len(code) == 2 and all(c in _STATE_LETTERS for c in code):
+        return f"{_STATE_LETTERS[code[0]]} to {_STATE_LETTERS[code[1]]}"
+    return code
+
+
 def plural(n: int, noun: str, nouns: str | None = None) -> str:
     """``1 slave``, ``0 slaves``, ``2 entries`` (with ``nouns`` given)."""
     return f"{n} {noun if n == 1 else (nouns or noun + 's')}"
@@ -37,4 +48,4 @@ def number(value: float, unit: str, digits: int = 3) -> str:
     return f"{text} {unit}" if unit else text
 
 
-__all__ = ["hex32", "number", "object_entry", "plural", "station"]
+__all__ = ["hex32", "number", "object_entry", "plural", "station", "transition_text"]

@@ -152,3 +152,19 @@ def test_bus_scan_with_faults_fits_80_columns(faults, capsys, monkeypatch) -> No
     out = _scan_output(LOLA, capsys, **faults)
     assert_fits(1, out)
     assert "differs: " in out and "from the ENI" in out
+
+
+# ------------------------------------------------------------------------- bus simulate
+SIMULATE_CASES = {
+    "at 2 kHz": ("--cycles", "200"),
+    "a rate the bus cannot hold": ("--rate", "20000", "--cycles", "400"),
+    "faults and a watch": ("--cycles", "400", "--drop-p", "0.02", "--stuck-safeop", "3",
+                           "--watch", "CAN Gateway (IMU, FTS).IMU.Acceleration X"),
+}
+
+
+@pytest.mark.parametrize("case", list(SIMULATE_CASES))
+def test_bus_simulate_fits_80_columns(case: str) -> None:
+    code, out = human("bus", "simulate", "-q", *SIMULATE_CASES[case])
+    assert_fits(code, out)
+    assert "Verdict: " in out

@@ -108,8 +108,7 @@ def _al_state(s: dict[str, Any]) -> str:
 
 def _render(doc: dict[str, Any]) -> None:
     from lolacli.cli.common import data_table, say, stdout_console
-    from lolacli.master.scan import transition_text
-    from lolacli.text import hex32, plural, station
+    from lolacli.text import hex32, plural, station, transition_text
 
     console = stdout_console()
     table = data_table(f"Bus on {doc['iface']}")

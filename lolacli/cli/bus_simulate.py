@@ -304,7 +304,7 @@ def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
 def _render(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
-    from lolacli.cli.common import stdout_console
+    from lolacli.cli.common import data_table, stdout_console
     from lolacli.cli.verdict import render_verdict
 
     console = stdout_console()
@@ -316,9 +316,8 @@ def _render(doc: dict[str, Any]) -> None:
         table.add_row(name, value)
     console.print(table, width=min(console.width, 80))
     if doc["sections_us"]:
-        sections = Table(
-            title="Per-cycle sections (seed Tables I/II, Fig. 7)", title_justify="left"
-        )
+        console.print("Per-cycle sections (seed Tables I/II, Fig. 7)")
+        sections = data_table()
         for column in ("section", "thread", "mean µs", "p99 µs", "max µs"):
             sections.add_column(
                 column, justify="left" if column in ("section", "thread") else "right"

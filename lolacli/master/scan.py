@@ -45,6 +45,7 @@ from lolacli.errors import TransportError, UsageError
 from lolacli.master import eeprom
 from lolacli.master.core import Master, MasterOptions, Refusal
 from lolacli.master.transport import Transport
+from lolacli.text import transition_text
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
@@ -659,17 +660,6 @@ def _counter_text(c: ErrorCounters) -> str:
     return ", ".join(parts)
 
 
-_STATE_LETTERS = {"I": "INIT", "P": "PREOP", "S": "SAFEOP", "O": "OP", "B": "BOOT"}
-
-
-def transition_text(code: str) -> str:
-    """An ENI transition in words: ``SO`` -> ``SAFEOP to OP`` (ETG.2100 names each by the
-    first letters of its two states); anything else as it is."""
-    if len(code) == 2 and all(c in _STATE_LETTERS for c in code):
-        return f"{_STATE_LETTERS[code[0]]} to {_STATE_LETTERS[code[1]]}"
-    return code
-
-
 def parse_state(text: str) -> AlState:
     """``init``, ``preop``, ``safeop``, ``op`` (any case) -> AlState; UsageError."""
     names = {"INIT": AlState.INIT, "PREOP": AlState.PREOP, "SAFEOP": AlState.SAFEOP}
@@ -697,5 +687,4 @@ __all__ = [
     "read_sii",
     "scan",
     "state_differences",
-    "transition_text",
 ]

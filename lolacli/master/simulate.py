@@ -39,6 +39,7 @@ from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.transport import ChainTransport, Transport
 from lolacli.master.variables import BusVariable, variable_for
 from lolacli.motion.profile import back_and_forth
+from lolacli.text import transition_text
 from lolacli.timing.model import (
     INTER_FRAME_GAP_BYTES,
     LINK_100_MBIT_S,
@@ -209,8 +210,8 @@ def _findings(
     fail, warn = Severity.FAILURE, Severity.WARNING
     for r in master.refusals:
         code = "" if r.al_status_code is None else f", AL status code 0x{r.al_status_code:04X}"
-        out.add("refused", fail, f"slave {r.position} ({r.slave}) refused {r.transition}"
-                f"{code}: {r.text}", slave=r.position)
+        out.add("refused", fail, f"slave {r.position} ({r.slave}) refused "
+                f"{transition_text(r.transition)}{code}: {r.text}", slave=r.position)
     refused = {r.position for r in master.refusals}
     for slave in master.eni.slaves:
         state = app.final_states.get(slave.position, "no answer")
@@ -241,7 +242,8 @@ def _findings(
                 f"{doc['drives'] - doc['drives_enabled']} of {doc['drives']} drives were not "
                 "enabled (CiA 402 state machine short of Operation enabled)")
     for name, value in doc["watch"].items():
-        out.add("watch", Severity.INFO, f"{name} = {value} (last value)")
+        shown = f"{value:.6g}" if isinstance(value, float) else value
+        out.add("watch", Severity.INFO, f"{name} = {shown} (last value)")
     if stopped is not None:
         signame = "SIGTERM" if stopped.exit_code == 143 else "SIGINT"
         out.add("interrupted", warn,
