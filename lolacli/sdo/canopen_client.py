@@ -122,6 +122,9 @@ class CanopenClient:
     def dictionary(self) -> Dictionary | None:
         return None  # CANopen has no SDO Information service: the EDS is the dictionary
 
+    def sdo_info(self) -> None:
+        return None
+
     def close(self) -> None:
         self.network.close()
 

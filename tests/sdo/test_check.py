@@ -89,7 +89,7 @@ def test_a_difference_and_an_unexpected_abort_are_exit_1(cli, channel, tmp_path)
     assert code == 1
     results = json.loads(out)["results"]
     assert [r["ok"] for r in results] == [False, False, False, True]
-    assert results[0]["message"] == "expected 411, read 410"
+    assert results[0]["message"] == "expected 411 (0x0000019B), read 410 (0x0000019A)"
     assert (
         results[1]["abort_code"] == "0x06020000"
         and "Object does not exist" in results[1]["message"]
