@@ -404,8 +404,8 @@ def _render_list(report: dict[str, Any]) -> None:
         if obj["object_code"] != "VAR":
             rows.append((obj["object"], obj["name"] or "", obj["object_code"], "", ""))
         for e in obj["entries"]:
-            row = (e["object"], e["name"] or "", e["data_type"] or "?", e["access"] or "")
-            rows.append((*row, _list_default(e)))
+            kind, access = e["data_type"] or "?", e["access"] or ""
+            rows.append((e["object"], e["name"] or "", kind, access, _list_default(e)))
     headers = ("object", "name", "type", "access", "default")
     widest = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(headers)]
     room = _width() - widest[0] - widest[2] - widest[3] - 2 * (len(headers) - 1)
@@ -414,8 +414,8 @@ def _render_list(report: dict[str, Any]) -> None:
     table = Table(show_edge=False, pad_edge=False, box=None)
     for header in headers:
         table.add_column(header)
-    for row in rows:
-        table.add_row(row[0], _cell(row[1], name_w), row[2], row[3], _cell(row[4], default_w))
+    for where, name, kind, access, default in rows:
+        table.add_row(where, _cell(name, name_w), kind, access, _cell(default, default_w))
     console = stdout_console()
     with console.capture() as captured:  # fitted to the width; cells padded: strip them
         console.print(table)

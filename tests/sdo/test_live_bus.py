@@ -14,6 +14,10 @@ not match", CiA 301), the code every backend and the CANopen stacks give.
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 
@@ -248,3 +252,66 @@ def test_a_bus_that_does_not_answer_is_exit_4(silent, backend) -> None:
     assert code == 4, err
     assert err.startswith("lolacli: error:") and err.count("\n") == 1
     assert time.monotonic() - t0 < 60
+
+
+def _has_socket(pid: int) -> bool:
+    """Whether the process has opened a socket (ours: the raw socket on the bus)."""
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except FileNotFoundError:
+        return False
+    for fd in fds:
+        try:
+            if os.readlink(f"/proc/{pid}/fd/{fd}").startswith("socket:"):
+                return True
+        except OSError:  # closed meanwhile
+            continue
+    return False
+
+
+@pytest.mark.parametrize(
+    ("command", "signum"),
+    [
+        (("list", "5"), signal.SIGINT),
+        (("read", "5", "0x1000"), signal.SIGTERM),
+        (("check", "CHECK"), signal.SIGINT),
+    ],
+    ids=["list", "read", "check"],
+)
+def test_a_stop_while_the_bus_does_not_answer(silent, tmp_path, command, signum) -> None:
+    """Our master waiting on a bus where nothing answers (each frame up to 50 ms, sent
+    again for --timeout 30 s): Ctrl-C or SIGTERM ends it within a second, exit 130/143;
+    ``sdo check`` still reports (no item done)."""
+    check = tmp_path / "drive5.yaml"
+    check.write_text("slave: 5\nreads:\n  - {object: '0x1000', expect: 0x00020192}\n")
+    args = [str(check) if a == "CHECK" else a for a in command]
+    argv = [sys.executable, "-m", "lolacli", "sdo", *args, "--iface", silent.master]
+    proc = subprocess.Popen(
+        silent.command(*argv, "--eni", str(LOLA), "--timeout", "30"),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not _has_socket(proc.pid) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.5)  # into the frames' waits
+        assert proc.poll() is None
+        start = time.monotonic()
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    took = time.monotonic() - start
+    name = signal.Signals(signum).name
+    assert proc.returncode == 128 + signum and took < 1.0, (took, err)
+    assert "Traceback" not in err
+    if command[0] == "check":
+        assert out == f"stopped by {name} after 0 checks of 1: 0 passed, 0 failed\n"
+    else:
+        assert out == "" and err == f"lolacli: stopped by {name}\n"
