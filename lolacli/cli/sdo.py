@@ -233,11 +233,10 @@ def _render_value(result: Any) -> None:
     if not isinstance(result.value, list):  # not described: the bytes
         _print(f"{where}  {describe(result.name, result.data_type, result.text)}")
         return
-    size = len(result.raw)
-    _print(
-        f"{where}  {describe(result.name, result.data_type)}"
-        + f"  (complete access, {size} byte{'' if size == 1 else 's'})"
-    )
+    from lolacli.text import plural
+
+    size = plural(len(result.raw), "byte")
+    _print(f"{where}  {describe(result.name, result.data_type)}  (complete access, {size})")
     for item in result.value:
         code = data_type_from_name(item["data_type"]) if item["data_type"] != "?" else None
         text = format_value(item["value"], code)
@@ -489,7 +488,8 @@ def check_cmd(
 ) -> None:
     """Make the file's writes, then its reads, and compare each read with its expected
     value: exit 0 when all match, 1 when any differs or aborts unexpectedly, 3 for a bad
-    file, 4 when the bus does not answer."""
+    file, 4 when the bus does not answer. Each result is printed as it is made; Ctrl-C
+    or SIGTERM stops with the results so far, exit 130 or 143."""
     from lolacli.interrupt import exit_code
     from lolacli.sdo.check import CheckReport, parse_check, run_check
     from lolacli.sdo.files import read_text_file

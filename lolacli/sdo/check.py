@@ -261,6 +261,10 @@ class _Validator:
         if value_key not in entry and (key == "writes" or abort is None):
             raise self.fail(f"{where}: no {value_key}", item_line)
         value = entry.get(value_key)
+        if value_key in entry and value is None:
+            raise self.fail(
+                f"{where}: {value_key}: empty (null): give a number or a string", at(value_key)
+            )
         if value is not None and not isinstance(value, bool | int | float | str):
             raise self.fail(
                 f"{where}: {value_key}: {value!r} is not a number or a string", at(value_key)

@@ -19,6 +19,7 @@ from lolacli.sdo.client import json_value
 from lolacli.sdo.dictionary import Dictionary, OdEntry
 from lolacli.sdo.entry_type import EntryType, TypeLookup
 from lolacli.sdo.session import TransportOptions, open_session
+from lolacli.text import plural
 
 
 def dictionary_report(
@@ -135,7 +136,8 @@ def _offline_esi(
         )
         more = f"; {len(with_od) - 3} more" if len(with_od) > 3 else ""
         raise UsageError(
-            f"{names} describes {len(with_od)} devices with a dictionary ({shown}{more}): "
+            f"{names} describes {plural(len(with_od), 'device')} with a dictionary "
+            f"({shown}{more}): "
             "give --eni FILE so SLAVE picks one"
         )
     found = esi_dictionary(files, None)
