@@ -499,6 +499,7 @@ def check_cmd(
     options = _options(can, interface, node, iface, backend, eni, eds, esi, timeout)
     report = CheckReport(check.path, len(check.items))
     notes: set[str] = set()
+    printed = [0]  # results printed (a stop may come between a result and its line)
 
     def done(result: Any) -> None:  # each result as it is made: a stop keeps them
         if result.note and result.note not in notes:
@@ -506,6 +507,7 @@ def check_cmd(
             _note(result.note)
         if fmt is not OutputFormat.json:
             _print(*_check_lines(result))
+        printed[0] += 1
 
     try:
         with open_session(options) as session:
@@ -515,9 +517,9 @@ def check_cmd(
 
         code = exit_code(exc)
         report.stopped_by = signal.Signals(code - 128).name
-        _finish_check(report, fmt)
+        _finish_check(report, fmt, printed[0])
         raise typer.Exit(code) from None
-    _finish_check(report, fmt)
+    _finish_check(report, fmt, printed[0])
     if report.failed:
         raise typer.Exit(1)
 
@@ -541,12 +543,15 @@ def _check_lines(r: Any) -> list[str]:
     return lines
 
 
-def _finish_check(report: Any, fmt: OutputFormat) -> None:
+def _finish_check(report: Any, fmt: OutputFormat, printed: int) -> None:
+    """The JSON document, or the results not printed yet and the summary."""
     from lolacli.text import plural
 
     if fmt is OutputFormat.json:
         emit_json(report.to_dict())
         return
+    for result in report.results[printed:]:
+        _print(*_check_lines(result))
     n = len(report.results)
     tally = f"{n - report.failed} passed, {report.failed} failed"
     if report.stopped_by is not None:
