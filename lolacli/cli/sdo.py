@@ -533,8 +533,9 @@ def _check_lines(r: Any) -> list[str]:
     status = "ok  " if r.ok else "FAIL"
     head = f"{status} {item.kind:<5} {item.slave} {item.address}"
     if r.abort_code is not None:
-        what = describe(r.name, "", f"abort 0x{r.abort_code:08X}")
-        return [f"{head}  {what}", f"    {r.message}"] if r.message else [f"{head}  {what}"]
+        said = f"abort 0x{r.abort_code:08X}"
+        why = r.message.removeprefix(f"{said}: ")
+        return [f"{head}  {describe(r.name, '', said)}", *([f"    {why}"] if why else [])]
     if r.value is None and r.raw is None:  # not made: a value that does not fit its type
         return [f"{head}  {describe(r.name, r.data_type)}", f"    {r.message}"]
     lines = [f"{head}  {describe(r.name, r.data_type, r.text)}"]
