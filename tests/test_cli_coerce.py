@@ -117,4 +117,4 @@ def test_a_short_command_does_not_import_pydantic() -> None:
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout == "5 0x1000:00  Device type  UNSIGNED32 = 131474 (0x20192)\n"
+    assert done.stdout == "5 0x1000:00  Device type  UNSIGNED32 = 131474 (0x00020192)\n"

@@ -3,6 +3,12 @@
 Thin: options -> :class:`lolacli.sdo.session.TransportOptions`, one library call, render.
 canopen, python-can, pysoem and PyYAML are imported by the library only when a command
 runs, so ``lolacli --help`` stays fast.
+
+Human output fits the terminal (``$COLUMNS``; 80 columns when piped): a line longer than
+that is wrapped between words, its continuation indented. Every command says an entry
+the same way — ``Device type  UNSIGNED32 = 131474 (0x00020192)``: name, type, value by
+:func:`lolacli.sdo.entry_type.format_value` — and notes (a guessed type, a --type that
+overrides the dictionary) go to stderr, once.
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, emit_json, warn
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -45,8 +51,9 @@ TypeOption = Annotated[
         "--type",
         "-t",
         help="Data type: UNSIGNED32, INTEGER24, REAL32, VISIBLE_STRING, OCTET_STRING, "
-        "u16, i32, f64, UDINT… Default: from --eds/--esi, the CiA 301 objects, or a guess "
-        "from the length (reads).",
+        "u16, i32, f64, UDINT… Default: from --eds/--esi/the ENI, the slave's SDO "
+        "Information, the CiA 301 objects, or (reads) a guess from the bytes, said on "
+        "stderr.",
     ),
 ]
 CompleteOption = Annotated[
@@ -167,22 +174,73 @@ def _run_access(fmt: OutputFormat, base: dict[str, Any], call: Any) -> None:
             raise
         _json_error(exc, base)
         raise typer.Exit(exc.exit_code) from None
+    if result.note:
+        _note(result.note)
     if fmt is OutputFormat.json:
         emit_json(result.to_dict())
         return
     _render_value(result)
 
 
-def _render_value(result: Any) -> None:
-    from lolacli.sdo.client import display_value
+def _width() -> int:
+    """The width human output fits: the terminal's, ``$COLUMNS``, else 80 (piped)."""
+    import shutil
 
-    name = f"  {result.name}" if result.name else ""
-    sys.stdout.write(
-        f"{result.slave} 0x{result.index:04X}:{result.subindex:02X}{name}  "
-        f"{result.data_type} = {display_value(result.value)}\n"
-    )
-    if result.note:
-        warn(f"note: {result.note}")
+    return max(40, shutil.get_terminal_size((80, 24)).columns)
+
+
+def _wrapped(text: str, indent: str = "    ") -> list[str]:
+    """A line of human output fitted to the width: broken between words, continuation
+    lines indented (a word longer than a line is broken where it must be)."""
+    import textwrap
+
+    return textwrap.wrap(
+        text,
+        _width(),
+        subsequent_indent=indent,
+        break_on_hyphens=False,
+        drop_whitespace=True,
+    ) or [""]
+
+
+def _print(*lines: str) -> None:
+    _write_lines(line for text in lines for line in _wrapped(text))
+
+
+def _write_lines(lines: Any) -> None:
+    from lolacli.cli.common import silence_stdout
+
+    try:
+        sys.stdout.write("".join(f"{line}\n" for line in lines))
+        sys.stdout.flush()
+    except BrokenPipeError:
+        silence_stdout()
+
+
+def _note(text: str) -> None:
+    """A note on stderr (``lolacli: note: …``), wrapped like the rest."""
+    sys.stderr.write("".join(f"{line}\n" for line in _wrapped(f"lolacli: note: {text}")))
+
+
+def _render_value(result: Any) -> None:
+    from lolacli.sdo.entry_type import describe, format_value
+    from lolacli.wire.datatypes import data_type_from_name
+
+    where = f"{result.slave} 0x{result.index:04X}:{result.subindex:02X}"
+    if not result.complete_access:
+        _print(f"{where}  {describe(result.name, result.data_type, result.text)}")
+        return
+    if not isinstance(result.value, list):  # not described: the bytes
+        _print(f"{where}  {describe(result.name, result.data_type, result.text)}")
+        return
+    from lolacli.text import plural
+
+    size = plural(len(result.raw), "byte")
+    _print(f"{where}  {describe(result.name, result.data_type)}  (complete access, {size})")
+    for item in result.value:
+        code = data_type_from_name(item["data_type"]) if item["data_type"] != "?" else None
+        text = format_value(item["value"], code)
+        _print(f"  :{item['subindex']:02X}  {describe(item['name'], item['data_type'], text)}")
 
 
 def _access(
@@ -231,22 +289,22 @@ def read_cmd(
             address.subindex,
             slave=target.label,
             data_type=data_type,
-            dictionary=target.dictionary,
+            lookup=target.lookup,
             complete_access=complete,
         )
 
     _run_access(fmt, _base(slave, obj), lambda: _access(slave, obj, options, action))
 
 
-@app.command("write")
+@app.command("write", context_settings={"ignore_unknown_options": True})
 def write_cmd(
     slave: SlaveArgument,
     obj: ObjectArgument,
     value: Annotated[
         str,
         typer.Argument(
-            help="The value: a number (0x hex allowed), true/false, text, or hex bytes "
-            "for octet strings and --complete.",
+            help="The value: a number (0x hex allowed; a negative one as is: -1000), "
+            "true/false, text, or hex bytes for octet strings and --complete.",
             show_default=False,
         ),
     ],
@@ -264,7 +322,8 @@ def write_cmd(
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Write an object entry (SDO download). The type comes from --type, the object
-    dictionary (--eds/--esi) or the CiA 301 objects; an abort is exit 1."""
+    dictionary (--eds/--esi/the ENI), the slave's SDO Information or the CiA 301 objects;
+    an abort is exit 1."""
     from lolacli.sdo.client import write
 
     data_type = _data_type(type_name)
@@ -278,15 +337,13 @@ def write_cmd(
             value,
             slave=target.label,
             data_type=data_type,
-            dictionary=target.dictionary,
+            lookup=target.lookup,
             complete_access=complete,
         )
 
     if options.can is None and options.iface is None:
-        from lolacli.cli.common import warn
-
-        warn(
-            "note: the emulated chain lives in this process: the value is gone when it ends "
+        _note(
+            "the emulated chain lives in this process: the value is gone when it ends "
             "(sdo check runs a file's writes and reads on one chain)"
         )
     _run_access(fmt, _base(slave, obj), lambda: _access(slave, obj, options, action))
@@ -331,24 +388,82 @@ def list_cmd(
 
 
 def _render_list(report: dict[str, Any]) -> None:
+    """The listing as a table within the width: names and defaults wrapped in their
+    cells (a word too long for its cell broken after an underscore, else where it must)."""
     from rich.table import Table
 
     from lolacli.cli.common import stdout_console
+    from lolacli.text import plural
 
-    console = stdout_console()
-    console.print(
-        f"slave {report['slave']}: {len(report['objects'])} objects from {report['source']}"
-        + (f" ({report['path']})" if report.get("path") else "")
-    )
-    table = Table(show_edge=False, pad_edge=False, box=None)
-    for col in ("object", "name", "type", "access", "default"):
-        table.add_column(col, overflow="fold")
+    path = f" ({report['path']})" if report.get("path") else ""
+    count = plural(len(report["objects"]), "object")
+    _print(f"slave {report['slave']}: {count} from {report['source']}{path}")
+    rows: list[tuple[str, str, str, str, str]] = []
     for obj in report["objects"]:
+        if obj["object_code"] != "VAR":
+            rows.append((obj["object"], obj["name"] or "", obj["object_code"], "", ""))
         for e in obj["entries"]:
-            name = e["name"] if obj["object_code"] == "VAR" else f"{obj['name']}: {e['name']}"
-            default = "" if e["default"] is None else str(e["default"])
-            table.add_row(e["object"], name, e["data_type"] or "?", e["access"] or "?", default)
-    console.print(table)
+            kind, access = e["data_type"] or "?", e["access"] or ""
+            rows.append((e["object"], e["name"] or "", kind, access, _list_default(e)))
+    headers = ("object", "name", "type", "access", "default")
+    widest = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(headers)]
+    room = _width() - widest[0] - widest[2] - widest[3] - 2 * (len(headers) - 1)
+    name_w = max(16, room - min(widest[4], 20))
+    default_w = max(8, room - min(name_w, widest[1]))
+    table = Table(show_edge=False, pad_edge=False, box=None)
+    for header in headers:
+        table.add_column(header)
+    for where, name, kind, access, default in rows:
+        table.add_row(where, _cell(name, name_w), kind, access, _cell(default, default_w))
+    console = stdout_console()
+    with console.capture() as captured:  # fitted to the width; cells padded: strip them
+        console.print(table)
+    _write_lines(line.rstrip() for line in captured.get().splitlines())
+
+
+def _cell(text: str, width: int) -> str:
+    """``text`` in lines of at most ``width``: broken between words, and a word longer
+    than a line after an underscore (``interpolation_data_…``) or else where it must."""
+    lines: list[str] = []
+    line = ""
+    for word in text.split():
+        while word:
+            sep = " " if line else ""
+            if len(line) + len(sep) + len(word) <= width:
+                line += sep + word
+                break
+            if line and (len(word) <= width or width - len(line) - 1 < 8):
+                lines.append(line)
+                line = ""
+                continue
+            room = width - len(line) - len(sep)
+            cut = word.rfind("_", 0, room) + 1 or room
+            lines.append(line + sep + word[:cut])
+            line, word = "", word[cut:]
+    return "\n".join([*lines, line] if line else lines)
+
+
+def _list_default(entry: dict[str, Any]) -> str:
+    """An entry's default as read/write/check print values (JSON has octets as hex)."""
+    from lolacli.sdo.entry_type import format_value
+    from lolacli.wire.datatypes import data_type_from_name
+
+    default = entry["default"]
+    if default is None:
+        return ""
+    code = data_type_from_name(entry["data_type"]) if entry["data_type"] else None
+    if isinstance(default, str) and code is not None and not _is_text(code):
+        try:
+            default = bytes.fromhex(default)
+        except ValueError:
+            pass
+    return format_value(default, code)
+
+
+def _is_text(code: int) -> bool:
+    from lolacli.wire.datatypes import DataType
+
+    return code in (DataType.VISIBLE_STRING, DataType.UNICODE_STRING)
 
 
 @app.command("check")
@@ -373,39 +488,79 @@ def check_cmd(
 ) -> None:
     """Make the file's writes, then its reads, and compare each read with its expected
     value: exit 0 when all match, 1 when any differs or aborts unexpectedly, 3 for a bad
-    file, 4 when the bus does not answer."""
-    from lolacli.sdo.check import parse_check, run_check
+    file, 4 when the bus does not answer. Each result is printed as it is made; Ctrl-C
+    or SIGTERM stops with the results so far, exit 130 or 143."""
+    from lolacli.interrupt import exit_code
+    from lolacli.sdo.check import CheckReport, parse_check, run_check
     from lolacli.sdo.files import read_text_file
     from lolacli.sdo.session import open_session
 
     check = parse_check(read_text_file(file, "a check file"), str(file))
     options = _options(can, interface, node, iface, backend, eni, eds, esi, timeout)
-    with open_session(options) as session:
-        report = run_check(check, session)
-    if fmt is OutputFormat.json:
-        emit_json(report.to_dict())
-    else:
-        _render_check(report)
+    report = CheckReport(check.path, len(check.items))
+    notes: set[str] = set()
+    printed = [0]  # results printed (a stop may come between a result and its line)
+
+    def done(result: Any) -> None:  # each result as it is made: a stop keeps them
+        if result.note and result.note not in notes:
+            notes.add(result.note)
+            _note(result.note)
+        if fmt is not OutputFormat.json:
+            _print(*_check_lines(result))
+        printed[0] += 1
+
+    try:
+        with open_session(options) as session:
+            run_check(check, session, report, done)
+    except KeyboardInterrupt as exc:
+        import signal
+
+        code = exit_code(exc)
+        report.stopped_by = signal.Signals(code - 128).name
+        _finish_check(report, fmt, printed[0])
+        raise typer.Exit(code) from None
+    _finish_check(report, fmt, printed[0])
     if report.failed:
         raise typer.Exit(1)
 
 
-def _render_check(report: Any) -> None:
-    from lolacli.sdo.client import display_value
+def _check_lines(r: Any) -> list[str]:
+    """One result: status, kind, slave, object, and the entry as read and write say it;
+    why it failed (or the abort's text) on the next line."""
+    from lolacli.sdo.entry_type import describe
 
-    out = []
-    for r in report.results:
-        item = r.item
-        status = "ok  " if r.ok else "FAIL"
-        what = display_value(r.value) if r.abort_code is None else f"abort 0x{r.abort_code:08X}"
-        detail = f"  {r.message}" if r.message and (not r.ok or r.abort_code is not None) else ""
-        out.append(
-            f"{status} {item.kind:<5} {item.slave} {item.address} {r.data_type or '?'} "
-            f"{what}{detail}"
-        )
+    item = r.item
+    status = "ok  " if r.ok else "FAIL"
+    head = f"{status} {item.kind:<5} {item.slave} {item.address}"
+    if r.abort_code is not None:
+        said = f"abort 0x{r.abort_code:08X}"
+        why = r.message.removeprefix(f"{said}: ")
+        return [f"{head}  {describe(r.name, '', said)}", *([f"    {why}"] if why else [])]
+    if r.value is None and r.raw is None:  # not made: a value that does not fit its type
+        return [f"{head}  {describe(r.name, r.data_type)}", f"    {r.message}"]
+    lines = [f"{head}  {describe(r.name, r.data_type, r.text)}"]
+    if r.message and not r.ok:
+        lines.append(f"    {r.message}")
+    return lines
+
+
+def _finish_check(report: Any, fmt: OutputFormat, printed: int) -> None:
+    """The JSON document, or the results not printed yet and the summary."""
+    from lolacli.text import plural
+
+    if fmt is OutputFormat.json:
+        emit_json(report.to_dict())
+        return
+    for result in report.results[printed:]:
+        _print(*_check_lines(result))
     n = len(report.results)
-    out.append(f"{n} checks: {n - report.failed} passed, {report.failed} failed")
-    sys.stdout.write("\n".join(out) + "\n")
+    tally = f"{n - report.failed} passed, {report.failed} failed"
+    if report.stopped_by is not None:
+        _print(
+            f"stopped by {report.stopped_by} after {plural(n, 'check')} of {report.items}: {tally}"
+        )
+    else:
+        _print(f"{plural(n, 'check')}: {tally}")
 
 
 @app.command("serve")
@@ -436,11 +591,12 @@ def serve_cmd(
 ) -> None:
     """Serve CANopen nodes from EDS files (canopen LocalNode) for tests and for trying
     the CANopen commands without hardware: with --interface udp_multicast every process
-    on this host sees them. Ctrl-C (or SIGTERM) stops it with exit 0."""
-    import signal
+    on this host sees them. Ctrl-C stops it with exit 130, SIGTERM with 143; --duration
+    with 0."""
     import time
 
     from lolacli.errors import UsageError
+    from lolacli.interrupt import exit_code
     from lolacli.sdo.node import NodeServer, NodeSpec, gateway_nodes
 
     files, ids = list(eds or ()), list(node or ())
@@ -454,17 +610,21 @@ def serve_cmd(
     taken = [s.node_id for s in specs]
     if len(set(taken)) != len(taken):
         raise UsageError(f"node IDs given twice: {taken}")
-    stop = {"flag": False}
-
-    def _stop(_signum: int, _frame: object) -> None:
-        stop["flag"] = True
-
-    signal.signal(signal.SIGINT, _stop)
-    signal.signal(signal.SIGTERM, _stop)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
-    with NodeServer(can, specs, interface=interface):
-        names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
-        sys.stderr.write(f"serving CANopen nodes {names} on {interface or 'CAN'} {can}\n")
-        sys.stderr.flush()
-        while not stop["flag"] and (deadline is None or time.monotonic() < deadline):
-            time.sleep(0.05)
+    try:
+        with NodeServer(can, specs, interface=interface):  # closed however the block ends
+            names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
+            sys.stderr.write(
+                "".join(
+                    f"{line}\n"
+                    for line in _wrapped(
+                        f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
+                    )
+                )
+            )
+            sys.stderr.flush()
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(0.05)  # the root's handlers raise a stop here at once
+    except KeyboardInterrupt as exc:
+        sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}: nodes closed\n")
+        raise typer.Exit(exit_code(exc)) from None

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from lolacli.errors import UsageError
+from lolacli.text import plural, station
 from lolacli.wire.datatypes import parse_int
 
 if TYPE_CHECKING:  # the ENI modules load only where an ENI is read (start-up time)
@@ -101,14 +102,14 @@ def resolve_ref(spec: str, slaves: Sequence[SlaveRef], *, source: str = "the bus
         for s in slaves:
             if s.station_address == address:
                 return s
-        raise UsageError(f"no slave with station address {address} (0x{address:04X}) in {source}")
+        raise UsageError(f"no slave with station address {station(address)} in {source}")
     if text.isdigit():
         position = int(text)
         for s in slaves:
             if s.position == position:
                 return s
         raise UsageError(
-            f"no slave at position {position} in {source} ({len(slaves)} slaves; "
+            f"no slave at position {position} in {source} ({plural(len(slaves), 'slave')}; "
             "a station address is written @ADDR)"
         )
     return _by_name(text, slaves, source)

@@ -15,6 +15,7 @@ from typing import Any
 from lolacli.errors import TransportError, UsageError
 from lolacli.sdo.client import abort_error
 from lolacli.sdo.dictionary import Dictionary
+from lolacli.text import number
 
 #: The group python-can's udp_multicast uses for IPv4 (its default is an IPv6 group).
 UDP_MULTICAST_IPV4 = "239.74.163.2"
@@ -122,6 +123,9 @@ class CanopenClient:
     def dictionary(self) -> Dictionary | None:
         return None  # CANopen has no SDO Information service: the EDS is the dictionary
 
+    def sdo_info(self) -> None:
+        return None
+
     def close(self) -> None:
         self.network.close()
 
@@ -135,7 +139,7 @@ class CanopenClient:
         except SdoCommunicationError as exc:
             raise TransportError(
                 f"0x{index:04X}:{subindex:02X}: {self.description}: {_reason(exc)} "
-                f"(timeout {self.network.timeout_s:g} s)"
+                f"(timeout {number(self.network.timeout_s, 's')})"
             ) from None
         except Exception as exc:  # can.CanError and OSError while sending
             raise TransportError(f"{self.description}: {exc}") from None

@@ -6,9 +6,9 @@ own object dictionary where it has the SDO Information service. Backends raise
 :class:`~lolacli.errors.SdoAbortError` for an abort (exit 1) and
 :class:`~lolacli.errors.TransportError` when the slave does not answer (exit 4).
 
-:func:`read` and :func:`write` add the value types: a type given by the caller, else the
-object dictionary (EDS, ESI or SDO Information), else the CiA 301 communication objects,
-else (reads only) a guess from the length that says it is one.
+:func:`read` and :func:`write` add the value types and names, decided by
+:meth:`lolacli.sdo.entry_type.TypeLookup.entry_type` (the one lookup of every ``sdo``
+command: ``--type``, the device's dictionary, SDO Information, CiA 301, a stated guess).
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from lolacli.errors import SdoAbortError, UsageError
-from lolacli.sdo.dictionary import (
-    Dictionary,
-    OdObject,
-    standard_name,
-    standard_object,
-    standard_type,
+from lolacli.errors import SdoAbortError, UsageError, WireError
+from lolacli.sdo.dictionary import Dictionary
+from lolacli.sdo.entry_type import (
+    Describes,
+    EntryType,
+    TypeLookup,
+    format_value,
 )
 from lolacli.wire.datatypes import (
     DataType,
@@ -31,6 +31,7 @@ from lolacli.wire.datatypes import (
     encode_value,
     parse_hex_bytes,
     parse_text,
+    size_bytes,
     type_name,
 )
 
@@ -56,6 +57,11 @@ class SdoClient(Protocol):
         protocol or the slave has none."""
         ...
 
+    def sdo_info(self) -> Describes | None:
+        """The SDO Information service asked entry by entry (for types and names); None
+        where the transport has none."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -66,63 +72,34 @@ def abort_error(index: int, subindex: int, code: int) -> SdoAbortError:
     return SdoAbortError(index, subindex, code, abort_text(code))
 
 
-# --- typing ------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class TypeChoice:
-    data_type: int | None
-    source: str  # option, eds, esi, sdo_info, standard, length, none
-    name: str = ""
-
-
-def choose_type(
-    index: int, subindex: int, explicit: int | None, dictionary: Dictionary | None
-) -> TypeChoice:
-    """Where the type of an entry comes from: ``--type``, the dictionary, the standard
-    communication objects; ``data_type`` None when none of them knows."""
-    entry = None if dictionary is None else dictionary.entry(index, subindex)
-    name = entry.name if entry is not None and entry.name else standard_name(index, subindex)
-    if explicit is not None:
-        return TypeChoice(explicit, "option", name)
-    if entry is not None and entry.data_type is not None and dictionary is not None:
-        return TypeChoice(entry.data_type, dictionary.source, name)
-    standard = standard_type(index, subindex)
-    if standard is not None:
-        return TypeChoice(standard, "standard", name)
-    return TypeChoice(None, "none", name)
-
-
-def guess_type(raw: bytes) -> DataType:
-    """A type for bytes of unknown type: unsigned by size, text if printable, else octets."""
-    by_size = {1: DataType.UNSIGNED8, 2: DataType.UNSIGNED16, 4: DataType.UNSIGNED32}
-    if len(raw) in by_size:
-        return by_size[len(raw)]
-    if len(raw) == 8:
-        return DataType.UNSIGNED64
-    text = raw.rstrip(b"\x00")
-    if text and all(0x20 <= b < 0x7F for b in text):
-        return DataType.VISIBLE_STRING
-    return DataType.OCTET_STRING
-
-
 # --- results -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
 class SdoValue:
-    """An entry's value as read (or as written): the contract ``lolacli.sdo/1``."""
+    """An entry's value as read (or as written): the contract ``lolacli.sdo/1``.
+
+    ``data_type`` is the type's name (``UNSIGNED32``; the object code, ``RECORD``, for
+    complete access), ``type_code`` its number, ``type_source`` one of
+    :data:`lolacli.sdo.entry_type.TYPE_SOURCES`; ``note`` is for stderr (a guess, an
+    override, bytes that do not fit the type)."""
 
     slave: str
     index: int
     subindex: int
     raw: bytes
-    value: Any  # Value, or a list of {subindex, value} for complete access
+    value: Any  # Value, or a list of {subindex, name, data_type, value} for complete access
     data_type: str
     type_source: str
     name: str = ""
     complete_access: bool = False
     note: str = ""
+    type_code: int | None = None
+
+    @property
+    def text(self) -> str:
+        """The value as every command prints it (:func:`format_value`)."""
+        return format_value(self.value, self.type_code)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -151,37 +128,24 @@ def json_value(value: Any) -> Any:
     return value
 
 
-def display_value(value: Any) -> str:
-    """A value as a person reads it: hex beside integers, spaced hex bytes, quoted text."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value) if value < 0 else f"{value} (0x{value:X})"
-    if isinstance(value, bytes | bytearray):
-        return bytes(value).hex(" ") if value else "(empty)"
-    if isinstance(value, str):
-        return repr(value)
-    if isinstance(value, list):
-        return ", ".join(f"{item['subindex']}: {display_value(item['value'])}" for item in value)
-    return str(value)
+def decode(raw: bytes, typed: EntryType) -> tuple[Value, int | None, str]:
+    """(value, type it was decoded as, note) of bytes read as ``typed``: bytes that do not
+    fit the type are kept as octets, and the note says so."""
+    note = typed.note
+    if typed.data_type is None:
+        return bytes(raw), None, note
+    try:
+        return decode_value(typed.data_type, raw), typed.data_type, note
+    except WireError as exc:
+        why = f"{typed.address}: {exc}; shown as octets"
+        return bytes(raw), DataType.OCTET_STRING, f"{note}; {why}" if note else why
 
 
-def decode(raw: bytes, choice: TypeChoice) -> tuple[Value, str, str, str]:
-    """(value, type name, type source, note) of bytes read."""
-    if choice.data_type is not None:
-        try:
-            return (
-                decode_value(choice.data_type, raw),
-                type_name(choice.data_type),
-                choice.source,
-                "",
-            )
-        except Exception as exc:  # WireError: bytes that do not fit the type
-            note = f"{exc}; shown as octets"
-            return bytes(raw), type_name(DataType.OCTET_STRING), choice.source, note
-    guess = guess_type(raw)
-    note = "type guessed from the length: give --type or an --eds/--esi"
-    return decode_value(guess, raw), type_name(guess), "length", note
+def lookup_for(client: SdoClient, dictionary: Dictionary | None = None) -> TypeLookup:
+    """The sources of a client's slave: ``dictionary`` (EDS, ESI) if given, then its SDO
+    Information where the transport has it."""
+    ask = getattr(client, "sdo_info", None)
+    return TypeLookup((dictionary,) if dictionary is not None else (), ask() if ask else None)
 
 
 # --- operations --------------------------------------------------------------------------------
@@ -196,20 +160,21 @@ def read(
     data_type: int | None = None,
     dictionary: Dictionary | None = None,
     complete_access: bool = False,
+    lookup: TypeLookup | None = None,
 ) -> SdoValue:
     """Upload an entry (or, with ``complete_access``, the whole object from ``subindex``
-    0 or 1) and decode it."""
+    0 or 1) and decode it. The type and name: ``lookup`` (a session's target has one),
+    else :func:`lookup_for` the client and ``dictionary``; ``data_type`` is ``--type``."""
+    lookup = lookup or lookup_for(client, dictionary)
     raw = client.upload(index, subindex, complete_access=complete_access)
     if complete_access:
-        obj = None if dictionary is None else dictionary.object(index)
-        source = "none" if dictionary is None else dictionary.source
-        if obj is None and raw:
-            count = raw[0] if subindex == 0 else 0
-            obj, source = standard_object(index, count), "standard"
-        return _complete_value(slave, index, subindex, raw, obj, source)
-    choice = choose_type(index, subindex, data_type, dictionary)
-    value, name, source, note = decode(raw, choice)
-    return SdoValue(slave, index, subindex, raw, value, name, source, choice.name, False, note)
+        return complete_value(slave, index, subindex, raw, lookup)
+    typed = lookup.entry_type(index, subindex, explicit=data_type, raw=raw)
+    value, code, note = decode(raw, typed)
+    label = type_name(code) if code is not None else "?"
+    return SdoValue(
+        slave, index, subindex, raw, value, label, typed.source, typed.name, False, note, code
+    )
 
 
 def write(
@@ -222,34 +187,40 @@ def write(
     data_type: int | None = None,
     dictionary: Dictionary | None = None,
     complete_access: bool = False,
+    lookup: TypeLookup | None = None,
 ) -> SdoValue:
     """Encode ``value`` (text is parsed by the type) and download it.
 
     The type comes as for :func:`read`; a write with no known type is a UsageError (the
-    length of a value cannot be guessed). Complete access writes take raw bytes (hex).
+    length of a value cannot be guessed). Complete access writes take the object's bytes
+    (hex), and the result reads them back as :func:`read` would.
     """
+    lookup = lookup or lookup_for(client, dictionary)
     if complete_access:
         raw = parse_hex_bytes(value) if isinstance(value, str) else _need_bytes(value)
         client.download(index, subindex, raw, complete_access=True)
-        kind = type_name(DataType.OCTET_STRING)
-        return SdoValue(slave, index, subindex, raw, raw, kind, "option", "", True)
-    choice = choose_type(index, subindex, data_type, dictionary)
-    if choice.data_type is None:
-        # a slave that describes itself (SDO Information) can say; optional for clients
-        ask = getattr(client, "entry_type", None)
-        found = ask(index, subindex) if ask is not None else None
-        if found is not None and type_name(found) != f"0x{found:04X}":
-            choice = TypeChoice(found, "sdo_info", choice.name)
-    if choice.data_type is None:
+        return complete_value(slave, index, subindex, raw, lookup)
+    typed = lookup.entry_type(index, subindex, explicit=data_type)
+    code = typed.data_type
+    if code is None:
         raise UsageError(
-            f"the data type of 0x{index:04X}:{subindex:02X} is not known: give --type "
-            "(or the object dictionary with --eds/--esi)"
+            f"the data type of {typed.address} is not known: give --type (no --eds/--esi "
+            "dictionary, SDO Information or CiA 301 object describes it)"
         )
-    raw = encode_text(choice.data_type, value)
+    raw = encode_text(code, value)
     client.download(index, subindex, raw)
-    typed = decode_value(choice.data_type, raw)
     return SdoValue(
-        slave, index, subindex, raw, typed, type_name(choice.data_type), choice.source, choice.name
+        slave,
+        index,
+        subindex,
+        raw,
+        decode_value(code, raw),
+        type_name(code),
+        typed.source,
+        typed.name,
+        False,
+        typed.note,
+        code,
     )
 
 
@@ -268,52 +239,79 @@ def _need_bytes(value: Value) -> bytes:
     raise UsageError("a complete-access write takes the object's bytes in hex (01 02 …)")
 
 
-def _complete_value(
-    slave: str, index: int, subindex: int, raw: bytes, obj: OdObject | None, source: str
+def complete_value(
+    slave: str, index: int, subindex: int, raw: bytes, lookup: TypeLookup
 ) -> SdoValue:
     """Complete access: sub 0 (8 bits, padded to 16 when the transfer starts at sub 0),
-    then each entry by its size (ETG.1000.6 §5.6.2.1.2). Entries of a size that is not a
-    whole number of bytes, or an unknown object, leave the bytes as they are."""
-    octets = type_name(DataType.OCTET_STRING)
-    if obj is None or any(
-        e.data_type is None or e.bit_size is None or e.bit_size % 8 for e in obj.entries[1:]
-    ):
-        note = "" if obj is not None else "object not in a dictionary: shown as octets"
-        return SdoValue(slave, index, subindex, raw, raw, octets, "none", "", True, note)
+    then each entry by its size (ETG.1000.6 §5.6.2.1.2), each typed and named by the one
+    lookup. An object no source describes, or an entry of unknown or fractional size,
+    leaves the bytes (from there on) as octets."""
+    count = raw[0] if subindex == 0 and raw else None
+    found = lookup.object(index, count)
+    if found is None:
+        note = f"0x{index:04X}: no source describes the object: shown as octets"
+        octets = type_name(DataType.OCTET_STRING)
+        return SdoValue(
+            slave, index, subindex, raw, raw, octets, "", "", True, note, DataType.OCTET_STRING
+        )
+    obj, source = found
     items: list[dict[str, Any]] = []
     pos = 0
-    count = len(obj.entries) - 1
     if subindex == 0 and raw:
-        count = raw[0]
-        items.append({"subindex": 0, "value": raw[0]})
+        items.append(_item(lookup, index, 0, raw[0]))
         pos = 2
-    for entry in obj.entries[1:]:
-        if entry.subindex > count or entry.data_type is None or entry.bit_size is None:
-            continue
-        size = entry.bit_size // 8
-        chunk = raw[pos : pos + size]
-        if len(chunk) < size:
+    subs = [e.subindex for e in obj.entries if e.subindex > 0]
+    if count is not None:
+        subs = [s for s in subs if s <= count]
+    note = ""
+    for sub in subs:
+        typed = lookup.entry_type(index, sub)
+        size = _size_bytes(typed)
+        chunk = raw[pos : pos + size] if size is not None else b""
+        if size is None or len(chunk) < size:
+            rest = raw[pos:]
+            if rest:
+                items.append(
+                    {"subindex": sub, "name": "", "data_type": "OCTET_STRING", "value": rest}
+                )
+                note = f"0x{index:04X}:{sub:02X} and after: size not known, shown as octets"
+            pos = len(raw)
             break
-        try:
-            value: Any = decode_value(entry.data_type, chunk)
-        except Exception:
-            value = bytes(chunk)
-        items.append({"subindex": entry.subindex, "value": value})
+        value, code, _ = decode(chunk, typed)
+        items.append(
+            {
+                "subindex": sub,
+                "name": typed.name,
+                "data_type": type_name(code) if code is not None else "?",
+                "value": value,
+            }
+        )
         pos += size
-    return SdoValue(slave, index, subindex, raw, items, obj.object_code, source, obj.name, True)
+    return SdoValue(
+        slave, index, subindex, raw, items, obj.object_code, source, obj.name, True, note
+    )
+
+
+def _item(lookup: TypeLookup, index: int, sub: int, value: int) -> dict[str, Any]:
+    typed = lookup.entry_type(index, sub)
+    return {"subindex": sub, "name": typed.name, "data_type": "UNSIGNED8", "value": value}
+
+
+def _size_bytes(typed: EntryType) -> int | None:
+    if typed.bit_size is not None:
+        return None if typed.bit_size % 8 else typed.bit_size // 8
+    return None if typed.data_type is None else size_bytes(typed.data_type)
 
 
 __all__ = [
     "SdoClient",
     "SdoValue",
-    "TypeChoice",
     "abort_error",
-    "choose_type",
+    "complete_value",
     "decode",
-    "display_value",
     "encode_text",
-    "guess_type",
     "json_value",
+    "lookup_for",
     "read",
     "write",
 ]

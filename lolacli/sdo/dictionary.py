@@ -2,9 +2,11 @@
 
 A neutral description (no values, no IO) with one adapter per source, as cantools keeps
 one model and one adapter per file format: an EDS/DCF through canopen's importer
-(:func:`from_canopen`), an ESI ``<Dictionary>`` (:func:`from_esi`), the slave's own SDO
-Information service (:func:`from_sdo_info`), and the CiA 301 / ETG.1000.6 communication
-objects every slave has (:func:`standard_type`), used when nothing better is known.
+(:func:`from_canopen`), an ESI ``<Dictionary>`` (:func:`from_esi`), the PDO entries an
+ENI gives for a slave (:func:`from_eni`), the slave's own SDO Information service
+(:func:`from_sdo_info`), and the CiA 301 / ETG.1000.6 communication objects every slave
+has (:func:`standard_type`), used when nothing better is known. The order in which they
+are asked is :mod:`lolacli.sdo.entry_type`'s.
 """
 
 from __future__ import annotations
@@ -13,10 +15,18 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from lolacli.wire.datatypes import DataType, Value, bit_size, decode_value, type_name
+from lolacli.wire.datatypes import (
+    DataType,
+    Value,
+    bit_size,
+    data_type_from_name,
+    decode_value,
+    type_name,
+)
 
-if TYPE_CHECKING:  # loads only where an ESI is read (start-up time)
+if TYPE_CHECKING:  # loads only where an ESI or ENI is read (start-up time)
     from lolacli.eni.esi_dictionary import EsiDictionary
+    from lolacli.eni.model import Slave as EniSlave
 
 VAR, ARRAY, RECORD = "VAR", "ARRAY", "RECORD"
 
@@ -58,8 +68,9 @@ class OdObject:
 
 @dataclass(frozen=True)
 class Dictionary:
-    """Objects by index; ``source`` says where they came from (``eds``, ``esi``,
-    ``sdo_info``) and ``path`` which file, if any."""
+    """Objects by index; ``source`` says where they came from (``eds``, ``esi``, ``eni``,
+    ``sdo-info``: the ``type_source`` of what is typed by it) and ``path`` which file, if
+    any."""
 
     objects: tuple[OdObject, ...]
     source: str
@@ -305,6 +316,30 @@ def _canopen_entry(var: Any) -> OdEntry:
     )
 
 
+def from_eni(slave: EniSlave, path: str = "") -> Dictionary | None:
+    """The objects an ENI's ``<RxPdo>``/``<TxPdo>`` entries map for ``slave``: index,
+    subindex, name, data type (its IEC or CiA name) and size; None when it maps none.
+    An object of entries after sub 0 is a RECORD whose own name the ENI does not give."""
+    found: dict[int, dict[int, OdEntry]] = {}
+    for pdo in slave.pdos:
+        for e in pdo.entries:
+            if e.index == 0:  # a gap in the PDO
+                continue
+            kind = data_type_from_name(e.data_type) if e.data_type else None
+            entry = OdEntry(e.index, e.subindex, e.name, kind, "", e.bit_size or None, None, True)
+            found.setdefault(e.index, {}).setdefault(e.subindex, entry)
+    if not found:
+        return None
+    objects = []
+    for index in sorted(found):
+        entries = tuple(found[index][s] for s in sorted(found[index]))
+        if len(entries) == 1 and entries[0].subindex == 0:
+            objects.append(OdObject(index, entries[0].name, VAR, entries))
+        else:
+            objects.append(OdObject(index, "", RECORD, entries))
+    return Dictionary(tuple(objects), "eni", path)
+
+
 SdoInfoObject = tuple[int, str, int, int, int, Iterable[tuple[int, str, int, int, int]]]
 
 
@@ -323,7 +358,7 @@ def from_sdo_info(objects: Iterable[SdoInfoObject]) -> Dictionary:
                 sub,
                 entry_name,
                 kind or None,
-                _access_bits(access),
+                access_text(access),
                 size,
                 None,
                 bool(access & 0xC0),
@@ -333,10 +368,11 @@ def from_sdo_info(objects: Iterable[SdoInfoObject]) -> Dictionary:
         if not items:
             items = (OdEntry(index, 0, name, data_type or None, "", bits or None),)
         out.append(OdObject(index, name, codes.get(code, VAR), items))
-    return Dictionary(tuple(out), "sdo_info")
+    return Dictionary(tuple(out), "sdo-info")
 
 
-def _access_bits(access: int) -> str:
+def access_text(access: int) -> str:
+    """``ro``/``rw``/``wo`` of an SDO Information access word (ETG.1000.6 Table 54)."""
     read, write = access & 0x07, access & 0x38
     if read and write:
         return "rw"
@@ -347,12 +383,14 @@ def _access_bits(access: int) -> str:
 
 __all__ = [
     "ARRAY",
+    "access_text",
     "RECORD",
     "VAR",
     "Dictionary",
     "OdEntry",
     "OdObject",
     "from_canopen",
+    "from_eni",
     "from_esi",
     "from_sdo_info",
     "standard_name",

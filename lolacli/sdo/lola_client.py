@@ -26,7 +26,16 @@ from lolacli.errors import (
     WireError,
 )
 from lolacli.sdo.address import SlaveRef, slave_refs
-from lolacli.sdo.dictionary import Dictionary, from_sdo_info
+from lolacli.sdo.dictionary import (
+    ARRAY,
+    RECORD,
+    VAR,
+    Dictionary,
+    OdEntry,
+    OdObject,
+    access_text,
+    from_sdo_info,
+)
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni, Slave
@@ -114,6 +123,7 @@ class LolaClient:
         self.mailbox.port = bus.port
         self.mailbox.timeout_ns = bus.timeout_ns
         self.sdo: MasterSdo = MasterSdo(self.mailbox)
+        self._info: SdoInfoEntries | None = None
 
     def upload(self, index: int, subindex: int, *, complete_access: bool = False) -> bytes:
         try:
@@ -129,15 +139,12 @@ class LolaClient:
         except (TransportError, WireError) as exc:
             raise self._failed(index, subindex, exc) from None
 
-    def entry_type(self, index: int, subindex: int) -> int | None:
-        """The entry's data type by the SDO Information service (one Get Entry
-        Description), or None where the slave has no such service or entry."""
-        from lolacli.master.sdo_info import entry_description
-
-        try:
-            return entry_description(self.mailbox, index, subindex).data_type or None
-        except (SdoAbortError, WireError, TransportError):
-            return None
+    def sdo_info(self) -> SdoInfoEntries:
+        """The slave's SDO Information service as a source of entry types and names,
+        asked entry by entry (:mod:`lolacli.sdo.entry_type`)."""
+        if self._info is None:
+            self._info = SdoInfoEntries(self)
+        return self._info
 
     def dictionary(self) -> Dictionary | None:
         """The slave's own description (SDO Information); None when it has no such
@@ -173,4 +180,74 @@ class LolaClient:
         return TransportError(f"0x{index:04X}:{subindex:02X}: {self.description}: {exc}")
 
 
-__all__ = ["LolaBus", "LolaClient"]
+class SdoInfoEntries:
+    """One slave's SDO Information, asked as needed (Get Entry Description, Get Object
+    Description) and kept for the session. A slave without the service (an SDO Info
+    Error or mailbox error answer to the first question, or none) is not asked again;
+    an entry it does not describe is None."""
+
+    source = "sdo-info"
+
+    def __init__(self, client: LolaClient) -> None:
+        self.client = client
+        self.available = True
+        self._entries: dict[tuple[int, int], OdEntry | None] = {}
+        self._objects: dict[int, OdObject | None] = {}
+
+    def entry(self, index: int, subindex: int) -> OdEntry | None:
+        key = (index, subindex)
+        if key not in self._entries:
+            self._entries[key] = self._ask_entry(index, subindex)
+        return self._entries[key]
+
+    def object(self, index: int) -> OdObject | None:
+        if index not in self._objects:
+            self._objects[index] = self._ask_object(index)
+        return self._objects[index]
+
+    def _ask_entry(self, index: int, subindex: int) -> OdEntry | None:
+        from lolacli.master.sdo_info import entry_description
+
+        if not self.available:
+            return None
+        try:
+            e = entry_description(self.client.mailbox, index, subindex)
+        except SdoAbortError:
+            return None  # the service answers, but not for this entry
+        except (WireError, TransportError):
+            self.available = False
+            return None
+        return OdEntry(
+            index,
+            subindex,
+            e.description().decode("utf-8", "replace"),
+            e.data_type or None,
+            access_text(e.object_access),
+            e.bit_length or None,
+            None,
+            bool(e.object_access & 0xC0),
+        )
+
+    def _ask_object(self, index: int) -> OdObject | None:
+        from lolacli.master.sdo_info import object_description
+
+        if not self.available:
+            return None
+        try:
+            o = object_description(self.client.mailbox, index)
+        except SdoAbortError:
+            return None
+        except (WireError, TransportError):
+            self.available = False
+            return None
+        entries = [self.entry(index, sub) for sub in range(o.max_subindex + 1)]
+        codes = {7: VAR, 8: ARRAY, 9: RECORD}
+        return OdObject(
+            index,
+            o.name_text,
+            codes.get(o.object_code, VAR),
+            tuple(e for e in entries if e is not None),
+        )
+
+
+__all__ = ["LolaBus", "LolaClient", "SdoInfoEntries"]

@@ -18,8 +18,10 @@ options                   transport
 Our master brings only the slaves asked for to PREOP, each when first asked for
 (:class:`lolacli.master.preop.PreopBus`).
 
-Object dictionaries for value types: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device
-whose identity the slave reports), and for ``sdo list`` the slave's SDO Information.
+Each target carries the sources of its value types and names, in the one order of
+:mod:`lolacli.sdo.entry_type`: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device whose
+identity the slave reports) and the slave's PDO entries in the ENI, then the slave's SDO
+Information (our master), then the CiA 301 objects.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from lolacli.errors import UsageError
 from lolacli.sdo.address import parse_node_id, resolve_ref, slave_refs
 from lolacli.sdo.client import SdoClient
 from lolacli.sdo.dictionary import Dictionary
+from lolacli.sdo.entry_type import TypeLookup
 
 BACKENDS = ("lolacli", "soem")
 
@@ -52,11 +55,22 @@ class TransportOptions:
 
 @dataclass
 class Target:
-    """One slave: the label the output calls it by, its client, its dictionary if known."""
+    """One slave: the label the output calls it by, its client, and the sources of its
+    entries' types and names (``lookup``: the dictionaries given or known for it, then
+    the client's SDO Information, then CiA 301)."""
 
     label: str
     client: SdoClient
-    dictionary: Dictionary | None
+    dictionaries: tuple[Dictionary, ...] = ()
+    lookup: TypeLookup = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.lookup = TypeLookup(self.dictionaries, self.client.sdo_info())
+
+    @property
+    def dictionary(self) -> Dictionary | None:
+        """The dictionary file (EDS, ESI) given for the slave, for ``sdo list``."""
+        return next((d for d in self.dictionaries if d.source in ("eds", "esi")), None)
 
 
 class Session:
@@ -104,12 +118,12 @@ class CanSession(Session):
             )
         return Target(str(node), self.network.client(node), self._dictionary(node))
 
-    def _dictionary(self, node: int) -> Dictionary | None:
+    def _dictionary(self, node: int) -> tuple[Dictionary, ...]:
         if self._eds_path is None:
-            return None
+            return ()
         if node not in self._dictionaries:  # $NODEID defaults differ per node
             self._dictionaries[node] = self._load_eds(self._eds_path, node)
-        return self._dictionaries[node]
+        return (self._dictionaries[node],)
 
     def close(self) -> None:
         self.network.close()
@@ -126,6 +140,7 @@ class SoemSession(Session):
         self.bus = SoemBus(options.iface, timeout_s=options.timeout_s)
 
     def target(self, spec: str) -> Target:
+        from lolacli.sdo.dictionary import from_eni
         from lolacli.sdo.files import esi_dictionary
 
         on_bus = self.bus.slaves()
@@ -135,8 +150,10 @@ class SoemSession(Session):
             ref = resolve_ref(spec, on_bus, source=self.bus.iface)
         client = self.bus.client(ref.position, ref.name)
         identity = on_bus[ref.position - 1].identity if ref.position <= len(on_bus) else None
-        dictionary = esi_dictionary(self.esi, identity) if self.esi else None
-        return Target(spec.strip(), client, dictionary)
+        dictionaries = [esi_dictionary(self.esi, identity) if self.esi else None]
+        if self.eni is not None:
+            dictionaries.append(from_eni(self.eni.slaves[ref.position - 1], self.eni.source))
+        return Target(spec.strip(), client, tuple(d for d in dictionaries if d is not None))
 
     def close(self) -> None:
         self.bus.close()
@@ -176,14 +193,18 @@ class LolaSession(Session):
             )
 
     def target(self, spec: str) -> Target:
+        from lolacli.sdo.dictionary import from_eni
+
         ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
         client = self.bus.client(ref)
-        dictionary = None
+        dictionaries = []
         if self.esi:
             from lolacli.sdo.files import esi_dictionary
 
-            dictionary = esi_dictionary(self.esi, ref.identity)
-        return Target(spec.strip(), client, dictionary)
+            dictionaries.append(esi_dictionary(self.esi, ref.identity))
+        eni = self.bus.eni
+        dictionaries.append(from_eni(eni.slaves[ref.position - 1], eni.source or ""))
+        return Target(spec.strip(), client, tuple(d for d in dictionaries if d is not None))
 
     def close(self) -> None:
         self.bus.close()

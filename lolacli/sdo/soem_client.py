@@ -143,6 +143,11 @@ class SoemClient:
             for o in objects
         )
 
+    def sdo_info(self) -> None:
+        """pysoem reads SDO Information only whole (``slave.od``: seconds on a large
+        drive), too slow to type one read by it; ``sdo list`` uses it."""
+        return None
+
     def close(self) -> None:
         self.bus.close()
 

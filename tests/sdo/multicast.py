@@ -54,7 +54,8 @@ def run(ns: str, *args: str, timeout: float = 60) -> tuple[int, str, str]:
 
 @contextmanager
 def serving(ns: str, *args: str) -> Iterator[subprocess.Popen[str]]:
-    """``lolacli sdo serve ARGS`` in the namespace, until the block ends."""
+    """``lolacli sdo serve ARGS`` in the namespace, until the block ends: then Ctrl-C
+    (SIGINT) stops it, a server's normal end, with exit 130."""
     proc = subprocess.Popen(
         command(ns, "sdo", "serve", *CAN, *args),
         cwd=ROOT,
@@ -74,4 +75,4 @@ def serving(ns: str, *args: str) -> Iterator[subprocess.Popen[str]]:
         except subprocess.TimeoutExpired:
             proc.kill()
             raise
-        assert proc.returncode == 0, err
+        assert proc.returncode == 130, err

@@ -45,7 +45,7 @@ def test_resolve_slave_over_the_lola_eni() -> None:
         resolve_slave("Joint", eni)
     with pytest.raises(UsageError, match="position 26 .*25 slaves"):
         resolve_slave("26", eni)
-    with pytest.raises(UsageError, match="station address 4097"):
+    with pytest.raises(UsageError, match=r"station address 0x1001 \(4097\)"):
         resolve_slave("@0x1001", eni)
     with pytest.raises(UsageError, match="no slave named"):
         resolve_slave("nobody", eni)

@@ -89,7 +89,7 @@ def test_a_difference_and_an_unexpected_abort_are_exit_1(cli, channel, tmp_path)
     assert code == 1
     results = json.loads(out)["results"]
     assert [r["ok"] for r in results] == [False, False, False, True]
-    assert results[0]["message"] == "expected 411, read 410"
+    assert results[0]["message"] == "expected 411 (0x0000019B), read 410 (0x0000019A)"
     assert (
         results[1]["abort_code"] == "0x06020000"
         and "Object does not exist" in results[1]["message"]
@@ -151,3 +151,69 @@ def test_bad_file_is_exit_3_before_any_bus(cli, tmp_path) -> None:
     code, _out, err = cli("sdo", "check", str(tmp_path / "missing.yaml"), "--can", "x")
     assert code == 3 and "no such file" in err
 
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "where", "message"),
+    [
+        (
+            "unknown-top-key.yaml",
+            "slave: 1\nreads:\n  - {object: '0x1000', expect: 1}\nextra: 2\n",
+            4,
+            "unknown key 'extra' (allowed: slave, writes, reads)",
+        ),
+        (
+            "value-not-its-type.yaml",
+            "slave: 1\nwrites:\n  - object: '0x2000'\n    type: u16\n    value: 70000\n",
+            5,
+            "writes[0]: value: 70000 is out of range for UNSIGNED16 (0..65535)",
+        ),
+        (
+            "expect-not-its-type.yaml",
+            "slave: 1\nreads:\n  - object: '0x1000'\n    expect: abc\n    type: u32\n",
+            4,
+            "reads[0]: expect: 'abc' is not an integer (UNSIGNED32)",
+        ),
+        (
+            "expect-null.yaml",
+            "slave: 1\nreads:\n  - object: '0x1000'\n    expect: null\n",
+            4,
+            "reads[0]: expect: empty (null)",
+        ),
+        (
+            "bad-key-in-item.yaml",
+            "slave: 1\nreads:\n  - object: '0x1000'\n    expect: 1\n    tolerance: -3\n",
+            5,
+            "reads[0]: tolerance: -3 is not a number >= 0",
+        ),
+        (
+            "trailing-comma.json",
+            '{\n  "slave": 1,\n  "reads": [{"object": "0x1000", "expect": 1},]\n}\n',
+            3,
+            "not JSON: Expecting value",
+        ),
+        (
+            "unclosed.yaml",
+            "slave: 1\nreads:\n  - {object: '0x1000', expect: 1\n",
+            4,
+            "not YAML/JSON: expected ',' or '}'",
+        ),
+    ],
+)
+def test_a_bad_file_names_file_and_line_once(cli, tmp_path, name, text, where, message) -> None:
+    path = tmp_path / name
+    path.write_text(text)
+    code, out, err = cli("sdo", "check", str(path), "--can", "unused", "--interface", "nosuch")
+    assert code == 3 and out == "", err
+    assert err.count("\n") == 1 and err.count(str(path)) == 1, err
+    assert err.startswith(f"lolacli: error: {path}:{where}: {message}"), err
+
+
+def test_json_indented_with_tabs_is_json(tmp_path) -> None:
+    """JSON may be indented with tabs, which YAML refuses: it is still read, its lines kept."""
+    text = '{\n\t"slave": 16,\n\t"reads": [\n\t\t{"object": "0x1000", "expct": 1}\n\t]\n}\n'
+    with pytest.raises(InputError) as exc:
+        parse_check(text, "tabs.json")
+    assert str(exc.value).startswith("tabs.json:4: reads[0]: unknown key 'expct'")
+    good = parse_check(text.replace("expct", "expect"), "tabs.json")
+    assert [(i.slave, i.address.index, i.value) for i in good.items] == [("16", 0x1000, 1)]

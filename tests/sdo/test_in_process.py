@@ -43,14 +43,14 @@ def _json(cli, *args: str) -> tuple[int, dict]:
 def test_reads_of_the_acceptance(cli) -> None:
     eni = _eni()
     code, doc = _json(cli, "read", "5", "0x1000")
-    assert code == 0 and doc["value"] == 0x00020192 and doc["type_source"] == "standard"
+    assert code == 0 and doc["value"] == 0x00020192 and doc["type_source"] == "sdo-info"
     assert doc["schema"] == "lolacli.sdo/1" and doc["raw_hex"] == "92010200"
-    assert doc["name"] == "Device type"  # CiA 301's name where no dictionary is asked
+    assert doc["name"] == "Device type"  # the slave's own name (SDO Information)
     code, doc = _json(cli, "read", "5", "0x1018:01")
     assert code == 0 and doc["value"] == eni.slaves[4].identity.vendor_id
     assert doc["name"] == "Vendor ID"
     code, doc = _json(cli, "read", "5", "0x1C13:01")  # SM3's first assigned TxPDO
-    assert code == 0 and doc["name"] == "Assigned PDO 1" and doc["value"] == 0x1A00
+    assert code == 0 and doc["name"] == "PDO" and doc["value"] == 0x1A00  # the slave's word
     code, doc = _json(cli, "read", "5", "0x1008")  # segmented upload
     assert code == 0 and doc["value"] == Cia402Drive.LONG_NAME
     room = eni.slaves[4].mailbox.in_length_bytes - 6 - 2 - 8  # mailbox, CoE, SDO initiate
@@ -99,9 +99,10 @@ def test_a_write_takes_its_type_from_sdo_information_and_says_it_is_not_kept(cli
     (UNSIGNED32), and stderr says the emulated chain (and the value) ends with the process."""
     code, out, err = cli("sdo", "write", "5", "0x607F", "250000", "-f", "json")
     doc = json.loads(out)
-    assert code == 0 and (doc["data_type"], doc["type_source"]) == ("UNSIGNED32", "sdo_info")
+    assert code == 0 and (doc["data_type"], doc["type_source"]) == ("UNSIGNED32", "sdo-info")
     assert doc["raw_hex"] == "90d00300"
-    assert "gone when it ends" in err and len(err.strip().splitlines()) == 1
+    assert err.count("lolacli: note:") == 1 and "gone when it ends" in " ".join(err.split())
+    assert all(len(line) <= 80 for line in err.splitlines())  # wrapped, as all human output
 
 
 def test_only_the_slaves_asked_for_leave_init() -> None:
@@ -173,10 +174,16 @@ def test_slaves_without_mailbox_and_unknown_slaves(cli) -> None:
 
 def test_complete_access_and_sdo_information(cli) -> None:
     code, doc = _json(cli, "read", "5", "0x1018", "--complete")
-    assert code == 0 and doc["value"][0] == {"subindex": 0, "value": 4}
-    assert doc["value"][4] == {"subindex": 4, "value": _eni().slaves[4].identity.serial}
+    assert code == 0 and doc["value"][0] == {
+        "subindex": 0,
+        "name": "Number of entries",
+        "data_type": "UNSIGNED8",
+        "value": 4,
+    }
+    assert doc["value"][4]["value"] == _eni().slaves[4].identity.serial
+    assert (doc["data_type"], doc["type_source"], doc["name"]) == ("RECORD", "sdo-info", "Identity")
     code, doc = _json(cli, "list", "5")
-    assert code == 0 and doc["source"] == "sdo_info"
+    assert code == 0 and doc["source"] == "sdo-info"
     objects = {o["index"]: o for o in doc["objects"]}
     assert {0x1000, 0x1008, 0x1018, 0x1A00, 0x6040, 0x6041, 0x607F} <= set(objects)
     ident = objects[0x1018]
@@ -226,7 +233,7 @@ def test_a_whole_process_and_its_cache(tmp_path) -> None:
             timeout=120,
         )
         assert done.returncode == 0, done.stderr
-        assert done.stdout == "5 0x1000:00  Device type  UNSIGNED32 = 131474 (0x20192)\n"
+        assert done.stdout == "5 0x1000:00  Device type  UNSIGNED32 = 131474 (0x00020192)\n"
     assert len(list((tmp_path / "cache").glob("*.eni.pickle"))) == 1
 
 

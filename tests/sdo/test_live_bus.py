@@ -14,6 +14,10 @@ not match", CiA 301), the code every backend and the CANopen stacks give.
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 
@@ -145,12 +149,13 @@ def test_the_three_aborts(bus, backend) -> None:
 
 def test_complete_access_and_list(bus, backend) -> None:
     identity = value(bus, backend, "read", "5", "0x1018", "--complete")
-    assert identity["complete_access"] and identity["value"][0] == {"subindex": 0, "value": 4}
-    assert identity["value"][1] == {"subindex": 1, "value": _eni().slaves[4].identity.vendor_id}
+    assert identity["complete_access"] and identity["value"][0]["value"] == 4
+    assert identity["value"][1]["value"] == _eni().slaves[4].identity.vendor_id
+    assert identity["value"][1]["data_type"] == "UNSIGNED32"
     code, out, err = sdo(bus, backend, "list", "5", "-f", "json")
     assert code == 0, err
     doc = json_of(out)
-    assert doc["source"] == "sdo_info"
+    assert doc["source"] == "sdo-info"
     indexes = {o["index"] for o in doc["objects"]}
     assert {0x1000, 0x1008, 0x1018, 0x6040, 0x6041} <= indexes
     entry = next(o for o in doc["objects"] if o["index"] == 0x6041)["entries"][0]
@@ -194,13 +199,31 @@ SAME = (
 )
 
 
+def _transfer(doc: dict) -> dict:
+    """What a master moved: the document without the name and where the type came from,
+    which differ where our master asks the slave's SDO Information (pysoem reads it only
+    whole) and pysoem's is CiA 301's or none; the type too unless --type gave it."""
+    dropped = ("name", "type_source")
+    if doc.get("type_source") != "--type":
+        dropped += ("data_type",)
+    kept = {k: v for k, v in doc.items() if k not in dropped}
+    if isinstance(kept.get("value"), list):
+        kept["value"] = [item["value"] for item in kept["value"]]
+    return kept
+
+
 def test_both_masters_print_the_same(bus) -> None:
     pytest.importorskip("pysoem")
     for args in SAME:
         ours = sdo(bus, "lolacli", *args, "-f", "json")
         theirs = sdo(bus, "soem", *args, "-f", "json")
         assert ours[0] == theirs[0], (args, ours, theirs)
-        assert json_of(ours[1]) == json_of(theirs[1]), args
+        assert _transfer(json_of(ours[1])) == _transfer(json_of(theirs[1])), args
+        typed = sdo(bus, "lolacli", *args, "--eni", str(LOLA), "-f", "json")
+        by_soem = sdo(bus, "soem", *args, "--eni", str(LOLA), "-f", "json")
+        mine, soem = json_of(typed[1]), json_of(by_soem[1])
+        if mine.get("type_source") == "eni":  # the same source, the same words
+            assert mine == soem, args
     ours_list = sdo(bus, "lolacli", "list", "22", "-f", "json")
     theirs_list = sdo(bus, "soem", "list", "22", "-f", "json")
     assert ours_list[0] == theirs_list[0] == 0
@@ -230,3 +253,66 @@ def test_a_bus_that_does_not_answer_is_exit_4(silent, backend) -> None:
     assert code == 4, err
     assert err.startswith("lolacli: error:") and err.count("\n") == 1
     assert time.monotonic() - t0 < 60
+
+
+def _has_socket(pid: int) -> bool:
+    """Whether the process has opened a socket (ours: the raw socket on the bus)."""
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except FileNotFoundError:
+        return False
+    for fd in fds:
+        try:
+            if os.readlink(f"/proc/{pid}/fd/{fd}").startswith("socket:"):
+                return True
+        except OSError:  # closed meanwhile
+            continue
+    return False
+
+
+@pytest.mark.parametrize(
+    ("command", "signum"),
+    [
+        (("list", "5"), signal.SIGINT),
+        (("read", "5", "0x1000"), signal.SIGTERM),
+        (("check", "CHECK"), signal.SIGINT),
+    ],
+    ids=["list", "read", "check"],
+)
+def test_a_stop_while_the_bus_does_not_answer(silent, tmp_path, command, signum) -> None:
+    """Our master waiting on a bus where nothing answers (each frame up to 50 ms, sent
+    again for --timeout 30 s): Ctrl-C or SIGTERM ends it within a second, exit 130/143;
+    ``sdo check`` still reports (no item done)."""
+    check = tmp_path / "drive5.yaml"
+    check.write_text("slave: 5\nreads:\n  - {object: '0x1000', expect: 0x00020192}\n")
+    args = [str(check) if a == "CHECK" else a for a in command]
+    argv = [sys.executable, "-m", "lolacli", "sdo", *args, "--iface", silent.master]
+    proc = subprocess.Popen(
+        silent.command(*argv, "--eni", str(LOLA), "--timeout", "30"),
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not _has_socket(proc.pid) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.5)  # into the frames' waits
+        assert proc.poll() is None
+        start = time.monotonic()
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    took = time.monotonic() - start
+    name = signal.Signals(signum).name
+    assert proc.returncode == 128 + signum and took < 1.0, (took, err)
+    assert "Traceback" not in err
+    if command[0] == "check":
+        assert out == f"stopped by {name} after 0 checks of 1: 0 passed, 0 failed\n"
+    else:
+        assert out == "" and err == f"lolacli: stopped by {name}\n"

@@ -110,7 +110,7 @@ def test_sdo_information_in_fragments() -> None:
         "Serial number",
     ]
     listed = b.dictionary()
-    assert listed is not None and listed.source == "sdo_info"
+    assert listed is not None and listed.source == "sdo-info"
     assert listed.entry(0x6041, 0) is not None and listed.entry(0x6041, 0).access == "ro"
 
 

@@ -65,12 +65,12 @@ def test_typed_reads_from_the_eds(network) -> None:
 def test_types_without_a_dictionary(network) -> None:
     imu = network.client(IMU_NODE)
     standard = read(imu, 0x1018, 2)  # CiA 301 identity: known without an EDS
-    assert (standard.value, standard.type_source) == (0xC11, "standard")
+    assert (standard.value, standard.type_source) == (0xC11, "cia301")
     guessed = read(imu, 0x2000, 0)
-    assert (guessed.value, guessed.data_type, guessed.type_source) == (1000, "UNSIGNED16", "length")
-    assert "guessed" in guessed.note
+    assert (guessed.value, guessed.data_type, guessed.type_source) == (1000, "UNSIGNED16", "guess")
+    assert "typed as UNSIGNED16 from its 2 bytes; give --type to choose" in guessed.note
     explicit = read(imu, 0x6010, 1, data_type=DataType.REAL32)
-    assert explicit.type_source == "option" and isinstance(explicit.value, float)
+    assert explicit.type_source == "--type" and isinstance(explicit.value, float)
     text = read(imu, 0x2100, 0)  # printable bytes of a length no number has
     assert (text.value, text.data_type) == ("LOLA-IMU-0001", "VISIBLE_STRING")
 
@@ -144,7 +144,7 @@ def test_cli_read_json_and_human(cli, channel, gateway) -> None:
     assert bytes.fromhex(doc["raw_hex"]) == b"LOLA IMU (CAN gateway)"
     code, out, _ = cli("sdo", "read", "16", "1018:02", *_can(channel))
     assert code == 0
-    assert "0x1018:02" in out and "UNSIGNED32 = 3089 (0xC11)" in out
+    assert "0x1018:02" in out and "UNSIGNED32 = 3089 (0x00000C11)" in out
 
 
 def test_cli_abort_exit_1_human_and_json(cli, channel, gateway) -> None:
