@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from lolacli.errors import UsageError
-from lolacli.text import plural, station
+from lolacli.text import station
 from lolacli.wire.datatypes import parse_int
 
 if TYPE_CHECKING:  # the ENI modules load only where an ENI is read (start-up time)
@@ -84,14 +84,17 @@ def slave_refs(eni: Eni) -> tuple[SlaveRef, ...]:
     return tuple(SlaveRef(s.position, s.station_address, s.name, s.identity) for s in eni.slaves)
 
 
-def resolve_slave(spec: str, eni: Eni) -> SlaveRef:
+def resolve_slave(spec: str | int, eni: Eni) -> SlaveRef:
     """The ENI slave that SLAVE names (position, ``@station`` or name); UsageError if none."""
     return resolve_ref(spec, slave_refs(eni), source=eni.source or "the ENI")
 
 
-def resolve_ref(spec: str, slaves: Sequence[SlaveRef], *, source: str = "the bus") -> SlaveRef:
-    """The slave of ``slaves`` that SLAVE names; UsageError with the choices if none."""
-    text = spec.strip()
+def resolve_ref(
+    spec: str | int, slaves: Sequence[SlaveRef], *, source: str = "the bus"
+) -> SlaveRef:
+    """The slave of ``slaves`` that SLAVE names (a position, also as an int; ``@station``;
+    a name); UsageError with the choices if none."""
+    text = str(spec).strip()
     if not text:
         raise UsageError("SLAVE is empty: give a position, @station address or name")
     if text.startswith("@"):
@@ -103,13 +106,13 @@ def resolve_ref(spec: str, slaves: Sequence[SlaveRef], *, source: str = "the bus
             if s.station_address == address:
                 return s
         raise UsageError(f"no slave with station address {station(address)} in {source}")
-    if text.isdigit():
+    if text.isdigit() or (text[:1] in "+-" and text[1:].isdigit()):
         position = int(text)
         for s in slaves:
             if s.position == position:
                 return s
         raise UsageError(
-            f"no slave at position {position} in {source} ({plural(len(slaves), 'slave')}; "
+            f"no slave at position {position} in {source} (positions 1 to {len(slaves)}; "
             "a station address is written @ADDR)"
         )
     return _by_name(text, slaves, source)
@@ -133,10 +136,10 @@ def _by_name(text: str, slaves: Sequence[SlaveRef], source: str) -> SlaveRef:
     raise UsageError(f"no slave named {text!r} in {source}")
 
 
-def parse_node_id(spec: str) -> int:
+def parse_node_id(spec: str | int) -> int:
     """A CANopen node ID (1..127) from SLAVE or ``--node``."""
     try:
-        node = parse_int(spec, "node ID")
+        node = parse_int(str(spec), "node ID")
     except ValueError:
         raise UsageError(f"{spec!r} is not a CANopen node ID (1..127)") from None
     if not 1 <= node <= 127:

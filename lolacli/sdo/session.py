@@ -76,7 +76,7 @@ class Target:
 class Session:
     """An open transport. :meth:`target` resolves SLAVE; :meth:`close` releases it all."""
 
-    def target(self, spec: str) -> Target:
+    def target(self, spec: str | int) -> Target:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -109,7 +109,7 @@ class CanSession(Session):
             **options.can_options,
         )
 
-    def target(self, spec: str) -> Target:
+    def target(self, spec: str | int) -> Target:
         node = parse_node_id(spec)
         if self.options.node is not None and self.options.node != node:
             raise UsageError(
@@ -139,7 +139,7 @@ class SoemSession(Session):
         self.esi = [load_esi(p) for p in options.esi]
         self.bus = SoemBus(options.iface, timeout_s=options.timeout_s)
 
-    def target(self, spec: str) -> Target:
+    def target(self, spec: str | int) -> Target:
         from lolacli.sdo.dictionary import from_eni
         from lolacli.sdo.files import esi_dictionary
 
@@ -153,7 +153,7 @@ class SoemSession(Session):
         dictionaries = [esi_dictionary(self.esi, identity) if self.esi else None]
         if self.eni is not None:
             dictionaries.append(from_eni(self.eni.slaves[ref.position - 1], self.eni.source))
-        return Target(spec.strip(), client, tuple(d for d in dictionaries if d is not None))
+        return Target(str(spec).strip(), client, tuple(d for d in dictionaries if d is not None))
 
     def close(self) -> None:
         self.bus.close()
@@ -192,7 +192,7 @@ class LolaSession(Session):
                 timeout_s=options.timeout_s,
             )
 
-    def target(self, spec: str) -> Target:
+    def target(self, spec: str | int) -> Target:
         from lolacli.sdo.dictionary import from_eni
 
         ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
@@ -204,7 +204,7 @@ class LolaSession(Session):
             dictionaries.append(esi_dictionary(self.esi, ref.identity))
         eni = self.bus.eni
         dictionaries.append(from_eni(eni.slaves[ref.position - 1], eni.source or ""))
-        return Target(spec.strip(), client, tuple(d for d in dictionaries if d is not None))
+        return Target(str(spec).strip(), client, tuple(d for d in dictionaries if d is not None))
 
     def close(self) -> None:
         self.bus.close()
