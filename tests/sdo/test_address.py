@@ -43,7 +43,7 @@ def test_resolve_slave_over_the_lola_eni() -> None:
     assert resolve_slave("gateway", eni) == gateway  # a unique part
     with pytest.raises(UsageError, match="ambiguous"):
         resolve_slave("Joint", eni)
-    with pytest.raises(UsageError, match="position 26 .*25 slaves"):
+    with pytest.raises(UsageError, match="position 26 .*positions 1 to 25"):
         resolve_slave("26", eni)
     with pytest.raises(UsageError, match=r"station address 0x1001 \(4097\)"):
         resolve_slave("@0x1001", eni)
