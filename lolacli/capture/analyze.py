@@ -272,7 +272,16 @@ def _zeros(n: int, py: bool) -> Any:
 
 
 def _np(values: Any) -> np.ndarray:
+    """int64 numpy view of a scanner array (a copy only for the Python engine's lists)."""
     return np.asarray(values, dtype=np.int64)
+
+
+def _rows(out: Any, n: int) -> np.ndarray:
+    """A copy of the first ``n`` values of a scanner output array. The kernel writes the
+    next rows from 0 again after each drain, so a view kept past it would be overwritten
+    (the c and numba engines' outputs are numpy arrays; the Python engine's lists copy
+    anyway)."""
+    return np.array(out[:n], dtype=np.int64)
 
 
 class _Pass:
@@ -487,8 +496,8 @@ class _Pass:
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
-            rt = _np(self.o_rt[:n])
-            meta = _np(self.o_rtfr[:n])
+            rt = _rows(self.o_rt, n)
+            meta = _rows(self.o_rtfr, n)
             cyc = (meta & 1) != 0
             self.rt_cyclic.append(_compact(rt[cyc]))
             self.rt_other.append(_compact(rt[~cyc]))
@@ -497,13 +506,13 @@ class _Pass:
                 self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
             if self.keep_series:
                 self.rt_series.append(rt)
-                self.rt_ts.append(_np(self.o_rtts[:n]))
+                self.rt_ts.append(_rows(self.o_rtts, n))
         n = int(st[S.S_N_PERIOD])
         if n:
-            self.periods.append(_compact(_np(self.o_period[:n])))
+            self.periods.append(_compact(_rows(self.o_period, n)))
         n = int(st[S.S_N_BURST])
         if n:
-            counts = np.bincount(_np(self.o_burst[:n]))
+            counts = np.bincount(_rows(self.o_burst, n))
             if counts.size > self.bursts.size:
                 counts[: self.bursts.size] += self.bursts
                 self.bursts = counts
@@ -511,10 +520,10 @@ class _Pass:
                 self.bursts[: counts.size] += counts
         n = int(st[S.S_N_DC])
         if n:
-            self.dc_values.append(_np(self.o_dc[:n]))
+            self.dc_values.append(_rows(self.o_dc, n))
         n = int(st[S.S_N_EVICT])
         if n:
-            self.evicted.append(_np(self.o_evict[: n * S.EVICT_COLS]).reshape(n, S.EVICT_COLS))
+            self.evicted.append(_rows(self.o_evict, n * S.EVICT_COLS).reshape(n, S.EVICT_COLS))
         n = int(st[S.S_N_CFG])
         for r in range(n):
             frame, q, cmd, adp, ado, ln = (int(v) for v in
