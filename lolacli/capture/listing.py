@@ -210,13 +210,19 @@ class DatagramFilter:
 def list_frames(
     path: str | Path, *, count: int | None = None, expr: str | None = None
 ) -> Iterator[ListedFrame]:
-    """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``."""
+    """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``.
+    A bad ``count`` or ``expr`` and a file that is no capture raise here, before the
+    first frame is asked for."""
     if count is not None and count < 0:
         raise UsageError(f"count {count}: must be >= 0")
-    flt = DatagramFilter(expr)
+    return _frames(CaptureReader(path), DatagramFilter(expr), count)
+
+
+def _frames(reader: CaptureReader, flt: DatagramFilter, count: int | None
+            ) -> Iterator[ListedFrame]:
     shown = 0
     first_ns: int | None = None
-    for frame in CaptureReader(path):
+    for frame in reader:
         if first_ns is None:
             first_ns = frame.timestamp_ns
         if count is not None and shown >= count:
