@@ -57,7 +57,7 @@ from lolacli.errors import CaptureError
 from lolacli.findings import Finding, Findings, failed, first
 from lolacli.findings import verdict as verdict_of
 from lolacli.interrupt import never
-from lolacli.text import plural
+from lolacli.text import plural, station
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
@@ -655,7 +655,7 @@ class _Pass:
         for t in self.sdo.aborts():
             findings.add("sdo-abort", WARNING,
                          f"SDO abort 0x{t.abort_code or 0:08X} ({t.to_dict()['abort_text']}) "
-                         f"on 0x{t.index:04X}:{t.subindex:02X} of slave 0x{t.slave:04X}",
+                         f"on 0x{t.index:04X}:{t.subindex:02X} of slave {station(t.slave)}",
                          [t.end_frame], 1)
         return CaptureReport(
             path=str(self.reader.path),
@@ -722,17 +722,20 @@ class _Pass:
             if self.cut_short:
                 out.add("cut-short", WARNING,
                         f"the file ends inside a record at offset {self.stopped_at} (the "
-                        f"capture was cut short); its last {unread} bytes are not analysed",
+                        f"capture was cut short); its last {plural(unread, 'byte')} are not "
+                        "analysed",
                         count=1)
             else:
                 out.add("unreadable", FAILURE,
-                        f"the file is damaged at offset {self.stopped_at}: the {unread} bytes "
-                        f"after it (of {total}) could not be read", count=1)
+                        f"the file is damaged at offset {self.stopped_at}: the "
+                        f"{plural(unread, 'byte')} after it (of {total}) could not be read",
+                        count=1)
         malformed = st[S.S_MALFORMED] - (1 if self.stopped_at is not None else 0)
         if malformed > 0:
             frames = st[S.S_MALF_F0:S.S_MALF_F0 + min(malformed, S.BACK_KEEP)]
             out.add("malformed", WARNING,
-                    f"{malformed} frames could not be decoded (truncated or damaged)",
+                    f"{plural(malformed, 'frame')} could not be decoded (truncated or "
+                    "damaged)",
                     frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
@@ -761,11 +764,13 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
             values = ", ".join(f"{o.wkc} ×{o.count}" for o in d.observed if o.wkc != d.expected)
             out.add("wkc-mismatch", FAILURE if total > max_wkc else WARNING,
                     f"{d.name()}: WKC differs from the expected {d.expected} in "
-                    f"{d.mismatches} of {d.returns} returns (seen: {values}; expected: "
+                    f"{d.mismatches} of {plural(d.returns, 'return')} (seen: {values}; "
+                    "expected: "
                     f"{d.note})", d.mismatch_frames, d.mismatches)
         if counted and d.bring_up:
             out.add("wkc-bring-up", INFO,
-                    f"{d.name()}: {d.bring_up} returns below {d.expected} before it first "
+                    f"{d.name()}: {plural(d.bring_up, 'return')} below {d.expected} before it"
+                    " first "
                     "reached it (the bus coming up)", (), d.bring_up)
         if d.expected is None:
             out.add("wkc-unknown", WARNING, f"{d.name()}: {d.note}",
@@ -784,8 +789,9 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
     if missing:
         names = ", ".join(f"{s.position} {s.name}" for s in missing[:5])
         out.add("eni-slave-unmapped", FAILURE,
-                f"{len(missing)} ENI slaves with process data have no FMMU in the master's "
-                f"layout (not in the bus, or not configured): {names}", (), len(missing))
+                f"{plural(len(missing), 'ENI slave')} with process data "
+                f"{'has' if len(missing) == 1 else 'have'} no FMMU in the master's layout (not "
+                f"in the bus, or not configured): {names}", (), len(missing))
 
 
 def _slave_count_finding(out: Findings, eni: Eni | None, brd_wkc_max: int) -> None:
@@ -795,8 +801,8 @@ def _slave_count_finding(out: Findings, eni: Eni | None, brd_wkc_max: int) -> No
         return
     fewer = brd_wkc_max < len(eni.slaves)
     out.add("eni-slave-count", FAILURE,
-            f"the bus answered broadcasts with at most {brd_wkc_max} slaves, the ENI has "
-            f"{len(eni.slaves)}" + (" (slaves missing, or a different bus)" if fewer
+            f"the bus answered broadcasts with at most {plural(brd_wkc_max, 'slave')}, the "
+            f"ENI has {len(eni.slaves)}" + (" (slaves missing, or a different bus)" if fewer
                                     else " (extra slaves, or a different ENI)"),
             (), abs(len(eni.slaves) - brd_wkc_max))
 
@@ -806,7 +812,7 @@ def _al_findings(out: Findings, reads: list[AlStatusRead], layout: MasterLayout)
     for r in reads:
         request = layout.requested(None if r.broadcast else r.station)
         asked_op = request is not None and request.state == 8 and request.frame < r.last_frame
-        who = "the bus (BRD)" if r.broadcast else f"slave 0x{r.station:04X}"
+        who = "the bus (BRD)" if r.broadcast else f"slave {station(r.station)}"
         pos = None if r.broadcast else layout.position_of(r.station)
         if pos is not None:
             who += f" (position {pos + 1})"

@@ -173,11 +173,14 @@ def list_cmd(
 ) -> None:
     """One line per EtherCAT frame and datagram (number, time, direction, command, index,
     address, length, WKC), mailbox/CoE/SDO decoded."""
-    from lolacli.capture.listing import format_line, list_frames
+    import shutil
+
+    from lolacli.capture.listing import format_lines, list_frames
     from lolacli.interrupt import stop_signals
 
     frames = list_frames(file, count=count, expr=expr)
     head = {"schema": "lolacli.capture-list/1", "file": str(file)}
+    width = shutil.get_terminal_size((80, 24)).columns  # $COLUMNS, the terminal, or 80
     json_out = _JsonFrames(head) if fmt is OutputFormat.json else None
     out = sys.stdout
     # Ctrl-C or SIGTERM: the frames listed so far stay listed (JSON: a whole document, so
@@ -189,7 +192,8 @@ def list_cmd(
                     json_out.add(frame.to_dict())
                 else:
                     for i, d in enumerate(frame.datagrams):
-                        out.write(format_line(frame, d, i == 0) + "\n")
+                        for line in format_lines(frame, d, i == 0, width):
+                            out.write(line + "\n")
                 if stop():
                     break
             if json_out is not None:
