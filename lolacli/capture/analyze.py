@@ -56,6 +56,8 @@ from lolacli.capture.wkc import WkcVerdict, eni_slaves_not_mapped, verdict
 from lolacli.errors import CaptureError
 from lolacli.findings import Finding, Findings, failed, first
 from lolacli.findings import verdict as verdict_of
+from lolacli.interrupt import never
+from lolacli.text import plural, station
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
@@ -64,6 +66,11 @@ if TYPE_CHECKING:
 
 SCHEMA = "lolacli.capture/1"
 CHUNK_BYTES = 8 * 1024 * 1024
+#: The scanner is called on at most this much of a chunk at a time, so that between two
+#: calls (where a stop is polled and progress reported) no more than ~10 ms pass with the
+#: compiled engines and ~50 ms with the Python engine (about 5 MB/s).
+SLICE_BYTES = 1024 * 1024
+SLICE_BYTES_PYTHON = 256 * 1024
 OUT_ROWS = 1 << 16
 PAIR_SLOTS = 1 << 12
 STREAM_SLOTS = 1 << 10
@@ -105,6 +112,10 @@ class CaptureReport:
     sdo: SdoTracker
     time_span_ns: int
     interfaces: list[Interface] = field(default_factory=list)
+    # stopped (should_stop) before the end of the file: the figures cover the first
+    # read_bytes bytes
+    interrupted: bool = False
+    read_bytes: int | None = None
     # the series themselves, with keep_series (for plots): round trips in return order,
     # their return timestamps, cycle periods
     round_trip_ns: np.ndarray | None = None
@@ -133,6 +144,7 @@ class CaptureReport:
             "format": self.format,
             "engine": self.engine,
             "verdict": verdict_of(self.findings),
+            "interrupted": self.interrupted,
             "frames_total": c["frames_total"],
             "ecat_frames": c["ecat_frames"],
             "non_ecat_frames": c["non_ecat_frames"],
@@ -236,12 +248,15 @@ def analyze_file(
     timeout_ns: int | None = None,
     max_lost: int = 0,
     max_wkc_mismatches: int = 0,
+    should_stop: Callable[[], bool] = never,
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
     ``engine`` is ``"auto"`` (C when built, else numba when installed, except for files
     under 2 MB), ``"c"``, ``"numba"`` or ``"python"``; all give identical results.
-    ``progress(done_bytes, total_bytes)`` is called once per chunk.
+    ``progress(done_bytes, total_bytes)`` is called after every slice of the file
+    (:data:`SLICE_BYTES`), and ``should_stop()`` polled there: when it says stop, the
+    report covers the frames read so far (``interrupted``, a finding ``interrupted``).
     ``keep_series`` keeps the return timestamp of every pair (for plots).
     ``timeout_ns`` replaces the in-flight timeout (10 x the median round trip, >= 1 ms);
     ``max_lost`` and ``max_wkc_mismatches`` are how many lost frames and WKC mismatches
@@ -252,19 +267,25 @@ def analyze_file(
     eng = choose_engine(engine, os.path.getsize(reader.path))
 
     def scan_pass(dirmode: int, mode: int, sig: int) -> _Pass:
-        p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress)
+        p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress,
+                  should_stop)
         p.run()
         return p
 
+    # a later pass is the first one read again with other rules; once a pass was stopped
+    # no other starts, and the stopped one is kept when its rules would be
     run = scan_pass(S.DIR_AUTO, S.MODE_LOGICAL, 0)
+    stopped_at = run.stopped_by_signal_at
     st = run.st
-    if st[S.S_ECAT] > 0 and (st[S.S_OUT] == 0 or st[S.S_RET] == 0):
+    if stopped_at is None and st[S.S_ECAT] > 0 and (st[S.S_OUT] == 0 or st[S.S_RET] == 0):
         inferred = scan_pass(S.DIR_INFER, S.MODE_LOGICAL, 0)
+        stopped_at = inferred.stopped_by_signal_at
         if inferred.st[S.S_PAIRS] > 0:
             run = inferred
-    if run.st[S.S_LOGICAL_OUT] == 0 and run.st[S.S_OUT] > 0:
+    if stopped_at is None and run.st[S.S_LOGICAL_OUT] == 0 and run.st[S.S_OUT] > 0:
         run = scan_pass(int(run.st[S.S_DIRMODE]), S.MODE_SIGNATURE, run.top_stream())
-    return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches)
+        stopped_at = run.stopped_by_signal_at
+    return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
 
 
 def _zeros(n: int, py: bool) -> Any:
@@ -272,7 +293,16 @@ def _zeros(n: int, py: bool) -> Any:
 
 
 def _np(values: Any) -> np.ndarray:
+    """int64 numpy view of a scanner array (a copy only for the Python engine's lists)."""
     return np.asarray(values, dtype=np.int64)
+
+
+def _rows(out: Any, n: int) -> np.ndarray:
+    """A copy of the first ``n`` values of a scanner output array. The kernel writes the
+    next rows from 0 again after each drain, so a view kept past it would be overwritten
+    (the c and numba engines' outputs are numpy arrays; the Python engine's lists copy
+    anyway)."""
+    return np.array(out[:n], dtype=np.int64)
 
 
 class _Pass:
@@ -288,6 +318,7 @@ class _Pass:
         keep_series: bool,
         chunk_bytes: int,
         progress: Progress | None,
+        should_stop: Callable[[], bool] = never,
     ) -> None:
         from lolacli.capture.sdo import SdoTracker
 
@@ -298,6 +329,8 @@ class _Pass:
         self.keep_series = keep_series
         self.chunk_bytes = max(chunk_bytes, 1 << 16)
         self.progress = progress
+        self.should_stop = should_stop
+        self.stopped_by_signal_at: int | None = None  # file offset where should_stop stopped
         py = self.py
         self.st = _zeros(S.S_SIZE, py)
         self.st[S.S_MODE] = mode
@@ -379,22 +412,34 @@ class _Pass:
         total = os.path.getsize(path)
         buf = np.empty(self.chunk_bytes, np.uint8)
         fmt = self.reader.header.format
+        slice_bytes = SLICE_BYTES_PYTHON if self.py else SLICE_BYTES
         with open(path, "rb") as f:
             base = 0  # file offset of buf[0]
             pos = PCAP_HEADER_BYTES if fmt == FORMAT_PCAP else 0
             f.seek(0)
             end, eof = _fill(f, buf, 0)
+            view: Any = None
+            whole = False  # the next call gets the rest of the buffer (a record > a slice)
             while True:
-                view = buf[:end].tobytes() if self.py else buf
+                if view is None:
+                    view = buf[:end].tobytes() if self.py else buf
+                stop_at = end if whole else min(end, pos + slice_bytes)
+                started = pos
                 pos, status = self.k.scan(
-                    view, pos, end, eof, fmt, self.big, self.reader.header.nanoseconds,
+                    view, pos, stop_at, eof and stop_at == end, fmt, self.big,
+                    self.reader.header.nanoseconds,
                     self.ifs, self.n_if, self.st, self.cmd_counts, self.dg,
                     self.pk, self.pn, self.pv, self.sk, self.sc, self.wk, self.wn, self.wv,
                     self.o_rt, self.o_rtts, self.o_rtfr, self.o_period, self.o_burst,
                     self.o_dc, self.o_mbx, self.o_cfg, self.o_evict,
                 )
                 self._drain(view)
+                if self.progress is not None:
+                    self.progress(min(base + pos, total), total)
                 if status == S.ST_DONE:
+                    break
+                if self.should_stop():
+                    self.stopped_by_signal_at = base + pos
                     break
                 if status == S.ST_CORRUPT:
                     self._stop(buf, pos, end, eof, base)
@@ -412,17 +457,20 @@ class _Pass:
                         break
                 elif status == S.ST_FLUSH:
                     continue
+                elif stop_at < end:  # the end of a slice, not of the buffer
+                    whole = pos == started
+                    continue
                 # need more bytes: keep the unread tail, read behind it
+                whole = False
                 if eof:
                     break
                 buf, end, eof = _shift_and_fill(f, buf, pos, end)
+                view = None
                 base += pos
                 pos = 0
-                if self.progress is not None:
-                    self.progress(min(base, total), total)
         self.k.finish(self.st, self.o_burst)
         self._drain(b"")
-        if self.progress is not None:
+        if self.progress is not None and self.stopped_by_signal_at is None:
             self.progress(total, total)
         if self.interfaces and not any(i.analysed for i in self.interfaces):
             types = sorted({i.link_type for i in self.interfaces})
@@ -487,8 +535,8 @@ class _Pass:
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
-            rt = _np(self.o_rt[:n])
-            meta = _np(self.o_rtfr[:n])
+            rt = _rows(self.o_rt, n)
+            meta = _rows(self.o_rtfr, n)
             cyc = (meta & 1) != 0
             self.rt_cyclic.append(_compact(rt[cyc]))
             self.rt_other.append(_compact(rt[~cyc]))
@@ -497,13 +545,13 @@ class _Pass:
                 self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
             if self.keep_series:
                 self.rt_series.append(rt)
-                self.rt_ts.append(_np(self.o_rtts[:n]))
+                self.rt_ts.append(_rows(self.o_rtts, n))
         n = int(st[S.S_N_PERIOD])
         if n:
-            self.periods.append(_compact(_np(self.o_period[:n])))
+            self.periods.append(_compact(_rows(self.o_period, n)))
         n = int(st[S.S_N_BURST])
         if n:
-            counts = np.bincount(_np(self.o_burst[:n]))
+            counts = np.bincount(_rows(self.o_burst, n))
             if counts.size > self.bursts.size:
                 counts[: self.bursts.size] += self.bursts
                 self.bursts = counts
@@ -511,10 +559,10 @@ class _Pass:
                 self.bursts[: counts.size] += counts
         n = int(st[S.S_N_DC])
         if n:
-            self.dc_values.append(_np(self.o_dc[:n]))
+            self.dc_values.append(_rows(self.o_dc, n))
         n = int(st[S.S_N_EVICT])
         if n:
-            self.evicted.append(_np(self.o_evict[: n * S.EVICT_COLS]).reshape(n, S.EVICT_COLS))
+            self.evicted.append(_rows(self.o_evict, n * S.EVICT_COLS).reshape(n, S.EVICT_COLS))
         n = int(st[S.S_N_CFG])
         for r in range(n):
             frame, q, cmd, adp, ado, ln = (int(v) for v in
@@ -560,7 +608,7 @@ class _Pass:
 
     # --- result ----------------------------------------------------------------------
     def report(self, eni: Eni | None, given_timeout_ns: int | None, max_lost: int,
-               max_wkc: int) -> CaptureReport:
+               max_wkc: int, stopped_at: int | None = None) -> CaptureReport:
         st = [int(v) for v in self.st]
         by_cmd = {mnemonic(c): int(n) for c, n in enumerate(self.cmd_counts) if n}
         counts = {
@@ -590,6 +638,12 @@ class _Pass:
         findings = Findings()
         fate = self._fate(all_rt, rt_stats, given_timeout_ns, st[S.S_END_TS])
         rule = self._direction_rule(st)
+        if stopped_at is not None:
+            total = os.path.getsize(self.reader.path)
+            findings.add("interrupted", WARNING,
+                         f"the analysis was stopped after {stopped_at:,} of {total:,} bytes "
+                         f"({100 * stopped_at / max(total, 1):.0f} %): every figure covers "
+                         f"the first {plural(st[S.S_FRAMES], 'frame')} only", count=1)
         frame_findings(findings, counts, fate, max_lost, rule)
         unusable = self._timestamps(findings, all_rt, st)
         self._file_findings(findings, st)
@@ -601,7 +655,7 @@ class _Pass:
         for t in self.sdo.aborts():
             findings.add("sdo-abort", WARNING,
                          f"SDO abort 0x{t.abort_code or 0:08X} ({t.to_dict()['abort_text']}) "
-                         f"on 0x{t.index:04X}:{t.subindex:02X} of slave 0x{t.slave:04X}",
+                         f"on 0x{t.index:04X}:{t.subindex:02X} of slave {station(t.slave)}",
                          [t.end_frame], 1)
         return CaptureReport(
             path=str(self.reader.path),
@@ -624,6 +678,8 @@ class _Pass:
             sdo=self.sdo,
             time_span_ns=st[S.S_END_TS] - st[S.S_FIRST_TS],
             interfaces=list(self.interfaces),
+            interrupted=stopped_at is not None,
+            read_bytes=stopped_at,
             round_trip_ns=_take(self.rt_series) if keep else None,
             round_trip_at_ns=_take(self.rt_ts) if keep else None,
             cycle_period_ns=_take(self.periods) if keep else None,
@@ -666,17 +722,20 @@ class _Pass:
             if self.cut_short:
                 out.add("cut-short", WARNING,
                         f"the file ends inside a record at offset {self.stopped_at} (the "
-                        f"capture was cut short); its last {unread} bytes are not analysed",
+                        f"capture was cut short); its last {plural(unread, 'byte')} are not "
+                        "analysed",
                         count=1)
             else:
                 out.add("unreadable", FAILURE,
-                        f"the file is damaged at offset {self.stopped_at}: the {unread} bytes "
-                        f"after it (of {total}) could not be read", count=1)
+                        f"the file is damaged at offset {self.stopped_at}: the "
+                        f"{plural(unread, 'byte')} after it (of {total}) could not be read",
+                        count=1)
         malformed = st[S.S_MALFORMED] - (1 if self.stopped_at is not None else 0)
         if malformed > 0:
             frames = st[S.S_MALF_F0:S.S_MALF_F0 + min(malformed, S.BACK_KEEP)]
             out.add("malformed", WARNING,
-                    f"{malformed} frames could not be decoded (truncated or damaged)",
+                    f"{plural(malformed, 'frame')} could not be decoded (truncated or "
+                    "damaged)",
                     frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
@@ -705,11 +764,13 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
             values = ", ".join(f"{o.wkc} ×{o.count}" for o in d.observed if o.wkc != d.expected)
             out.add("wkc-mismatch", FAILURE if total > max_wkc else WARNING,
                     f"{d.name()}: WKC differs from the expected {d.expected} in "
-                    f"{d.mismatches} of {d.returns} returns (seen: {values}; expected: "
+                    f"{d.mismatches} of {plural(d.returns, 'return')} (seen: {values}; "
+                    "expected: "
                     f"{d.note})", d.mismatch_frames, d.mismatches)
         if counted and d.bring_up:
             out.add("wkc-bring-up", INFO,
-                    f"{d.name()}: {d.bring_up} returns below {d.expected} before it first "
+                    f"{d.name()}: {plural(d.bring_up, 'return')} below {d.expected} before it"
+                    " first "
                     "reached it (the bus coming up)", (), d.bring_up)
         if d.expected is None:
             out.add("wkc-unknown", WARNING, f"{d.name()}: {d.note}",
@@ -728,8 +789,9 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
     if missing:
         names = ", ".join(f"{s.position} {s.name}" for s in missing[:5])
         out.add("eni-slave-unmapped", FAILURE,
-                f"{len(missing)} ENI slaves with process data have no FMMU in the master's "
-                f"layout (not in the bus, or not configured): {names}", (), len(missing))
+                f"{plural(len(missing), 'ENI slave')} with process data "
+                f"{'has' if len(missing) == 1 else 'have'} no FMMU in the master's layout (not "
+                f"in the bus, or not configured): {names}", (), len(missing))
 
 
 def _slave_count_finding(out: Findings, eni: Eni | None, brd_wkc_max: int) -> None:
@@ -739,8 +801,8 @@ def _slave_count_finding(out: Findings, eni: Eni | None, brd_wkc_max: int) -> No
         return
     fewer = brd_wkc_max < len(eni.slaves)
     out.add("eni-slave-count", FAILURE,
-            f"the bus answered broadcasts with at most {brd_wkc_max} slaves, the ENI has "
-            f"{len(eni.slaves)}" + (" (slaves missing, or a different bus)" if fewer
+            f"the bus answered broadcasts with at most {plural(brd_wkc_max, 'slave')}, the "
+            f"ENI has {len(eni.slaves)}" + (" (slaves missing, or a different bus)" if fewer
                                     else " (extra slaves, or a different ENI)"),
             (), abs(len(eni.slaves) - brd_wkc_max))
 
@@ -750,7 +812,7 @@ def _al_findings(out: Findings, reads: list[AlStatusRead], layout: MasterLayout)
     for r in reads:
         request = layout.requested(None if r.broadcast else r.station)
         asked_op = request is not None and request.state == 8 and request.frame < r.last_frame
-        who = "the bus (BRD)" if r.broadcast else f"slave 0x{r.station:04X}"
+        who = "the bus (BRD)" if r.broadcast else f"slave {station(r.station)}"
         pos = None if r.broadcast else layout.position_of(r.station)
         if pos is not None:
             who += f" (position {pos + 1})"

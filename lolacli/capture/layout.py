@@ -20,6 +20,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass, field
 
+from lolacli.text import station as station_name
 from lolacli.wire.commands import Command
 from lolacli.wire.registers import (
     FMMU_BYTES,
@@ -46,7 +47,7 @@ class Target:
 
     def __str__(self) -> str:
         if self.kind == "station":
-            return f"station 0x{self.value:04X}"
+            return f"station {station_name(self.value)}"
         if self.kind == "position":
             return f"position {self.value + 1}"
         return "all slaves"

@@ -15,6 +15,7 @@ for a datagram to be listed (frames with no listed datagram are left out):
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,7 @@ from typing import Any
 
 from lolacli.capture.reader import CaptureReader, link_header
 from lolacli.errors import UsageError, WireError
+from lolacli.text import station
 from lolacli.wire.coe import CoeService, decode_coe_header
 from lolacli.wire.commands import LOGICAL, Command, mnemonic
 from lolacli.wire.frame import (
@@ -210,13 +212,19 @@ class DatagramFilter:
 def list_frames(
     path: str | Path, *, count: int | None = None, expr: str | None = None
 ) -> Iterator[ListedFrame]:
-    """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``."""
+    """The EtherCAT frames of a capture (at most ``count`` listed), filtered by ``expr``.
+    A bad ``count`` or ``expr`` and a file that is no capture raise here, before the
+    first frame is asked for."""
     if count is not None and count < 0:
         raise UsageError(f"count {count}: must be >= 0")
-    flt = DatagramFilter(expr)
+    return _frames(CaptureReader(path), DatagramFilter(expr), count)
+
+
+def _frames(reader: CaptureReader, flt: DatagramFilter, count: int | None
+            ) -> Iterator[ListedFrame]:
     shown = 0
     first_ns: int | None = None
-    for frame in CaptureReader(path):
+    for frame in reader:
         if first_ns is None:
             first_ns = frame.timestamp_ns
         if count is not None and shown >= count:
@@ -241,16 +249,35 @@ def list_frames(
             )
 
 
-def format_line(frame: ListedFrame, d: ListedDatagram, first: bool) -> str:
-    """One text line, like tshark's summary: number, time, direction, datagram."""
-    head = f"{frame.number:>7} {frame.time_s:>12.6f} {frame.direction:<3}" if first else " " * 24
+_CONFIGURED = ("FPRD", "FPWR", "FPRW", "FRMW")  # adp is a station address
+#: where a datagram's summary starts (after number, time and direction)
+HEAD_COLUMNS = 24
+
+
+def format_lines(frame: ListedFrame, d: ListedDatagram, first: bool, width: int = 80
+                 ) -> list[str]:
+    """The text of one datagram, like tshark's summary: number, time, direction (on the
+    frame's first datagram), command, index, address, length, WKC; then the mailbox
+    summary, on the same line when it fits in ``width`` columns, else on lines of its own
+    below, wrapped between words."""
+    head = (f"{frame.number:>7} {frame.time_s:>10.6f} s {frame.direction:<3}" if first
+            else " " * HEAD_COLUMNS)
     if d.logical_address is not None:
         where = f"lad=0x{d.logical_address:08X}"
+    elif d.cmd in _CONFIGURED:
+        where = f"adp={station(d.adp or 0)} ado=0x{d.ado or 0:04X}"
     else:
         where = f"adp=0x{d.adp or 0:04X} ado=0x{d.ado or 0:04X}"
-    text = f"{head} {d.cmd:<4} idx=0x{d.index:02X} {where} len={d.length_bytes:<4} wkc={d.wkc}"
-    return text + (f"  {d.info}" if d.info else "")
+    text = f"{head} {d.cmd:<4} idx=0x{d.index:02X} {where} {d.length_bytes:>4} B wkc={d.wkc}"
+    if not d.info:
+        return [text]
+    if len(text) + 2 + len(d.info) <= width:
+        return [f"{text}  {d.info}"]
+    indent = " " * (HEAD_COLUMNS + 1)
+    return [text, *textwrap.wrap(d.info, max(width, len(indent) + 20), initial_indent=indent,
+                                 subsequent_indent=indent, break_long_words=False,
+                                 break_on_hyphens=False)]
 
 
-__all__ = ["DatagramFilter", "ListedFrame", "describe_mailbox", "format_line", "list_frames",
+__all__ = ["DatagramFilter", "ListedFrame", "describe_mailbox", "format_lines", "list_frames",
            "mnemonic"]

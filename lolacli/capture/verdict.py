@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lolacli.findings import Findings, Severity
+from lolacli.text import number, plural
 
 FAILURE = Severity.FAILURE
 WARNING = Severity.WARNING
@@ -66,34 +67,37 @@ def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_l
     ecat, sent, back = counts["ecat_frames"], counts["outgoing_frames"], counts["returned_frames"]
     if ecat == 0:
         out.add("no-ethercat", FAILURE,
-                f"no EtherCAT frame among {counts['frames_total']} packets: wrong interface, "
-                "or a capture filter that dropped them?")
+                f"no EtherCAT frame among {plural(counts['frames_total'], 'packet')}: wrong "
+                "interface, or a capture filter that dropped them?")
         return
     if sent and not back:
         out.add("no-answer", FAILURE,
-                f"the bus never answered: {sent} frames sent, none came back (no slave "
-                "connected or powered, cable, or a capture of the master's sending side only)",
+                f"the bus never answered: {plural(sent, 'frame')} sent, none came back (no "
+                "slave connected or powered, cable, or a capture of the master's sending side "
+                "only)",
                 fate.lost if fate.lost.size else fate.in_flight, sent)
     if back and not sent:
         out.add("direction-unknown", WARNING,
-                f"all {back} frames look returned and none echoes another: the direction "
-                f"cannot be told ({direction_rule} rule); nothing is paired")
+                f"all {plural(back, 'frame')} look returned and none echoes another: the "
+                f"direction cannot be told ({direction_rule} rule); nothing is paired")
     lost = int(fate.lost.size)
     if lost:
         cyc = f", {fate.lost_cyclic} of them cyclic" if fate.lost_cyclic else ""
         out.add("lost", FAILURE if lost > max_lost else WARNING,
-                f"{lost} outgoing frames never came back{cyc} (threshold {max_lost}; a frame "
-                "can also be missing because the capture itself dropped it)",
+                f"{plural(lost, 'outgoing frame')} never came back{cyc} (threshold "
+                f"{max_lost}; a frame can also be missing because the capture itself dropped "
+                "it)",
                 fate.lost, lost)
     if fate.late:
         out.add("late", WARNING,
-                f"{fate.late} frames came back later than the timeout "
-                f"({fate.timeout_ns / 1000:g} µs, {fate.timeout_source}); counted apart from "
-                "lost frames", fate.late_frames, fate.late)
+                f"{plural(fate.late, 'frame')} came back later than the timeout "
+                f"({number(fate.timeout_ns / 1000, 'µs', 2)}, {fate.timeout_source}); counted "
+                "apart from lost frames", fate.late_frames, fate.late)
     if fate.in_flight.size:
         out.add("in-flight-at-end", INFO,
-                f"{fate.in_flight.size} frames sent within the last "
-                f"{fate.timeout_ns / 1000:g} µs of the capture had no answer yet (not lost)",
+                f"{plural(int(fate.in_flight.size), 'frame')} sent within the last "
+                f"{number(fate.timeout_ns / 1000, 'µs', 2)} of the capture had no answer yet "
+                "(not lost)",
                 fate.in_flight, int(fate.in_flight.size))
 
 
@@ -106,11 +110,13 @@ def timestamp_findings(
     unusable: list[str] = []
     if rt_zero:
         out.add("timestamps-quantised", WARNING,
-                f"{rt_zero} of {pairs} round trips are 0 µs: the capture's clock is coarser "
-                "than a round trip; round-trip statistics are unusable", rt_bad_frames, rt_zero)
+                f"{rt_zero} of {plural(pairs, 'round trip')} {'is' if rt_zero == 1 else 'are'}"
+                " 0 µs: the capture's clock is coarser than a round trip; round-trip statistics"
+                " are unusable", rt_bad_frames, rt_zero)
     if backwards:
         out.add("timestamps-backwards", WARNING,
-                f"timestamps go backwards {backwards} times; statistics that span those "
+                f"timestamps go backwards {plural(backwards, 'time')}; statistics that span "
+                "those "
                 "steps are unusable", backwards_frames, backwards)
     if rt_zero or rt_negative:
         unusable += ["round_trip_us", "round_trip_cyclic_us"]

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from lolacli.capture.layout import MasterLayout, Target, covered
+from lolacli.text import station as station_name
 from lolacli.wire.commands import (
     BROADCAST,
     READ_MULTIPLE_WRITES,
@@ -82,7 +83,8 @@ class DatagramVerdict:
             where = f"0x{self.address:08X}"
         else:
             ado, adp = self.address >> 16, self.address & 0xFFFF
-            where = f"0x{ado:04X}" if adp == 0 else f"0x{adp:04X}:0x{ado:04X}"
+            # (adp is kept in the key only where it is a station address)
+            where = f"0x{ado:04X}" if adp == 0 else f"0x{ado:04X} of {station_name(adp)}"
         return f"{mnemonic(self.cmd)} {where} ({self.length_bytes} B)"
 
     def to_dict(self) -> dict[str, Any]:

@@ -6,6 +6,7 @@ the commands.
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -84,10 +85,14 @@ def analyze_cmd(
         from lolacli.files import load_eni
 
         model = load_eni(eni)
-    with _Progress(file, quiet=False) as progress:
+    from lolacli.interrupt import stop_signals
+
+    # Ctrl-C or SIGTERM during the scan: the report of the frames read so far, then 130/143
+    with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
         report = analyze_file(
             file, eni=model, progress=progress, engine=engine, keep_series=plot is not None,
             timeout_ns=timeout_ns, max_lost=max_lost, max_wkc_mismatches=max_wkc,
+            should_stop=stop,
         )
     data = report.to_dict()
     if fmt is OutputFormat.json:
@@ -96,6 +101,14 @@ def analyze_cmd(
         from lolacli.cli.capture_render import render_analysis
 
         render_analysis(data, show_all=show_all)
+    if stop():
+        from lolacli.text import number
+
+        read = "the whole file" if report.read_bytes is None else (
+            f"the first {number(report.read_bytes / 1e6, 'MB', 1)}")
+        sys.stderr.write(f"lolacli: stopped by {_signal_name(stop.exit_code)}; the analysis "
+                         f"covers {read}" + ("; no plots written" if plot else "") + "\n")
+        raise typer.Exit(stop.exit_code)
     if plot is not None:
         from lolacli.capture.plots import write_plots
 
@@ -103,6 +116,12 @@ def analyze_cmd(
             sys.stderr.write(f"lolacli: wrote {written}\n")
     if report.failed:
         raise typer.Exit(1)
+
+
+def _signal_name(code: int) -> str:
+    import signal
+
+    return signal.Signals(code - 128).name
 
 
 class _Progress:
@@ -154,18 +173,54 @@ def list_cmd(
 ) -> None:
     """One line per EtherCAT frame and datagram (number, time, direction, command, index,
     address, length, WKC), mailbox/CoE/SDO decoded."""
-    from lolacli.capture.listing import format_line, list_frames
+    import shutil
+
+    from lolacli.capture.listing import format_lines, list_frames
+    from lolacli.interrupt import stop_signals
 
     frames = list_frames(file, count=count, expr=expr)
-    if fmt is OutputFormat.json:
-        emit_json({"schema": "lolacli.capture-list/1", "file": str(file),
-                   "frames": [f.to_dict() for f in frames]})
-        return
+    head = {"schema": "lolacli.capture-list/1", "file": str(file)}
+    width = shutil.get_terminal_size((80, 24)).columns  # $COLUMNS, the terminal, or 80
+    json_out = _JsonFrames(head) if fmt is OutputFormat.json else None
     out = sys.stdout
-    try:
-        for frame in frames:
-            for i, d in enumerate(frame.datagrams):
-                out.write(format_line(frame, d, i == 0) + "\n")
-        out.flush()
-    except BrokenPipeError:  # `lolacli capture list F | head`
-        silence_stdout()
+    # Ctrl-C or SIGTERM: the frames listed so far stay listed (JSON: a whole document, so
+    # frames are written as they are listed), then 130/143
+    with stop_signals() as stop, stop.polled():
+        try:
+            for frame in frames:
+                if json_out is not None:
+                    json_out.add(frame.to_dict())
+                else:
+                    for i, d in enumerate(frame.datagrams):
+                        for line in format_lines(frame, d, i == 0, width):
+                            out.write(line + "\n")
+                if stop():
+                    break
+            if json_out is not None:
+                json_out.end(interrupted=stop())
+            out.flush()
+        except BrokenPipeError:  # `lolacli capture list F | head`
+            silence_stdout()
+    if stop():
+        sys.stderr.write(f"lolacli: stopped by {_signal_name(stop.exit_code)}; the list "
+                         "ends there\n")
+        raise typer.Exit(stop.exit_code)
+
+
+class _JsonFrames:
+    """``lolacli.capture-list/1`` written frame by frame (the document ``emit_json`` would
+    write, with ``interrupted`` last): a stop, or a long list, costs no time nor memory."""
+
+    def __init__(self, head: dict[str, Any]) -> None:
+        self.n = 0
+        text = json.dumps(head, indent=2, ensure_ascii=False)
+        sys.stdout.write(text[:-2] + ',\n  "frames": [')
+
+    def add(self, frame: dict[str, Any]) -> None:
+        body = json.dumps(frame, indent=2, ensure_ascii=False).replace("\n", "\n    ")
+        sys.stdout.write(("," if self.n else "") + "\n    " + body)
+        self.n += 1
+
+    def end(self, interrupted: bool) -> None:
+        close = "\n  ]" if self.n else "]"
+        sys.stdout.write(f'{close},\n  "interrupted": {json.dumps(interrupted)}\n}}\n')

@@ -457,11 +457,12 @@ def busy_wait_us(options: SimulateOptions) -> float:
 
 
 def _open_recorders(options: SimulateOptions) -> tuple[Any, Any]:
-    from lolacli.master.record import McapRecorder, PcapngRecorder
+    from lolacli.master.record import McapRecorder, PcapngRecorder, WallClock
 
-    pcap = PcapngRecorder(options.pcap) if options.pcap is not None else None
+    clock = WallClock()  # one wall-clock time base for both recordings
+    pcap = PcapngRecorder(options.pcap, clock) if options.pcap is not None else None
     try:
-        mcap = McapRecorder(options.mcap) if options.mcap is not None else None
+        mcap = McapRecorder(options.mcap, clock) if options.mcap is not None else None
     except BaseException:
         if pcap is not None:
             pcap.close()

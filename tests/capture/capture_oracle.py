@@ -87,14 +87,20 @@ def datagrams_by_cmd(frames: tuple[OracleFrame, ...]) -> dict[str, int]:
 def pair(frames: tuple[OracleFrame, ...]) -> list[int]:
     """DESIGN.md Pairing: each returned frame takes the most recent unmatched outgoing
     frame with the same (command, index, address) sequence. Round trips in ns."""
+    return [rt for _, rt in pair_series(frames)]
+
+
+def pair_series(frames: tuple[OracleFrame, ...]) -> list[tuple[int, int]]:
+    """(return timestamp, round trip) of every pair, in the order the returns were
+    captured, both in ns (the pairing of :func:`pair`)."""
     pending: dict[tuple, list[int]] = {}
-    rts = []
+    pairs = []
     for fr in frames:
         if not fr.returned:
             pending.setdefault(fr.pair_key, []).append(fr.ts_ns)
         elif pending.get(fr.pair_key):
-            rts.append(fr.ts_ns - pending[fr.pair_key].pop())
-    return rts
+            pairs.append((fr.ts_ns, fr.ts_ns - pending[fr.pair_key].pop()))
+    return pairs
 
 
 def cyclic_periods(frames: tuple[OracleFrame, ...]) -> list[int]:

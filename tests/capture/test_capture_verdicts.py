@@ -381,7 +381,7 @@ def test_human_output_shows_the_verdict_and_findings(cli, tmp_path):
     assert code == 1
     lines = out.splitlines()
     assert lines[2].startswith("Verdict: FAIL (1 failure")
-    assert any(line.startswith("FAIL lost: 1 outgoing frames never came back") for line in lines)
+    assert any(line.startswith("FAIL lost: 1 outgoing frame never came back") for line in lines)
     assert any("frame 29" in line for line in lines)
     end = next(i for i, x in enumerate(lines) if x.strip() == "Frames")
     findings = lines[3:end]  # the findings grid wraps at 80 columns
