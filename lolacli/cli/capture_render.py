@@ -11,7 +11,6 @@ from lolacli.text import number, plural, station
 
 SDO_ROWS = 50
 _SEVERITY = {"failure": "FAIL", "warning": "WARN", "info": "info"}
-_SEVERITY_NOUNS = {"failure": "failure", "warning": "warning", "info": "note"}
 _STATS = ("count", "min", "mean", "median", "std", "p99", "max")
 _RULES = {"mac": "by the source MAC", "packet_type": "by packet type (Linux cooked)",
           "packet_type+mac": "by packet type and source MAC", "inferred": "inferred"}
@@ -64,26 +63,10 @@ def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
 
 
 def _verdict(console: Any, d: dict[str, Any]) -> None:
-    findings = d["findings"]
-    counts = {s: sum(1 for f in findings if f["severity"] == s) for s in _SEVERITY}
-    parts = [plural(n, _SEVERITY_NOUNS[s]) for s, n in counts.items() if n]
-    _say(console, f"Verdict: {d['verdict'].upper()}" + (f" ({', '.join(parts)})" if parts else "")
-         + (", of the part read before the stop" if d.get("interrupted") else ""))
-    if not findings:
-        return
-    grid = _grid()
-    grid.add_column(no_wrap=True)
-    grid.add_column()
-    for f in findings:
-        text = f"{f['kind']}: {f['message']}"
-        if f["frames"]:
-            listed = ", ".join(str(n) for n in f["frames"])
-            if f["count"] > len(f["frames"]):
-                text += f"\nfirst frames {listed} (of {f['count']})"
-            else:
-                text += f"\nframe{'s' if len(f['frames']) > 1 else ''} {listed}"
-        grid.add_row(_SEVERITY.get(f["severity"], f["severity"]), _text(text))
-    console.print(grid)
+    from lolacli.cli.verdict import render_verdict
+
+    note = ", of the part read before the stop" if d.get("interrupted") else ""
+    render_verdict(console, d["verdict"], d["findings"], note)
 
 
 def _frames(console: Any, d: dict[str, Any]) -> None:

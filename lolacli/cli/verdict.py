@@ -10,23 +10,31 @@ from typing import Any
 from lolacli.text import plural
 
 _LABEL = {"failure": "FAIL", "warning": "WARN", "info": "info"}
+_NOUN = {"failure": "failure", "warning": "warning", "info": "note"}
 
 
-def render_verdict(console: Any, verdict: str, findings: list[dict[str, Any]]) -> None:
-    """``findings`` as :meth:`lolacli.findings.Finding.to_dict` gives them."""
+def render_verdict(
+    console: Any, verdict: str, findings: list[dict[str, Any]], note: str = ""
+) -> None:
+    """``findings`` as :meth:`lolacli.findings.Finding.to_dict` gives them; ``note`` ends
+    the verdict's line (", of the part read before the stop")."""
     from rich.table import Table
+    from rich.text import Text
+
+    from lolacli.cli.common import say
 
     counts = {s: sum(1 for f in findings if f["severity"] == s) for s in _LABEL}
-    parts = [plural(n, s) for s, n in counts.items() if n]
-    console.print(f"Verdict: {verdict.upper()}" + (f" ({', '.join(parts)})" if parts else ""))
+    parts = [plural(n, _NOUN[s]) for s, n in counts.items() if n]
+    say(console, f"Verdict: {verdict.upper()}" + (f" ({', '.join(parts)})" if parts else "")
+        + note)
     if not findings:
         return
     grid = Table.grid(padding=(0, 1))
     grid.add_column(no_wrap=True)
     grid.add_column(overflow="fold")
     for f in findings:
-        grid.add_row(_LABEL.get(f["severity"], f["severity"]), f"{f['kind']}: {f['message']}"
-                     + _where(f))
+        grid.add_row(_LABEL.get(f["severity"], f["severity"]),
+                     Text(f"{f['kind']}: {f['message']}" + _where(f)))
     console.print(grid, width=min(console.width, 80) if console.width else 80)
 
 
