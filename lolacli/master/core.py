@@ -781,8 +781,9 @@ class Master:
         now = self.transport.now_ns()
         realtime = self.options.realtime
         for plan, index, sent in pending:
-            # a frame gets one cycle time to come back (more only when this cycle is late;
-            # in real time no later than this cycle was due)
+            # a frame gets one cycle time to come back from when it left (a frame that
+            # waited behind others on the port left late: the master waits for it, as one
+            # whose NIC queue is full waits); in real time no later than this cycle was due
             until = sent + self.cycle_time_ns
             if realtime and until > self._next_cycle_ns:
                 until = self._next_cycle_ns
@@ -845,7 +846,9 @@ class Master:
         now = self.transport.now_ns()
         realtime = self.options.realtime
         for index, sent in pending:
-            wait = 0 if realtime else max(0, sent + self.cycle_time_ns - now)
+            # the diagnosis is no reason to hold the cycle: at most until it was due
+            wait = 0 if realtime else max(0, min(sent + self.cycle_time_ns,
+                                                 self._next_cycle_ns) - now)
             got = self._await(index, wait, sent)
             if got is None:
                 if realtime and now - sent < self.options.frame_timeout_ns:

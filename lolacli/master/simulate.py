@@ -130,7 +130,7 @@ def simulate(
         start_ns = transport.now_ns()
         arm_link_loss(chain, emulate, start_ns)
         app.enable()
-        app.first_cycle = master.stats.cycles
+        app.start_run()
         skipped0 = master.stats.skipped_cycles
         clock.active = True
         interrupted = _run(master, options, progress, stop, wall0)
@@ -218,25 +218,26 @@ def _findings(
         if state != "OP" and slave.position not in refused:
             out.add("not-op", fail, f"slave {slave.position} ({slave.name}) ended in {state}, "
                     "not OP", slave=slave.position)
-    _overrun_finding(out, doc, master, options)
+    _overrun_finding(out, doc, master, options, app)
     lost, late = doc["lost_frames"], doc["late_frames"] or 0
     over = lost + late > options.max_lost
     if lost:
         cyclic = doc["cyclic_lost_frames"]
         out.add("lost", fail if over else warn,
                 f"{lost:,} frames never came back ({cyclic:,} of them cyclic; threshold "
-                f"--max-lost {options.max_lost})", cycles=master.lost_cycles(), count=lost)
+                f"--max-lost {options.max_lost})", cycles=app.run_cycles(master.lost_cycles()),
+                count=lost)
     if late:
         out.add("late", fail if over else warn,
                 f"{late:,} cyclic frames came back after their cycle had ended: those cycles "
-                "ran without their inputs", cycles=stats.late_at, count=late)
+                "ran without their inputs", cycles=app.run_cycles(stats.late_at), count=late)
     if doc["wkc_mismatches"]:
         out.add("wkc-mismatch", fail if doc["wkc_mismatches"] > options.max_wkc_mismatches
                 else warn,
                 f"{doc['wkc_mismatches']:,} of {doc['wkc_checked']:,} working counters differed"
                 f" from the ENI's <Cnt>, in {doc['cycles_with_wkc_mismatch']:,} cycles (threshold "
                 f"--max-wkc-mismatches {options.max_wkc_mismatches})",
-                cycles=stats.mismatch_at, count=doc["wkc_mismatches"])
+                cycles=app.run_cycles(stats.mismatch_at), count=doc["wkc_mismatches"])
     if doc["drives_enabled"] < doc["drives"]:
         out.add("drives-disabled", warn,
                 f"{doc['drives'] - doc['drives_enabled']} of {doc['drives']} drives were not "
@@ -253,7 +254,8 @@ def _findings(
 
 
 def _overrun_finding(
-    out: Findings, doc: dict[str, Any], master: Master, options: SimulateOptions
+    out: Findings, doc: dict[str, Any], master: Master, options: SimulateOptions,
+    app: _Application,
 ) -> None:
     """Cycles not kept: the slots skipped and the cycles sent over half a cycle late, and
     why — a bus too slow for the rate (with the rate it holds), or the host."""
@@ -276,7 +278,7 @@ def _overrun_finding(
             f"the cycle of {cycle_us:g} µs ({doc['rate_hz']:,g} Hz) was not kept: {skipped:,} "
             f"cycle slots skipped, {overruns:,} cycles sent over half a cycle late (threshold "
             f"--max-overruns {options.max_overruns}){why}",
-            cycles=master.stats.skipped_at, count=skipped + overruns)
+            cycles=app.run_cycles(master.stats.skipped_at), count=skipped + overruns)
 
 
 #: keys only a run on a live bus fills (null in virtual time)
@@ -341,7 +343,7 @@ def _live(
             _bring_up(master)
             start_ns = transport.now_ns()
             app.enable()
-            app.first_cycle = master.stats.cycles
+            app.start_run()
             master.start_cyclic()  # the schedule starts now, not where start-up left it
             skipped0 = master.stats.skipped_cycles
             cpu0, run0 = time.process_time(), time.perf_counter()
@@ -528,6 +530,18 @@ class _Application:
             master.control.append(self._apply_shm)
         if mcap is not None:
             master.admin.append(self._record)
+
+    def start_run(self) -> None:
+        """The cyclic run starts: findings name its cycles from 0 on (those of the
+        bring-up before it are forgotten)."""
+        stats = self.master.stats
+        self.first_cycle = stats.cycles
+        for at in (stats.lost_at, stats.late_at, stats.mismatch_at, stats.skipped_at):
+            at.clear()
+
+    def run_cycles(self, cycles: list[int]) -> list[int]:
+        """``cycles`` (the master's count) as cycles of the run, 0 its first."""
+        return [c - self.first_cycle for c in cycles if c >= self.first_cycle]
 
     def enable(self) -> None:
         for drive in self.drives:
