@@ -26,7 +26,12 @@ def simulate_cmd(
     ] = None,
     cycles: Annotated[
         int | None,
-        typer.Option("--cycles", min=0, help="Number of cycles (instead of --duration)."),
+        typer.Option(
+            "--cycles",
+            min=0,
+            help="Number of cycles (instead of --duration): slots of the schedule; one a "
+            "late cycle ran past is skipped, not made up for.",
+        ),
     ] = None,
     pcap: Annotated[
         Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")

@@ -91,11 +91,17 @@ def test_every_rate_ends_in_bounded_time_and_memory(rate: str, extra: tuple[str,
         assert doc["lost_frames"] == 0 and doc["late_frames"] > 0
 
 
-def _stop_after(sig: int, *args: str, wait_s: float = 1.5) -> tuple[int, dict, str, float]:
-    argv = [sys.executable, "-m", "lolacli", "bus", "simulate", *args, "-q", "-f", "json"]
+def _stop_after(sig: int, tmp: Path, *args: str) -> tuple[int, dict, str, float]:
+    """Start a run, send ``sig`` once it cycles (its recording has grown past 1 MB), and
+    return exit code, JSON, stderr and the seconds from the signal to the exit."""
+    pcap = tmp / "run.pcapng"
+    argv = [sys.executable, "-m", "lolacli", "bus", "simulate", *args, "--pcap", str(pcap),
+            "-q", "-f", "json"]
     proc = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(wait_s)
-    assert proc.poll() is None, proc.communicate()
+    deadline = time.monotonic() + 60
+    while not (pcap.exists() and pcap.stat().st_size > 1_000_000):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
     t0 = time.monotonic()
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=30)
@@ -104,14 +110,17 @@ def _stop_after(sig: int, *args: str, wait_s: float = 1.5) -> tuple[int, dict, s
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_a_signal_stops_a_run_the_bus_cannot_hold_within_a_second(sig: int, code: int) -> None:
-    got, doc, err, took = _stop_after(sig, "--rate", "20000", "--duration", "600s")
+def test_a_signal_stops_a_run_the_bus_cannot_hold_within_a_second(
+    sig: int, code: int, tmp_path: Path
+) -> None:
+    got, doc, err, took = _stop_after(sig, tmp_path, "--rate", "20000", "--duration", "600s")
     assert got == code, err
     assert took < 1.0, took
     assert doc["interrupted"] is True and doc["verdict"] == "fail"
     stopped = next(f for f in doc["findings"] if f["kind"] == "interrupted")
     assert ("SIGTERM" if sig == signal.SIGTERM else "SIGINT") in stopped["message"]
     assert 0 < doc["cycles"] < 20000 * 600
+    assert doc["pcap"]["frames"] > 0
 
 
 @pytest.mark.parametrize(

@@ -49,10 +49,13 @@ def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
     finally:
         stop_emulator(proc)
     assert code == 0, err
-    assert (doc["mode"], doc["iface"], doc["cycles"]) == ("realtime", bus.master, 2000)
+    # --cycles 2000 are 2000 slots of the schedule: a slot a late cycle ran past is
+    # skipped (a loaded host), not made up for
+    assert (doc["mode"], doc["iface"]) == ("realtime", bus.master)
+    assert doc["cycles"] + doc["skipped_cycles"] == 2000 and doc["skipped_cycles"] <= 200
     assert doc["kernel_timestamps"] is True
     period = doc["cycle_period_us"]
-    assert period["count"] == doc["cyclic_frames_timed"] - 1 >= 1999
+    assert period["count"] == doc["cyclic_frames_timed"] - 1 >= 1999 - doc["skipped_cycles"]
     assert abs(period["median"] - CYCLE_US) < 25
     assert abs(period["mean"] - CYCLE_US) < 0.05 * CYCLE_US
     assert doc["round_trip_us"]["median"] < CYCLE_US
@@ -71,7 +74,7 @@ def test_holds_2khz_against_bus_emulate(bus, tmp_path: Path) -> None:
     analyzed = json.loads(ana.stdout)
     assert analyzed["malformed_frames"] == 0
     assert abs(analyzed["cycle_period_us"]["median"] - period["median"]) < 5
-    assert analyzed["pairs"] >= 2000 - doc["lost_frames"]
+    assert analyzed["pairs"] >= doc["cycles"] - doc["lost_frames"]
     # a frame capture analyze never saw return is one our master counted lost too
     assert analyzed["lost_frames"] <= doc["lost_frames"]
 
@@ -135,16 +138,23 @@ def test_a_rate_the_bus_cannot_hold_ends_in_time_with_a_verdict(bus) -> None:
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_a_signal_stops_a_live_run_within_a_second(bus, sig: int, code: int) -> None:
+def test_a_signal_stops_a_live_run_within_a_second(
+    bus, sig: int, code: int, tmp_path: Path
+) -> None:
     proc = start_emulator(bus)
+    pcap = tmp_path / "live.pcapng"
     try:
         run_proc = subprocess.Popen(
             bus.command(sys.executable, "-m", "lolacli", "bus", "simulate", "--iface",
-                        bus.master, "--duration", "600s", "-f", "json"),
+                        bus.master, "--duration", "600s", "--pcap", str(pcap), "-f", "json"),
             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )
-        time.sleep(3.0)  # up and cycling
-        assert run_proc.poll() is None, run_proc.communicate()
+        deadline = time.monotonic() + 60
+        while not (pcap.exists() and pcap.stat().st_size > 1_000_000):  # up and cycling
+            assert run_proc.poll() is None and time.monotonic() < deadline, (
+                run_proc.communicate()
+            )
+            time.sleep(0.05)
         t0 = time.monotonic()
         run_proc.send_signal(sig)
         out, err = run_proc.communicate(timeout=30)
