@@ -330,6 +330,7 @@ def _live(
     assert options.iface is not None
     busy_us = busy_wait_us(options)
     transport = RawSocketTransport(options.iface, spin_ns=round(busy_us * 1000))
+    transport.stop = stop  # a slow cycle's wait ends at a stop
     shm = None
     try:
         master, app, shm = _compose(eni, options, transport, recorders)
@@ -645,7 +646,8 @@ def _run(
     stats = master.stats
     target = stats.cycles + stats.skipped_cycles + options.cycles
     cycle = master.cycle
-    step = 256
+    # a look at the stop request every 50 ms of the schedule (at most 256 cycles apart)
+    step = max(1, min(256, round(options.rate_hz / 20)))
     virtual0 = master.transport.now_ns()
     with stop.polled() if stop is not None else nullcontext():
         while True:

@@ -82,6 +82,10 @@ def frame_time_on_wire_ns(frame_length: int, link_bit_s: int = LINK_100_MBIT_S) 
     return (on_wire + PREAMBLE_SFD_BYTES + INTER_FRAME_GAP_BYTES) * 8 * 1_000_000_000 // link_bit_s
 
 
+#: the longest sleep of a real-time wait between two looks at a stop request
+_SLICE_NS = 100_000_000
+
+
 class ChainTransport:
     """A frame processor in virtual time (see the module docstring)."""
 
@@ -175,6 +179,7 @@ class RawSocketTransport:
         self.taps: list[Tap] = []
         self.spin_ns = spin_ns
         self.wake_lateness_ns: list[int] | None = None  # a list: record how late waits end
+        self.stop: Callable[[], bool] | None = None  # ends a long wait when it says so
         self._sock = open_socket(iface)
         self._sock.setblocking(False)
         self._sent: deque[int] = deque(maxlen=256)
@@ -237,8 +242,13 @@ class RawSocketTransport:
     def wait_until(self, t_ns: int) -> None:
         clock = time.monotonic_ns
         left = t_ns - clock()
-        if left > self.spin_ns:
-            time.sleep((left - self.spin_ns) / 1e9)
+        while left > self.spin_ns:
+            # a long wait (a slow cycle rate) in slices, so that a stop asked for meanwhile
+            # (``stop``) ends it within a second
+            time.sleep(min(left - self.spin_ns, _SLICE_NS) / 1e9)
+            if self.stop is not None and self.stop():
+                return
+            left = t_ns - clock()
         now = clock()
         while now < t_ns:
             now = clock()

@@ -166,3 +166,24 @@ def test_a_signal_stops_a_live_run_within_a_second(
     doc = json.loads(out)
     assert doc["interrupted"] is True and doc["cycles"] > 0 and doc["mode"] == "realtime"
     assert any(f["kind"] == "interrupted" for f in doc["findings"])
+
+
+def test_a_signal_stops_a_slow_live_rate_within_a_second(bus) -> None:
+    """At 1 Hz a cycle waits a whole second: the wait itself ends at a stop."""
+    proc = start_emulator(bus)
+    try:
+        run_proc = subprocess.Popen(
+            bus.command(sys.executable, "-m", "lolacli", "bus", "simulate", "--iface",
+                        bus.master, "--rate", "1", "--duration", "600s", "-f", "json"),
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )
+        time.sleep(4.0)  # in the bring-up or the cyclic run: either stops at once
+        assert run_proc.poll() is None, run_proc.communicate()
+        t0 = time.monotonic()
+        run_proc.send_signal(signal.SIGINT)
+        _out, err = run_proc.communicate(timeout=30)
+        took = time.monotonic() - t0
+    finally:
+        stop_emulator(proc)
+    assert run_proc.returncode == 130, err
+    assert took < 1.0, took
