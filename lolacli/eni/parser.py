@@ -146,6 +146,11 @@ def _defused_gate(raw: bytes, source: str) -> None:
     parser = DefusedXMLParser(
         target=_NullTarget(), forbid_dtd=True, forbid_entities=True, forbid_external=True
     )
+    # The gate builds nothing: without ElementTree's default handler, expat hands no
+    # character data to Python (6 ms instead of 37 ms for the 450 kB LOLA ENI). DOCTYPE and
+    # entity declarations still stop it (defusedxml's own handlers), and so does an
+    # undefined entity reference (expat's error without a DTD).
+    parser.parser.DefaultHandlerExpand = None
     try:
         parser.feed(raw)
         parser.close()
@@ -199,22 +204,28 @@ def _strip_namespaces(root: _El) -> None:
 
 
 def parse_number(text: str) -> int:
-    """An ENI integer: decimal, ``#x1A00`` or ``0x1A00`` (optionally signed). ValueError if not."""
-    t = text.strip().replace("_", "")
-    sign = 1
-    if t[:1] in ("+", "-"):
-        sign, t = (-1 if t[0] == "-" else 1), t[1:]
-    if t[:2] in ("#x", "#X", "0x", "0X"):
-        digits = t[2:]
-        if not (digits and digits.isascii() and all(c in _HEX_DIGITS for c in digits)):
-            raise ValueError(text)
-        return sign * int(digits, 16)
-    if not (t.isascii() and t.isdigit()):
+    """An ENI integer: decimal, ``#x1A00`` or ``0x1A00`` (optionally signed; ASCII digits,
+    ``_`` ignored). ValueError if not."""
+    value = _number(text)
+    if value is None:
         raise ValueError(text)
-    return sign * int(t, 10)
+    return value
 
 
-_HEX_DIGITS = frozenset("0123456789abcdefABCDEF")
+def _number(text: str) -> int | None:
+    """:func:`parse_number`, None for no number."""
+    m = _NUMBER.fullmatch(text.replace("_", "") if "_" in text else text)
+    if m is None:
+        return None
+    sign, hex_digits, digits = m.groups()
+    try:
+        value = int(hex_digits, 16) if hex_digits is not None else int(digits, 10)
+    except ValueError:  # more decimal digits than Python converts (4300)
+        return None
+    return -value if sign == "-" else value
+
+
+_NUMBER = re.compile(r"\s*([+-]?)(?:[#0][xX]([0-9A-Fa-f]+)|([0-9]+))\s*")
 
 
 def _local(tag: object) -> str:
@@ -228,14 +239,35 @@ class _Reader:
 
     def __init__(self, source: str) -> None:
         self.source = source
+        # the children of each element asked, by tag: lxml's find() parses its path each
+        # call, and most elements are asked for several children
+        self._by_tag: dict[_El, dict[Any, list[_El]]] = {}
 
     # -- element access (namespace-agnostic) --
 
+    def _kids(self, el: _El) -> dict[Any, list[_El]]:
+        kids = self._by_tag.get(el)
+        if kids is None:
+            kids = {}
+            for c in el:
+                group = kids.get(c.tag)
+                if group is None:
+                    kids[c.tag] = [c]
+                else:
+                    group.append(c)
+            self._by_tag[el] = kids
+        return kids
+
     def children(self, el: _El, name: str) -> list[_El]:
-        return list(el.iterchildren(name))
+        return self._kids(el).get(name, [])
 
     def child(self, el: _El | None, path: str) -> _El | None:
-        return None if el is None else el.find(path)
+        if el is None:
+            return None
+        if "/" in path:
+            return el.find(path)
+        group = self._kids(el).get(path)
+        return None if group is None else group[0]
 
     def text(self, el: _El | None, path: str, default: str = "") -> str:
         node = self.child(el, path)
@@ -253,22 +285,26 @@ class _Reader:
         """The number of ``<path>`` below ``el`` (``default`` when absent or empty), within
         ``width``: a value outside it is an :class:`EniError` naming its line."""
         node = self.child(el, path)
-        if node is None or node.text is None or not node.text.strip():
+        if node is None:
             return default
-        return self.value(node, node.text, f"<{_local(node.tag)}>", width)
+        text = node.text
+        if not text or text.isspace():
+            return default
+        return self.value(node, text, width)
 
-    def value(self, node: _El, text: str, label: str, width: Width | None) -> int:
-        """``text`` (of ``node``, called ``label`` in messages) as a number within ``width``."""
-        shown = _shown(text)
-        try:
-            value = parse_number(text)
-        except ValueError:
-            raise self.error(node, f"{label}: not a number: {shown!r}") from None
-        if width is None:
+    def value(self, node: _El, text: str, width: Width | None, label: str = "") -> int:
+        """``text`` of ``node`` (``label`` in messages, else ``<Tag>``) as a number within
+        ``width``."""
+        value = _number(text)
+        if value is None:
+            what = label or f"<{_local(node.tag)}>"
+            raise self.error(node, f"{what}: not a number: {_shown(text)!r}")
+        if width is None or (width.lo <= value and (width.hi is None or value <= width.hi)):
             return value
         got = width.read(value)
         if got is None:
-            raise self.error(node, f"{label} {shown} is outside {width}")
+            what = label or f"<{_local(node.tag)}>"
+            raise self.error(node, f"{what} {_shown(text)} is outside {width}")
         return got
 
     def need(self, el: _El, path: str, width: Width | None = None) -> int:
@@ -284,7 +320,7 @@ class _Reader:
         text = el.get(name)
         if text is None:
             return None
-        return self.value(el, text, f"<{_local(el.tag)}> {name}", width)
+        return self.value(el, text, width, f"<{_local(el.tag)}> {name}")
 
     def flag(self, el: _El | None, path: str) -> bool:
         return self.text(el, path).strip().lower() in _TRUE
@@ -577,7 +613,7 @@ class _Reader:
         for n, el in self.sm_elements(process_data).items():
             for p in self.children(el, "Pdo"):
                 if p.text and p.text.strip():
-                    assigned[self.value(p, p.text, "<Pdo>", lim.U16)] = n
+                    assigned[self.value(p, p.text, lim.U16)] = n
         pdos: list[Pdo] = []
         for tag, direction in (("RxPdo", Direction.OUTPUT), ("TxPdo", Direction.INPUT)):
             for el in self.children(process_data, tag):

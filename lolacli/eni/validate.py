@@ -537,6 +537,13 @@ def check_field_ranges(eni: Eni) -> Iterator[Finding]:
     yield from _range_findings("process image", _image_fields(eni))
 
 
+def within_limits(eni: Eni) -> bool:
+    """True when every number of ``eni`` holds the limits the parser enforces (no
+    :func:`check_field_ranges` finding): a model that did not come from the parser (built
+    in code, read from the cache) and may be handed to the emulator or master."""
+    return next(check_field_ranges(eni), None) is None
+
+
 def check_slaves_present(eni: Eni) -> Iterator[Finding]:
     """An ENI configures a bus: with no ``<Slave>`` there is nothing to bring up, emulate or
     check a capture against."""
@@ -594,4 +601,5 @@ __all__ = [
     "expected_wkc",
     "validate_eni",
     "validate_report",
+    "within_limits",
 ]

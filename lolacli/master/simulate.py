@@ -268,10 +268,10 @@ def _live(
 
 
 def _check(eni: Eni, options: SimulateOptions) -> None:
+    if not eni.slaves:
+        raise EniError("the ENI has no <Slave>: nothing to simulate", path=eni.source)
     if not eni.cyclic_frames:
         raise EniError("the ENI has no cyclic frame: nothing to simulate", path=eni.source)
-    if not eni.slaves:
-        raise EniError("the ENI has no slaves: nothing to simulate", path=eni.source)
     if not 1.0 <= options.rate_hz <= 100_000.0:
         raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to 100000 Hz")
     if options.cycles < 0:
