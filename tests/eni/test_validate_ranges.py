@@ -209,7 +209,7 @@ CASES = [
     el("image-bytesize", "<Inputs>", "<ByteSize>11</ByteSize>", "<ByteSize>{}</ByteSize>", "-1",
        "16777216"),
     C("variable-past-image", STATUSWORD, "<BitSize>16</BitSize>", "<BitSize>{}</BitSize>", "89",
-      "88", "variable 'Drive.Inputs.Statusword': bits 0..88 lie past the 11-byte input image",
+      '88', 'variable "Drive.Inputs.Statusword": bits 0..88 lie past the 11-byte input image',
       element="<Variable>"),
     el("variable-bitsize", STATUSWORD, "<BitSize>16</BitSize>", "<BitSize>{}</BitSize>", "-1",
        "0"),
@@ -258,8 +258,9 @@ def test_just_outside_is_refused_with_its_line_just_inside_reads(case: Case, cli
     assert code == (1 if new else 0)
 
 
-def test_every_command_reading_an_eni_refuses_it_alike(cli, tmp_path):
-    """`eni inspect|vars|validate|diff`, `bus timing|simulate --eni`: the same one line."""
+def test_every_command_reading_an_eni_refuses_it_alike(cli, tmp_path, corpus):
+    """`eni inspect|vars|validate|diff`, `bus timing|simulate|emulate|scan --eni`, `sdo read
+    --eni` and `capture analyze --eni`: the same one line, before any interface is opened."""
     (case,) = [c for c in CASES if c.id == "cyclic-datalength-neg"]
     bad = tmp_path / "bad.xml"
     bad.write_text(case.text(case.outside))
@@ -273,6 +274,11 @@ def test_every_command_reading_an_eni_refuses_it_alike(cli, tmp_path):
         ("eni", "diff", good, bad),
         ("bus", "timing", "--eni", bad),
         ("bus", "simulate", "--eni", bad, "--cycles", "3"),
+        ("bus", "emulate", "-i", "nosuchif0", "--duration", "0.1", "--eni", bad),
+        ("bus", "scan", "-i", "nosuchif0", "--eni", bad),
+        ("sdo", "read", "1", "0x1018:01", "--eni", bad),
+        ("capture", "analyze", corpus / "pcap" / "ethercrab__twincat-run-ek1100-el1004.pcapng",
+         "--eni", bad),
     ):
         code, out, err = cli(*args)
         assert code == 3, (args, code, out, err)
