@@ -4,8 +4,11 @@ on the emulated chain, in a CI loop) does not parse the same XML again.
 :func:`load_eni_cached` reads the file, and where a model parsed from exactly these bytes
 by exactly this parser is in the cache, returns it; else parses (:func:`lolacli.files.
 load_eni`) and stores the model. The key is a BLAKE2 digest of the file's bytes, the
-Python version and lolacli's ENI package itself (name, size and modification time of each
-of its modules), so an edited file or parser never meets an old model.
+Python version and the parser's source (name, size and modification time of each module of
+lolacli's ``eni`` and ``wire`` packages, which hold its limits and register decoding), so
+an edited file or parser never meets an old model. A model read back must also hold the
+limits the parser enforces (:func:`lolacli.eni.validate.within_limits`): one that does not
+(an entry written by other code) is parsed over, and the file's error is the parser's.
 
 The cache is a directory of pickles: ``$LOLACLI_CACHE_DIR``, else ``$XDG_CACHE_HOME/lolacli``,
 else ``~/.cache/lolacli``; ``LOLACLI_CACHE_DIR=""`` turns it off. Unpickling runs code, so an
@@ -44,18 +47,24 @@ def cache_dir() -> Path | None:
     return Path(base) / "lolacli"
 
 
+#: the packages whose source makes the parser: the ENI reader, model and limits; the
+#: register codecs and frame constants it decodes InitCmds and checks datagrams with
+_PARSER_PACKAGES = ("eni", "wire")
+
+
 def _package_fingerprint() -> bytes:
-    """Names, sizes and modification times of lolacli's ENI modules (the parser and model)."""
-    here = Path(__file__).resolve().parent / "eni"
+    """Names, sizes and modification times of the modules the parser is made of."""
+    root = Path(__file__).resolve().parent
     parts = [f"{sys.version_info[0]}.{sys.version_info[1]}"]
-    try:
-        with os.scandir(here) as it:
-            for entry in sorted(it, key=lambda e: e.name):
-                if entry.name.endswith(".py"):
-                    st = entry.stat()
-                    parts.append(f"{entry.name}:{st.st_size}:{st.st_mtime_ns}")
-    except OSError:
-        parts.append("?")
+    for package in _PARSER_PACKAGES:
+        try:
+            with os.scandir(root / package) as it:
+                for entry in sorted(it, key=lambda e: e.name):
+                    if entry.name.endswith(".py"):
+                        st = entry.stat()
+                        parts.append(f"{package}/{entry.name}:{st.st_size}:{st.st_mtime_ns}")
+        except OSError:
+            parts.append(f"{package}/?")
     return "|".join(parts).encode()
 
 
@@ -85,8 +94,9 @@ def _read(path: Path) -> Eni | None:
     except Exception:  # missing, unreadable or damaged: parse instead
         return None
     from lolacli.eni.model import Eni
+    from lolacli.eni.validate import within_limits
 
-    return model if isinstance(model, Eni) else None
+    return model if isinstance(model, Eni) and within_limits(model) else None
 
 
 def _write(folder: Path, path: Path, model: Eni) -> None:

@@ -67,7 +67,10 @@ def _esi_match(slave: Slave, esi: Sequence[EsiFile]) -> tuple[EsiDevice, str] | 
 def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()) -> Chain:
     """The chain of ``eni`` with the faults of ``options``; UsageError for bad positions.
     Slaves that an ``esi`` device describes (see :func:`esi_matches`) take their SII from
-    it; a product matched with another revision keeps the ENI's revision."""
+    it; a product matched with another revision keeps the ENI's revision. An ENI without
+    slaves is an EniError: there is no chain to emulate."""
+    if not eni.slaves:
+        raise EniError("the ENI has no <Slave>: no chain to emulate", path=eni.source)
     if not 0.0 <= options.drop_probability <= 1.0:
         raise UsageError(f"drop probability {options.drop_probability} is not in [0, 1]")
     if not 0.0 <= options.corrupt_probability <= 1.0:

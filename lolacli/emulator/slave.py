@@ -24,7 +24,13 @@ ASSIGN_OBJECTS = {Direction.OUTPUT: ASSIGN_RX, Direction.INPUT: ASSIGN_TX}
 DEFAULT_PDO = {Direction.OUTPUT: MAPPING_RX, Direction.INPUT: MAPPING_TX}
 FILLER_OBJECT = {Direction.OUTPUT: 0x5FFE, Direction.INPUT: 0x5FFF}
 _FILLER_TYPES = ((32, "UDINT"), (16, "UINT"), (8, "USINT"))
+#: larger areas start with 64-bit entries: in 32-bit ones, 0xFFFF bytes (what an FMMU maps)
+#: would take more entries than the SII's PDO category (65535 words, 8 bytes an entry) holds
+_WIDE_FILLER_TYPES = ((64, "ULINT"), *_FILLER_TYPES)
+_WIDE_FILLER_ABOVE_BITS = 0x8000 * 8
 ENTRIES_PER_PDO = 8
+#: entries one PDO mapping (and one filler object) holds: sub-indexes 1..254
+MAX_PDO_ENTRIES = 254
 
 
 class SlaveApplication:
@@ -113,21 +119,46 @@ def with_process_data_pdos(slave: Slave) -> Slave:
         indexes = _coe_assigned(slave, ASSIGN_OBJECTS[direction]) or [DEFAULT_PDO[direction]]
         entries = _filler_entries(FILLER_OBJECT[direction], bits)
         sm = _process_sm(slave, direction)
-        for k, index in enumerate(indexes):
-            chunk = entries[k * ENTRIES_PER_PDO : (k + 1) * ENTRIES_PER_PDO]
-            if k == len(indexes) - 1:
-                chunk = entries[k * ENTRIES_PER_PDO :]
+        for index, chunk in _pdo_chunks(indexes, entries):
             name = f"{'Rx' if direction == Direction.OUTPUT else 'Tx'}PDO 0x{index:04X}"
             pdos.append(Pdo(index, name, direction, sm, tuple(chunk)))
     return replace(slave, pdos=tuple(pdos))
 
 
+def _pdo_chunks(
+    indexes: list[int], entries: list[PdoEntry]
+) -> list[tuple[int, list[PdoEntry]]]:
+    """The filler entries spread over the PDOs: ENTRIES_PER_PDO each, the last PDO the
+    rest, and where the rest is more than one mapping holds, the PDOs after it (0x1A00,
+    0x1A01, ...) as many as it takes."""
+    first = [
+        (index, entries[k * ENTRIES_PER_PDO : (k + 1) * ENTRIES_PER_PDO])
+        for k, index in enumerate(indexes[:-1])
+    ]
+    rest = entries[(len(indexes) - 1) * ENTRIES_PER_PDO :]
+    used = set(indexes)
+    index = indexes[-1]
+    last = [(index, rest[:MAX_PDO_ENTRIES])]
+    for at in range(MAX_PDO_ENTRIES, len(rest), MAX_PDO_ENTRIES):
+        while index in used:
+            index += 1
+        used.add(index)
+        last.append((index, rest[at : at + MAX_PDO_ENTRIES]))
+    return first + last
+
+
 def _filler_entries(index: int, bits: int) -> list[PdoEntry]:
+    """Unsigned entries of ``bits`` in all; every MAX_PDO_ENTRIES of them fill one more
+    filler object, 2 below the last (0x5FFE, 0x5FFC, ... for outputs; 0x5FFF, 0x5FFD, ...
+    for inputs), whose sub-indexes are a byte."""
     out: list[PdoEntry] = []
     left = bits
+    types = _WIDE_FILLER_TYPES if bits > _WIDE_FILLER_ABOVE_BITS else _FILLER_TYPES
     while left > 0:
-        size, name = next(((b, n) for b, n in _FILLER_TYPES if left >= b), (left, ""))
-        out.append(PdoEntry(index, len(out) + 1, size, f"Process data {len(out) + 1}", name))
+        size, name = next(((b, n) for b, n in types if left >= b), (left, ""))
+        n = len(out)
+        block, sub = divmod(n, MAX_PDO_ENTRIES)
+        out.append(PdoEntry(index - 2 * block, sub + 1, size, f"Process data {n + 1}", name))
         left -= size
     return out
 

@@ -16,12 +16,13 @@ CoE flags, ``<Dc>/<OpMode>``, ``<Eeprom>`` (ByteSize, ConfigData) and the object
 
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass
 from typing import Any
 
 from lolacli.eni.esi_dictionary import EsiDictionary, read_dictionary
 from lolacli.eni.model import Direction, Identity, Pdo, PdoEntry
-from lolacli.eni.parser import parse_number, safe_tree
+from lolacli.eni.parser import ENI_ROOTS, parse_number, safe_tree
 from lolacli.errors import EniError
 
 _El = Any  # an lxml element (lxml ships no type information)
@@ -162,6 +163,11 @@ class _EsiReader:
     # -- document --
 
     def esi(self, root: _El) -> EsiFile:
+        if root.tag in ENI_ROOTS:
+            raise self.error(
+                root, f"this is an ENI (<{root.tag}>), not an ESI device description "
+                f"(read it with: lolacli eni inspect {shlex.quote(self.source)})",
+            )
         if root.tag != "EtherCATInfo":
             raise self.error(root, f"not an ESI: root element is <{root.tag}>, not <EtherCATInfo>")
         vendor = root.find("Vendor")

@@ -11,12 +11,35 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
 from typing import Any
 
+from lolacli.eni.limits import (
+    ADDRESS16,
+    AREA_BITS,
+    BIT_LEN,
+    CCS,
+    COMMAND,
+    CYCLE_NS,
+    DATA_LENGTH,
+    ETHERNET_PAYLOAD_BYTES,
+    I32,
+    IMAGE_BIT,
+    IMAGE_BYTES,
+    LOGICAL_BIT,
+    MILLISECONDS,
+    RETRIES,
+    SM_INDEX,
+    U8,
+    U16,
+    U32,
+    WKC,
+    WORD32,
+    Width,
+)
 from lolacli.eni.model import (
     ConfiguredFmmu,
     CyclicCommand,
+    CyclicFrame,
     Direction,
     Eni,
     InitCmd,
@@ -26,7 +49,7 @@ from lolacli.eni.model import (
 from lolacli.findings import Finding, Severity
 from lolacli.text import plural, station
 from lolacli.wire.commands import LOGICAL, Command, addressed_wkc, mnemonic, wkc_increment
-from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, MAX_DATAGRAM_DATA
+from lolacli.wire.frame import DATAGRAM_HEADER_BYTES, ECAT_HEADER_BYTES, WKC_BYTES
 from lolacli.wire.registers import Fmmu, FmmuType
 
 VALIDATE_SCHEMA = "lolacli.eni-validate/2"
@@ -335,42 +358,9 @@ def check_process_image(eni: Eni) -> Iterator[Finding]:
 
 # --------------------------------------------------------------------------- field widths
 
-
-@dataclass(frozen=True, slots=True)
-class Width:
-    """The values an ENI number can take on the bus (``hi`` None: no upper bound)."""
-
-    lo: int
-    hi: int | None
-    name: str
-
-    def holds(self, value: int) -> bool:
-        return self.lo <= value and (self.hi is None or value <= self.hi)
-
-    def __str__(self) -> str:
-        if self.hi is None:
-            return f">= {self.lo} ({self.name})"
-        hi = f"0x{self.hi:X}" if self.hi > 0xFF else str(self.hi)
-        return f"{self.lo}..{hi} ({self.name})"
-
-
-# Register and object widths: ETG.1000.4 (datagram header: Cmd u8, ADP/ADO u16 or logical
-# address u32, 11-bit length, WKC u16; Table 56 FMMU, Table 58 sync manager; DC registers
-# 0x0980 activation u16, 0x09A0/0x09A4 SYNC0/SYNC1 cycle u32), ETG.1000.6 CoE (object index
-# u16, subindex u8; a PDO mapping entry is one u32 of index 16 | subindex 8 | bit length 8;
-# identity object 0x1018 u32 fields; mailbox SMs u16; 16 sync managers), CiA 301 (SDO
-# command specifier: 3 bits).
-U8 = Width(0, 0xFF, "u8")
-U16 = Width(0, 0xFFFF, "u16")
-U32 = Width(0, 0xFFFF_FFFF, "u32")
-I32 = Width(-(2**31), 2**31 - 1, "i32")
-SM_INDEX = Width(0, 15, "an ESC has 16 sync managers")
-CCS = Width(0, 7, "3-bit SDO command specifier")
-DATA_LENGTH = Width(0, MAX_DATAGRAM_DATA, "11-bit datagram length")
-BIT_LEN = Width(0, 0xFF, "u8 bit length of a PDO mapping entry; 0 pads")
-LOGICAL_BIT = Width(0, 0xFFFF_FFFF * 8 + 7, "a bit of the 4 GiB logical space")
-COUNT = Width(0, None, "not negative")
-POSITIVE = Width(1, None, "positive")
+# The widths are lolacli.eni.limits': the parser refuses a file with a value outside them
+# (exit 3, naming the line), so these findings come from models built in code or read back
+# from the cache, never from a file just parsed.
 
 RANGE_CODE = "value-out-of-range"
 
@@ -387,16 +377,19 @@ def _range_findings(
 
 def _init_cmd_fields(n: int, c: InitCmd) -> Iterator[_Field]:
     at = f"InitCmd {n} ({c.comment})" if c.comment else f"InitCmd {n}"
-    yield f"{at} <Cmd>", c.cmd, U8
+    yield f"{at} <Cmd>", c.cmd, COMMAND
     if c.logical_address is None:
-        yield f"{at} <Adp>", c.adp, U16
-        yield f"{at} <Ado>", c.ado, U16
-    yield f"{at} <Addr>", c.logical_address, U32
+        yield f"{at} <Adp>", c.adp, ADDRESS16
+        yield f"{at} <Ado>", c.ado, ADDRESS16
+    yield f"{at} <Addr>", c.logical_address, WORD32
     yield f"{at} data length", len(c.data), DATA_LENGTH
-    yield f"{at} <Cnt>", c.expected_wkc, U16
-    yield f"{at} <Retries>", c.retries, COUNT
-    yield f"{at} <Timeout>", c.timeout_ms, COUNT
-    yield f"{at} <Validate><Timeout>", c.validate_timeout_ms, COUNT
+    yield f"{at} <Cnt>", c.expected_wkc, WKC
+    yield f"{at} <Retries>", c.retries, RETRIES
+    yield f"{at} <Timeout>", c.timeout_ms, MILLISECONDS
+    yield f"{at} <Validate><Timeout>", c.validate_timeout_ms, MILLISECONDS
+    for name, data in (("<Validate><Data>", c.validate_data), ("<DataMask>", c.validate_mask)):
+        if data is not None:
+            yield f"{at} {name} length", len(data), DATA_LENGTH
 
 
 def _init_cmds_fields(cmds: Iterable[InitCmd]) -> Iterator[_Field]:
@@ -405,13 +398,13 @@ def _init_cmds_fields(cmds: Iterable[InitCmd]) -> Iterator[_Field]:
 
 
 def _identity_fields(s: Slave) -> Iterator[_Field]:
-    yield "<Info><PhysAddr>", s.station_address, U16
-    yield "<Info><AutoIncAddr>", s.auto_inc_address, U16
-    yield "<Info><VendorId>", s.identity.vendor_id, U32
-    yield "<Info><ProductCode>", s.identity.product_code, U32
-    yield "<Info><RevisionNo>", s.identity.revision, U32
-    yield "<Info><SerialNo>", s.identity.serial, U32
-    yield "<PreviousPort><PhysAddr>", s.previous_station_address, U16
+    yield "<Info><PhysAddr>", s.station_address, ADDRESS16
+    yield "<Info><AutoIncAddr>", s.auto_inc_address, ADDRESS16
+    yield "<Info><VendorId>", s.identity.vendor_id, WORD32
+    yield "<Info><ProductCode>", s.identity.product_code, WORD32
+    yield "<Info><RevisionNo>", s.identity.revision, WORD32
+    yield "<Info><SerialNo>", s.identity.serial, WORD32
+    yield "<PreviousPort><PhysAddr>", s.previous_station_address, ADDRESS16
 
 
 def _mailbox_fields(m: Mailbox | None) -> Iterator[_Field]:
@@ -421,14 +414,14 @@ def _mailbox_fields(m: Mailbox | None) -> Iterator[_Field]:
     yield "<Mailbox><Send><Length>", m.out_length_bytes, U16
     yield "<Mailbox><Recv><Start>", m.in_start, U16
     yield "<Mailbox><Recv><Length>", m.in_length_bytes, U16
-    yield "<Mailbox><Recv><PollTime>", m.poll_time_ms, COUNT
+    yield "<Mailbox><Recv><PollTime>", m.poll_time_ms, MILLISECONDS
     yield "<Mailbox><Recv><StatusBitAddr>", m.status_bit_address, LOGICAL_BIT
     for n, c in enumerate(m.coe_init_cmds, 1):
         at = f"CoE InitCmd {n} ({c.comment})" if c.comment else f"CoE InitCmd {n}"
         yield f"{at} <Index>", c.index, U16
         yield f"{at} <SubIndex>", c.subindex, U8
         yield f"{at} <Ccs>", c.ccs, CCS
-        yield f"{at} <Timeout>", c.timeout_ms, COUNT
+        yield f"{at} <Timeout>", c.timeout_ms, MILLISECONDS
 
 
 def _sm_fmmu_fields(s: Slave) -> Iterator[_Field]:
@@ -462,7 +455,7 @@ def _dc_fields(s: Slave) -> Iterator[_Field]:
     for kind, areas in (("Send", s.outputs), ("Recv", s.inputs)):
         for a in areas:
             yield f"<ProcessData><{kind}><BitStart>", a.bit_start, LOGICAL_BIT
-            yield f"<ProcessData><{kind}><BitLength>", a.bit_length, COUNT
+            yield f"<ProcessData><{kind}><BitLength>", a.bit_length, AREA_BITS
     if s.dc is None:
         return
     yield "<DC><CycleTime0>", s.dc.cycle_time0_ns, U32
@@ -481,24 +474,38 @@ def _slave_fields(s: Slave) -> Iterator[_Field]:
 
 
 def _cyclic_command_fields(c: CyclicCommand) -> Iterator[_Field]:
-    yield "<Cmd>", c.cmd, U8
-    yield "<Adp>", c.adp, U16
-    yield "<Ado>", c.ado, U16
-    yield "<Addr>", c.logical_address, U32
+    yield "<Cmd>", c.cmd, COMMAND
+    yield "<Adp>", c.adp, ADDRESS16
+    yield "<Ado>", c.ado, ADDRESS16
+    yield "<Addr>", c.logical_address, WORD32
     yield "<DataLength>", c.data_length_bytes, DATA_LENGTH
-    yield "<Cnt>", c.expected_wkc, U16
-    yield "<InputOffs>", c.input_offset_bytes, COUNT
-    yield "<OutputOffs>", c.output_offset_bytes, COUNT
+    yield "<Cnt>", c.expected_wkc, WKC
+    yield "<InputOffs>", c.input_offset_bytes, IMAGE_BYTES
+    yield "<OutputOffs>", c.output_offset_bytes, IMAGE_BYTES
+
+
+FRAME_PAYLOAD = Width(0, ETHERNET_PAYLOAD_BYTES, "an Ethernet frame carries 1500 bytes")
+
+
+def _payload_bytes(frame: CyclicFrame) -> int:
+    """EtherCAT header and datagrams: what the frame's Ethernet payload must hold (a
+    negative length is a finding of its own)."""
+    return ECAT_HEADER_BYTES + sum(
+        DATAGRAM_HEADER_BYTES + max(c.data_length_bytes, 0) + WKC_BYTES for c in frame.commands
+    )
 
 
 def _cyclic_findings(eni: Eni) -> Iterator[Finding]:
     for t, task in enumerate(eni.cyclic, 1):
         yield from _range_findings(
-            f"cyclic task {t}", [("<CycleTime> (ns)", task.cycle_time_ns, POSITIVE)]
+            f"cyclic task {t}", [("<CycleTime> (ns)", task.cycle_time_ns, CYCLE_NS)]
         )
         for fn, frame in enumerate(task.frames, 1):
             # CycleTimeFactor (Elmo Application Studio) is no bus field; its exports write 0.
             where = f"cyclic task {t} frame {fn}"
+            yield from _range_findings(
+                where, [("Ethernet payload (bytes)", _payload_bytes(frame), FRAME_PAYLOAD)]
+            )
             for cn, c in enumerate(frame.commands, 1):
                 yield from _range_findings(
                     f"{where} Cmd {cn} ({mnemonic(c.cmd)})", _cyclic_command_fields(c)
@@ -507,10 +514,11 @@ def _cyclic_findings(eni: Eni) -> Iterator[Finding]:
 
 def _image_fields(eni: Eni) -> Iterator[_Field]:
     pi = eni.process_image
-    yield "<Inputs><ByteSize>", pi.inputs_bytes, COUNT
-    yield "<Outputs><ByteSize>", pi.outputs_bytes, COUNT
+    yield "<Inputs><ByteSize>", pi.inputs_bytes, IMAGE_BYTES
+    yield "<Outputs><ByteSize>", pi.outputs_bytes, IMAGE_BYTES
     for v in pi.variables:
-        yield f"variable {v.name!r} <BitSize>", v.bit_size, COUNT
+        yield f"variable {v.name!r} <BitOffs>", v.bit_offset, IMAGE_BIT
+        yield f"variable {v.name!r} <BitSize>", v.bit_size, IMAGE_BIT
 
 
 def check_field_ranges(eni: Eni) -> Iterator[Finding]:
@@ -519,7 +527,7 @@ def check_field_ranges(eni: Eni) -> Iterator[Finding]:
     yield from _range_findings(
         "master",
         [
-            ("<CycleTime> (ns)", master.cycle_time_ns, POSITIVE),
+            ("<CycleTime> (ns)", master.cycle_time_ns, CYCLE_NS),
             *_init_cmds_fields(master.init_cmds),
         ],
     )
@@ -532,12 +540,27 @@ def check_field_ranges(eni: Eni) -> Iterator[Finding]:
     yield from _range_findings("process image", _image_fields(eni))
 
 
+def within_limits(eni: Eni) -> bool:
+    """True when every number of ``eni`` holds the limits the parser enforces (no
+    :func:`check_field_ranges` finding): a model that did not come from the parser (built
+    in code, read from the cache) and may be handed to the emulator or master."""
+    return next(check_field_ranges(eni), None) is None
+
+
+def check_slaves_present(eni: Eni) -> Iterator[Finding]:
+    """An ENI configures a bus: with no ``<Slave>`` there is nothing to bring up, emulate or
+    check a capture against."""
+    if not eni.slaves:
+        yield _error("no-slaves", "the ENI has no <Slave>: there is no bus to configure")
+
+
 def check_cyclic_present(eni: Eni) -> Iterator[Finding]:
     if eni.slaves and not eni.cyclic_frames:
         yield _warning("no-cyclic-frames", "the ENI has slaves but no cyclic frame")
 
 
 CHECKS: tuple[Callable[[Eni], Iterator[Finding]], ...] = (
+    check_slaves_present,
     check_station_addresses,
     check_chain,
     check_fmmu_types,
@@ -581,4 +604,5 @@ __all__ = [
     "expected_wkc",
     "validate_eni",
     "validate_report",
+    "within_limits",
 ]

@@ -141,7 +141,7 @@ def simulate(
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        doc.update(_timing(master, clock, app.last_skipped - skipped0))
+        doc.update(_timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
         return _result(doc, options, master, app, interrupted, stop)
     finally:
         for r in recorders:
@@ -361,7 +361,7 @@ def _live(
         wall_s = time.perf_counter() - wall0
         doc = _report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(_NO_LIVE_KEYS)
-        doc.update(_timing(master, clock, app.last_skipped - skipped0))
+        doc.update(_timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
         wake = summarize_array(wakes)
         doc["wakeup_lateness_us"] = wake.to_dict(scale=1e-3) if wake is not None else None
         doc.update(
@@ -392,10 +392,10 @@ def _check(eni: Eni, options: SimulateOptions) -> None:
     """Options no bus can have: UsageError naming the option and its range (exit 2)."""
     from lolacli.emulator.run import MAX_DRIFT_PPB
 
+    if not eni.slaves:
+        raise EniError("the ENI has no <Slave>: nothing to simulate", path=eni.source)
     if not eni.cyclic_frames:
         raise EniError("the ENI has no cyclic frame: nothing to simulate", path=eni.source)
-    if not eni.slaves:
-        raise EniError("the ENI has no slaves: nothing to simulate", path=eni.source)
     n = len(eni.slaves)
     if not 1.0 <= options.rate_hz <= MAX_RATE_HZ:
         raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to {MAX_RATE_HZ:.0f} Hz")
@@ -539,6 +539,12 @@ class _Application:
         self.first_cycle = stats.cycles
         for at in (stats.lost_at, stats.late_at, stats.mismatch_at, stats.skipped_at):
             at.clear()
+
+    def skipped_in_run(self, skipped0: int, slots: int) -> int:
+        """The slots of the run skipped (a stall in its last cycle skips past its end:
+        those are not the run's)."""
+        ran = (self.last_cycle or 0) - self.first_cycle
+        return max(0, min(self.last_skipped - skipped0, slots - ran))
 
     def run_cycles(self, cycles: list[int]) -> list[int]:
         """``cycles`` (the master's count) as cycles of the run, 0 its first."""

@@ -99,6 +99,34 @@ def test_a_slave_without_pdos_in_its_eni_maps_the_enis_sizes(corpus: Path) -> No
     assert sum(p.bit_size for p in pdos if p.index >= 0x1A00) == 112
 
 
+@pytest.mark.parametrize("bits", [8160, 8161, 0x8000 * 8 + 8, 0xFFFF * 8])
+def test_large_areas_without_pdos_fit_the_pdos_and_the_sii(corpus: Path, bits: int) -> None:
+    """An area up to what an FMMU maps (0xFFFF bytes): filler entries spread over PDOs and
+    filler objects of at most 254 sub-indexes, 64-bit entries past 32 KiB, so the SII's
+    PDO category (a byte of entries, a word of length) holds them; it overran a byte from
+    255 entries (1020 bytes) on."""
+    import re
+    from dataclasses import replace
+
+    from lolacli.eni.model import ProcessDataArea
+
+    eni = load_eni(corpus / "eni" / "rocos-ethercat__eni1.xml")
+    slave = replace(eni.slaves[0], outputs=(ProcessDataArea(0, bits),))
+    pdos = with_process_data_pdos(slave).pdos
+    outputs = [p for p in pdos if p.index < 0x1A00]
+    assert sum(p.bit_size for p in outputs) == bits
+    assert all(1 <= len(p.entries) <= 254 for p in outputs)
+    assert all(1 <= e.subindex <= 254 for p in pdos for e in p.entries)
+    assert len({(e.index, e.subindex) for p in outputs for e in p.entries}) == sum(
+        len(p.entries) for p in outputs
+    )  # every filler entry an object entry of its own
+    assert len({p.index for p in pdos}) == len(pdos)
+    layout = sii_layout(sii_from_slave(with_process_data_pdos(slave)))
+    assert layout.outputs_bytes == (bits + 7) // 8
+    build_chain(replace(eni, slaves=(slave,)))
+    assert re.fullmatch(r"RxPDO 0x16[0-9A-F]{2}", outputs[-1].name)
+
+
 @pytest.mark.parametrize(
     ("eni_name", "position", "sm"), [("lola.xml", 24, 1), ("ek1100_io.xml", 2, 0)]
 )

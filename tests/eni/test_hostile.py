@@ -152,3 +152,96 @@ def test_deep_nesting_is_refused_quickly(tmp_path):
     with pytest.raises(EniError):
         parse_eni(deep, "deep.xml")
     assert time.perf_counter() - start < 2.0
+
+
+# --------------------------------------------------------------------------- not an ENI at all
+
+
+def _corpus_file(kind: str, name: str) -> Path:
+    from tests.conftest import CORPUS
+
+    path = CORPUS / kind / name
+    if not path.is_file():
+        pytest.skip(f"corpus file {path} not found")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("name", "kind"),
+    [
+        ("ethercrab__twincat-run-ek1100-el1004.pcapng", "pcapng"),
+        ("DERIVED__ethercrab__twincat-run-ek1100-el1004.classic.pcap", "pcap"),
+    ],
+)
+@pytest.mark.parametrize(
+    "command", [("eni", "inspect"), ("eni", "validate"), ("bus", "timing", "--eni")]
+)
+def test_a_capture_given_as_an_eni_is_named_as_one(cli, name, kind, command):
+    path = _corpus_file("pcap", name)
+    code, out, err = cli(*command, str(path))
+    message = assert_one_line_error(code, out, err, path, None)
+    assert message == (
+        f"lolacli: error: {path}: this is a {kind} capture, not an ENI "
+        f"(read it with: lolacli capture analyze {path})"
+    )
+
+
+def test_an_eds_given_as_an_eni_is_named_as_one(cli):
+    path = _corpus_file("eds", "ros_canopen__prbt_0_1.dcf")
+    code, out, err = cli("eni", "vars", str(path))
+    message = assert_one_line_error(code, out, err, path, None)
+    assert "this is a CANopen EDS/DCF, not an ENI" in message and "--eds" in message
+
+
+def test_an_esi_given_as_an_eni_is_named_as_one(cli):
+    path = _corpus_file("esi", "soes__EasyCAT_V2_0.xml")
+    code, out, err = cli("eni", "inspect", str(path))
+    message = assert_one_line_error(code, out, err, path, 2)
+    assert "this is an ESI device description (<EtherCATInfo>), not an ENI" in message
+    assert "--esi" in message
+
+
+def test_an_eni_given_as_an_esi_is_named_as_one():
+    from lolacli.files import load_esi
+
+    path = FIXTURES / "eni-small-valid.xml"
+    with pytest.raises(EniError) as info:
+        load_esi(path)
+    assert info.value.path == str(path) and info.value.line is not None
+    assert "this is an ENI (<EtherCATConfig>), not an ESI" in str(info.value)
+    assert f"lolacli eni inspect {path}" in str(info.value)
+
+
+def test_a_capture_given_as_an_esi_is_named_as_one():
+    from lolacli.files import load_esi
+
+    path = _corpus_file("pcap", "ethercrab__twincat-run-ek1100-el1004.pcapng")
+    with pytest.raises(EniError, match="this is a pcapng capture, not an ESI"):
+        load_esi(path)
+
+
+# --------------------------------------------------------------------------- no slaves
+
+NO_SLAVES = (
+    "<EtherCATConfig><Config><Master><Info><Name>m</Name></Info></Master>"
+    "<Cyclic><CycleTime>1000</CycleTime><Frame><Cmd><Cmd>7</Cmd><Adp>0</Adp><Ado>#x130</Ado>"
+    "<DataLength>2</DataLength></Cmd></Frame></Cyclic></Config></EtherCATConfig>"
+)
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ("bus", "simulate", "--cycles", "3", "--eni"),
+        ("bus", "emulate", "-i", "nosuchif0", "--duration", "0.1", "--eni"),
+        ("sdo", "read", "1", "0x1018:01", "--eni"),
+    ],
+    ids=["simulate", "emulate", "sdo-read"],
+)
+def test_an_eni_without_slaves_cannot_be_run(cli, tmp_path, command):
+    """`eni validate` fails it (no-slaves); the commands that need a chain say so."""
+    path = tmp_path / "no-slaves.xml"
+    path.write_text(NO_SLAVES)
+    code, out, err = cli(*command, str(path))
+    message = assert_one_line_error(code, out, err, path, None)
+    assert "the ENI has no <Slave>" in message

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -49,7 +50,11 @@ def test_parse_number(text, value):
     assert parse_number(text) == value
 
 
-@pytest.mark.parametrize("text", ["", "#x", "12a", "0xZZ", "1.5", "one"])
+@pytest.mark.parametrize(
+    "text",
+    ["", "#x", "12a", "0xZZ", "1.5", "one", "\u0663", "\u00b2", "0x-1", "--5", "+-5", "#x 1",
+     "1e3", "9" * 5000],
+)
 def test_parse_number_rejects(text):
     with pytest.raises(ValueError):
         parse_number(text)
@@ -142,6 +147,22 @@ def test_namespaced_document_reads_the_same():
         b'<EtherCATConfig xmlns="urn:example:eni" Version="1.3">',
     )
     assert parse_eni(namespaced) == parse_eni(VALID)
+
+
+@pytest.mark.parametrize("encoding", ["utf-8", "utf-16"])
+def test_prefixed_elements_read_the_same(encoding):
+    """Elements in a prefixed namespace (``<e:Slave>``), in UTF-8 and UTF-16 (where the
+    parser cannot see the prefixes in the bytes and must look at every element)."""
+    text = re.sub(r"<(/?)([A-Za-z])", r"<\1e:\2", VALID.decode())
+    text = text.replace(
+        '<e:EtherCATConfig Version="1.3">',
+        '<e:EtherCATConfig xmlns:e="urn:example:eni" Version="1.3">',
+    )
+    assert text.count("xmlns:e") == 1 and "<e:Slave>" in text
+    if encoding == "utf-16":
+        text = text.replace('encoding="UTF-8"', 'encoding="UTF-16"')
+    data = text.encode(encoding)
+    assert parse_eni(data) == parse_eni(VALID)
 
 
 def test_twincat_export_details():

@@ -60,9 +60,6 @@ DEFECTS = {
         "04000100020000070010000101000000",  # read at 0x00010004: drive's inputs
     ),
     "pdo-overruns-sm": planted(DRIVE_SM2, "0011040064000100"),  # SM2 4 bytes < 6 bytes of PDOs
-    "variable-outside-image": planted(
-        "<BitSize>16</BitSize><BitOffs>64</BitOffs>", "<BitSize>16</BitSize><BitOffs>90</BitOffs>"
-    ),
     "cyclic-logical-overlap": planted(
         "<Cmd>7</Cmd>\n          <Adp>0</Adp>\n          <Ado>#x130</Ado>",
         "<Cmd>10</Cmd>\n          <Addr>#x00010004</Addr>",
@@ -86,6 +83,31 @@ def test_planted_defect_is_found(cli, tmp_path, code):
     assert report["errors"] >= 1
     finding = next(f for f in report["findings"] if f["code"] == code)
     assert finding["severity"] == "failure" and finding["message"]
+
+
+def test_variable_outside_the_image_is_found_in_a_model():
+    """A file with one is refused by the parser (tests/eni/test_validate_ranges.py); a model
+    built in code is checked by validate."""
+    from dataclasses import replace
+
+    eni = parse_eni(VALID.encode(), "t.xml")
+    pi = eni.process_image
+    moved = replace(pi.variables[0], bit_offset=pi.inputs_bytes * 8)
+    eni = replace(eni, process_image=replace(pi, variables=(moved, *pi.variables[1:])))
+    (finding,) = [f for f in validate_eni(eni) if f.kind == "variable-outside-image"]
+    assert finding.severity.value == "failure" and moved.name in finding.message
+
+
+def test_an_eni_without_slaves_fails_validation(cli, tmp_path):
+    path = tmp_path / "eni-no-slaves.xml"
+    path.write_text(
+        "<EtherCATConfig><Config><Master><Info><Name>m</Name></Info></Master>"
+        "<Cyclic><CycleTime>1000</CycleTime></Cyclic></Config></EtherCATConfig>"
+    )
+    code, out, _err = cli("eni", "validate", str(path), "--format", "json")
+    report = json.loads(out)
+    assert code == 1 and report["verdict"] == "fail"
+    assert [(f["kind"], f["severity"]) for f in report["findings"]] == [("no-slaves", "failure")]
 
 
 def test_wrong_cnt_is_the_only_finding():

@@ -1,9 +1,12 @@
-"""`eni validate` range checks: a number just outside the width the EtherCAT/CoE specs give
-its field is one ``value-out-of-range`` error naming slave and element; just inside, none.
+"""Range checks of ENI numbers: a number just outside the width the EtherCAT/CoE specs give
+its field (lolacli.eni.limits) makes the file unreadable: exit 3, one line naming the file, the
+line of the element and the element; just inside, the file reads and validates clean.
 
 File-level cases mutate one field of ``eni_examples/single_drive.xml`` (text replacement in a
-tmp copy) and run the CLI; model-level cases also cover the fields a file cannot carry out of
-range (register blocks decoded from InitCmd data) and models built in code.
+tmp copy) and run the CLI. Model-level cases check ``eni validate``'s own range check
+(``value-out-of-range``) on models the parser did not make (built in code, read from the
+cache), including the fields a file cannot carry out of range (register blocks decoded from
+InitCmd data).
 """
 
 from __future__ import annotations
@@ -48,149 +51,182 @@ class Case:
     template: str  # "{}" takes the value
     outside: str
     inside: str
-    label: str  # the element as the finding names it
-    slave: int | None = DRIVE
+    says: str  # what the error names, "{}" the value as written (default: "<El> {} is outside")
     count: int = 1
     base: str = SINGLE_DRIVE
-    cascades: frozenset[str] = frozenset()  # other errors the value rightly triggers
+    cascades: frozenset[str] = frozenset()  # validate errors the inside value rightly triggers
+    element: str | None = None  # the error names the line of this enclosing element
+
+    def _at(self) -> int:
+        if self.anchor is None:
+            assert self.base.count(self.old) == self.count, self.old
+            return self.base.index(self.old)
+        assert self.base.count(self.anchor) == 1, self.anchor
+        return self.base.index(self.old, self.base.index(self.anchor))
 
     def text(self, value: str) -> str:
         new = self.template.format(value)
         if self.anchor is None:
-            assert self.base.count(self.old) == self.count, self.old
             return self.base.replace(self.old, new)
-        assert self.base.count(self.anchor) == 1, self.anchor
-        at = self.base.index(self.old, self.base.index(self.anchor))
+        at = self._at()
         return self.base[:at] + new + self.base[at + len(self.old) :]
 
+    @property
+    def line(self) -> int:
+        """The line of the element (or attribute) replaced, or of ``element`` around it."""
+        at = self._at()
+        if self.element is not None:
+            at = self.base.rindex(self.element, 0, at)
+        return self.base.count("\n", 0, at) + 1
 
-ENTRY = "TxPdo 0x1A00 Entry 1 (Statusword)"
+
+def el(case_id: str, anchor: str | None, old: str, template: str, outside: str, inside: str,
+       **more: object) -> Case:
+    """A case whose error reads ``<Element> VALUE is outside ...``."""
+    tag = template.split(">", 1)[0] + ">"
+    return Case(case_id, anchor, old, template, outside, inside, tag + " {} is outside",
+                **more)  # type: ignore[arg-type]
+
+
 LRW = "cyclic task 1 frame 1 Cmd 1 (LRW):"
 BRD = "cyclic task 1 frame 1 Cmd 2 (BRD):"
 AL_STATUS = "<Comment>AL status of every slave</Comment>"
 PD_CMD = "<Comment>process data: outputs"
 WATCHDOG = "<Comment>watchdog divider 100 us</Comment>"
 INTERPOLATION = "<Comment>interpolation period: 5 x 10^-4 s</Comment>"
+STATUSWORD = "Drive.Inputs.Statusword<"
 C = Case
 CASES = [
-    # slave identity and addresses: kept as written by the parser (not folded into 16 or 32
-    # bits), except negative values within the width (AutoIncAddr -1 is 0xFFFF)
-    C("phys-addr", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>", "65536",
-      "65535", "<Info><PhysAddr>"),
-    C("auto-inc-addr", None, "<AutoIncAddr>#x0000</AutoIncAddr>",
-      "<AutoIncAddr>{}</AutoIncAddr>", "-32769", "-1", "<Info><AutoIncAddr>"),
-    C("vendor-id", None, "<VendorId>#x0000009a</VendorId>", "<VendorId>{}</VendorId>",
-      "#x100000000", "-1", "<Info><VendorId>"),
-    C("product-code", None, "<ProductCode>#x00030924</ProductCode>",
-      "<ProductCode>{}</ProductCode>", "#x100000000", "#xffffffff", "<Info><ProductCode>"),
-    C("serial-no", None, "<SerialNo>4097</SerialNo>", "<SerialNo>{}</SerialNo>",
-      "-2147483649", "-2147483648", "<Info><SerialNo>"),
-    C("cyclic-ado", AL_STATUS, "<Ado>#x0130</Ado>", "<Ado>{}</Ado>", "#x10000", "#xffff",
-      f"{BRD} <Ado>", slave=None),
-    C("cyclic-addr", PD_CMD, "<Addr>#x00010000</Addr>", "<Addr>{}</Addr>", "#x100000000",
-      "#xffffffff", f"{LRW} <Addr>", slave=None, cascades=frozenset({"wkc-mismatch"})),
+    # slave identity and addresses (negative values within the width are its two's
+    # complement: AutoIncAddr -1 is 0xFFFF)
+    el("phys-addr", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>", "65536",
+       "65535"),
+    el("phys-addr-70000", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>",
+       "70000", "1"),
+    el("auto-inc-addr", None, "<AutoIncAddr>#x0000</AutoIncAddr>",
+       "<AutoIncAddr>{}</AutoIncAddr>", "-32769", "-1", cascades=frozenset()),
+    el("vendor-id", None, "<VendorId>#x0000009a</VendorId>", "<VendorId>{}</VendorId>",
+       "#x100000000", "-1"),
+    el("product-code", None, "<ProductCode>#x00030924</ProductCode>",
+       "<ProductCode>{}</ProductCode>", "#x100000000", "#xffffffff"),
+    el("serial-no", None, "<SerialNo>4097</SerialNo>", "<SerialNo>{}</SerialNo>",
+       "-2147483649", "-2147483648"),
+    el("cyclic-ado", AL_STATUS, "<Ado>#x0130</Ado>", "<Ado>{}</Ado>", "#x10000", "#xffff"),
+    el("cyclic-addr", PD_CMD, "<Addr>#x00010000</Addr>", "<Addr>{}</Addr>", "#x100000000",
+       "#xffffffff", cascades=frozenset({"wkc-mismatch"})),
     # PDOs (ETG.1000.6: object index u16, subindex u8; mapping entry u32 = index|sub|bits)
-    C("pdo-index", "<TxPdo", "<Index>#x1a00</Index>", "<Index>{}</Index>", "#x10000", "#xffff",
-      "TxPdo 0x10000 <Index>"),
-    C("pdo-index-neg", "<TxPdo", "<Index>#x1a00</Index>", "<Index>{}</Index>", "-1", "0",
-      "TxPdo -1 <Index>"),
-    C("pdo-sm", "<TxPdo", 'Sm="3"', 'Sm="{}"', "16", "15", "TxPdo 0x1A00 Sm"),
-    C("entry-index", None, "<Index>#x6041</Index>", "<Index>{}</Index>", "#x10000", "#xffff",
-      f"{ENTRY} <Index>"),
-    C("entry-subindex", "<Index>#x6041</Index>", "<SubIndex>0</SubIndex>",
-      "<SubIndex>{}</SubIndex>", "256", "255", f"{ENTRY} <SubIndex>"),
-    C("entry-subindex-neg", "<Index>#x6041</Index>", "<SubIndex>0</SubIndex>",
-      "<SubIndex>{}</SubIndex>", "-1", "0", f"{ENTRY} <SubIndex>"),
-    C("entry-bitlen", "<Index>#x6041</Index>", "<BitLen>16</BitLen>", "<BitLen>{}</BitLen>",
-      "256", "255", f"{ENTRY} <BitLen>", cascades=frozenset({"pdo-overruns-sm"})),
-    C("entry-bitlen-padding", "<Index>#x6041</Index>", "<BitLen>16</BitLen>",
-      "<BitLen>{}</BitLen>", "-1", "0", f"{ENTRY} <BitLen>"),
+    el("pdo-index", "<TxPdo", "<Index>#x1a00</Index>", "<Index>{}</Index>", "#x10000",
+       "#xffff"),
+    el("pdo-index-neg", "<TxPdo", "<Index>#x1a00</Index>", "<Index>{}</Index>", "-1", "0"),
+    C("pdo-sm", "<TxPdo", 'Sm="3"', 'Sm="{}"', "16", "15", "<TxPdo> Sm {} is outside 0..15"),
+    el("entry-index", None, "<Index>#x6041</Index>", "<Index>{}</Index>", "#x10000", "#xffff"),
+    el("entry-subindex", "<Index>#x6041</Index>", "<SubIndex>0</SubIndex>",
+       "<SubIndex>{}</SubIndex>", "256", "255"),
+    el("entry-subindex-neg", "<Index>#x6041</Index>", "<SubIndex>0</SubIndex>",
+       "<SubIndex>{}</SubIndex>", "-1", "0"),
+    el("entry-bitlen", "<Index>#x6041</Index>", "<BitLen>16</BitLen>", "<BitLen>{}</BitLen>",
+       "256", "255", cascades=frozenset({"pdo-overruns-sm"})),
+    el("entry-bitlen-padding", "<Index>#x6041</Index>", "<BitLen>16</BitLen>",
+       "<BitLen>{}</BitLen>", "-1", "0"),
     # sync managers (ETG.1000.4 Table 58), declared by <SmN> when no InitCmd writes them
-    C("sm-index", None, "Sm3>", "Sm{}>", "16", "15", "SM16 index", count=2),
-    C("sm-start", "<Type>Outputs</Type>", "<StartAddress>#x1100</StartAddress>",
-      "<StartAddress>{}</StartAddress>", "65536", "65535", "SM2 start address",
-      base=SM2_DECLARED),
-    C("sm-length", "<Type>Outputs</Type>", "<DefaultSize>11</DefaultSize>",
-      "<DefaultSize>{}</DefaultSize>", "65536", "65535", "SM2 length", base=SM2_DECLARED),
-    C("sm-control", "<Type>Outputs</Type>", "<ControlByte>#x64</ControlByte>",
-      "<ControlByte>{}</ControlByte>", "256", "255", "SM2 control byte", base=SM2_DECLARED),
+    C("sm-index", None, "Sm3>", "Sm{}>", "16", "15", "<Sm{}>: sync manager {} is outside 0..15",
+      count=2),
+    el("sm-start", "<Type>Outputs</Type>", "<StartAddress>#x1100</StartAddress>",
+       "<StartAddress>{}</StartAddress>", "65536", "65535", base=SM2_DECLARED),
+    el("sm-length", "<Type>Outputs</Type>", "<DefaultSize>11</DefaultSize>",
+       "<DefaultSize>{}</DefaultSize>", "65536", "65535", base=SM2_DECLARED),
+    el("sm-control", "<Type>Outputs</Type>", "<ControlByte>#x64</ControlByte>",
+       "<ControlByte>{}</ControlByte>", "256", "255", base=SM2_DECLARED),
     # mailbox (the mailbox SMs' start and length are u16)
-    C("mbx-send-start", "<Mailbox>", "<Start>#x1800</Start>", "<Start>{}</Start>", "65536",
-      "65535", "<Mailbox><Send><Start>"),
-    C("mbx-send-length", "<Mailbox>", "<Length>140</Length>", "<Length>{}</Length>", "65536",
-      "65535", "<Mailbox><Send><Length>"),
-    C("mbx-recv-start", "<Mailbox>", "<Start>#x1900</Start>", "<Start>{}</Start>", "65536",
-      "65535", "<Mailbox><Recv><Start>"),
-    C("mbx-poll-time", "<Mailbox>", "<PollTime>20</PollTime>", "<PollTime>{}</PollTime>", "-1",
-      "0", "<Mailbox><Recv><PollTime>"),
-    C("coe-index", INTERPOLATION, "<Index>#x60c2</Index>", "<Index>{}</Index>", "#x10000",
-      "#xffff", "(interpolation period: 5 x 10^-4 s) <Index>"),
-    C("coe-subindex", INTERPOLATION, "<SubIndex>1</SubIndex>", "<SubIndex>{}</SubIndex>", "256",
-      "255", "(interpolation period: 5 x 10^-4 s) <SubIndex>"),
-    C("coe-ccs", INTERPOLATION, "<Ccs>1</Ccs>", "<Ccs>{}</Ccs>", "8", "7",
-      "(interpolation period: 5 x 10^-4 s) <Ccs>"),
-    C("coe-timeout", INTERPOLATION, "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1",
-      "0", "(interpolation period: 5 x 10^-4 s) <Timeout>"),
+    el("mbx-send-start", "<Mailbox>", "<Start>#x1800</Start>", "<Start>{}</Start>", "65536",
+       "65535"),
+    el("mbx-send-length", "<Mailbox>", "<Length>140</Length>", "<Length>{}</Length>", "65536",
+       "65535"),
+    el("mbx-recv-start", "<Mailbox>", "<Start>#x1900</Start>", "<Start>{}</Start>", "65536",
+       "65535"),
+    el("mbx-poll-time", "<Mailbox>", "<PollTime>20</PollTime>", "<PollTime>{}</PollTime>", "-1",
+       "0"),
+    el("coe-index", INTERPOLATION, "<Index>#x60c2</Index>", "<Index>{}</Index>", "#x10000",
+       "#xffff"),
+    el("coe-subindex", INTERPOLATION, "<SubIndex>1</SubIndex>", "<SubIndex>{}</SubIndex>", "256",
+       "255"),
+    el("coe-ccs", INTERPOLATION, "<Ccs>1</Ccs>", "<Ccs>{}</Ccs>", "8", "7"),
+    el("coe-timeout", INTERPOLATION, "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1",
+       "0"),
+    el("coe-timeout-u32", INTERPOLATION, "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>",
+       "4294967296", "4294967295"),
     # distributed clocks (registers 0x0980 u16, 0x09A0/0x09A4 u32)
-    C("dc-cycle0", None, "<CycleTime0>1000000</CycleTime0>", "<CycleTime0>{}</CycleTime0>",
-      "4294967296", "4294967295", "<DC><CycleTime0>"),
-    C("dc-cycle1", None, "<CycleTime1>0</CycleTime1>", "<CycleTime1>{}</CycleTime1>", "-1", "0",
-      "<DC><CycleTime1>"),
-    C("dc-shift-high", None, "<ShiftTime>0</ShiftTime>", "<ShiftTime>{}</ShiftTime>",
-      "2147483648", "2147483647", "<DC><ShiftTime>"),
-    C("dc-shift-low", None, "<ShiftTime>0</ShiftTime>", "<ShiftTime>{}</ShiftTime>",
-      "-2147483649", "-2147483648", "<DC><ShiftTime>"),
-    C("dc-assign-activate", None, "<AssignActivate>#x0300</AssignActivate>",
-      "<AssignActivate>{}</AssignActivate>", "#x10000", "#xffff", "<DC><AssignActivate>"),
-    # process data areas (bits of the image)
-    C("pd-send-bitstart", "<ProcessData>", "<BitStart>0</BitStart>", "<BitStart>{}</BitStart>",
-      "-1", "0", "<ProcessData><Send><BitStart>"),
-    C("pd-send-bitlength", "<ProcessData>", "<BitLength>88</BitLength>",
-      "<BitLength>{}</BitLength>", "-1", "0", "<ProcessData><Send><BitLength>"),
-    # InitCmds (ETG.1000.4 datagram: Cmd u8, WKC u16)
-    C("slave-initcmd-cmd", WATCHDOG, "<Cmd>5</Cmd>", "<Cmd>{}</Cmd>", "256", "255",
-      "(watchdog divider 100 us) <Cmd>"),
-    C("slave-initcmd-cnt", WATCHDOG, "<Cnt>1</Cnt>", "<Cnt>{}</Cnt>", "65536", "65535",
-      "(watchdog divider 100 us) <Cnt>"),
-    C("slave-initcmd-timeout", "<Comment>request INIT (acknowledge errors)</Comment>",
-      "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1", "0",
-      "(request INIT (acknowledge errors)) <Timeout>"),
-    C("slave-initcmd-validate-timeout", "<Comment>check INIT</Comment>",
-      "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1", "0",
-      "(check INIT) <Validate><Timeout>"),
-    C("master-initcmd-cmd", "<Comment>count slaves (AL status)</Comment>", "<Cmd>7</Cmd>",
-      "<Cmd>{}</Cmd>", "256", "255", "master: InitCmd 1 (count slaves (AL status)) <Cmd>",
-      slave=None),
-    # cyclic commands (datagram header: Cmd u8, 11-bit length, WKC u16); cycle time > 0
-    C("cyclic-cmd", PD_CMD, "<Cmd>12</Cmd>", "<Cmd>{}</Cmd>", "256", "255",
-      "cyclic task 1 frame 1 Cmd 1 (CMD256): <Cmd>", slave=None,
-      cascades=frozenset({"wkc-mismatch"})),
-    C("cyclic-datalength", PD_CMD, "<DataLength>11</DataLength>", "<DataLength>{}</DataLength>",
-      "2048", "2047", f"{LRW} <DataLength>", slave=None),
-    C("cyclic-datalength-neg", AL_STATUS, "<DataLength>2</DataLength>",
-      "<DataLength>{}</DataLength>", "-1", "0", f"{BRD} <DataLength>", slave=None),
-    C("cyclic-cnt", PD_CMD, "<Cnt>3</Cnt>", "<Cnt>{}</Cnt>", "65536", "65535", f"{LRW} <Cnt>",
-      slave=None, cascades=frozenset({"wkc-mismatch"})),
-    C("cyclic-input-offs", PD_CMD, "<InputOffs>0</InputOffs>", "<InputOffs>{}</InputOffs>", "-1",
-      "0", f"{LRW} <InputOffs>", slave=None),
-    C("cyclic-output-offs", PD_CMD, "<OutputOffs>0</OutputOffs>", "<OutputOffs>{}</OutputOffs>",
-      "-1", "0", f"{LRW} <OutputOffs>", slave=None),
+    el("dc-cycle0", None, "<CycleTime0>1000000</CycleTime0>", "<CycleTime0>{}</CycleTime0>",
+       "4294967296", "4294967295"),
+    el("dc-cycle1", None, "<CycleTime1>0</CycleTime1>", "<CycleTime1>{}</CycleTime1>", "-1",
+       "0"),
+    el("dc-shift-high", None, "<ShiftTime>0</ShiftTime>", "<ShiftTime>{}</ShiftTime>",
+       "2147483648", "2147483647"),
+    el("dc-shift-low", None, "<ShiftTime>0</ShiftTime>", "<ShiftTime>{}</ShiftTime>",
+       "-2147483649", "-2147483648"),
+    el("dc-assign-activate", None, "<AssignActivate>#x0300</AssignActivate>",
+       "<AssignActivate>{}</AssignActivate>", "#x10000", "#xffff"),
+    # process data areas (bits of the logical space; an FMMU maps at most 0xFFFF bytes)
+    el("pd-send-bitstart", "<ProcessData>", "<BitStart>0</BitStart>",
+       "<BitStart>{}</BitStart>", "-1", "0"),
+    el("pd-send-bitlength", "<ProcessData>", "<BitLength>88</BitLength>",
+       "<BitLength>{}</BitLength>", "-1", "0"),
+    el("pd-send-bitlength-fmmu", "<ProcessData>", "<BitLength>88</BitLength>",
+       "<BitLength>{}</BitLength>", "524281", "524280",
+       cascades=frozenset({"process-data-outside-image"})),
+    # InitCmds (ETG.1000.4 datagram: commands 0..14, WKC u16)
+    el("slave-initcmd-cmd", WATCHDOG, "<Cmd>5</Cmd>", "<Cmd>{}</Cmd>", "15", "14"),
+    el("slave-initcmd-cmd-u8", WATCHDOG, "<Cmd>5</Cmd>", "<Cmd>{}</Cmd>", "256", "4"),
+    el("slave-initcmd-cnt", WATCHDOG, "<Cnt>1</Cnt>", "<Cnt>{}</Cnt>", "65536", "65535"),
+    el("slave-initcmd-timeout", "<Comment>request INIT (acknowledge errors)</Comment>",
+       "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1", "0"),
+    el("slave-initcmd-validate-timeout", "<Comment>check INIT</Comment>",
+       "<Timeout>3000</Timeout>", "<Timeout>{}</Timeout>", "-1", "0"),
+    el("master-initcmd-cmd", "<Comment>count slaves (AL status)</Comment>", "<Cmd>7</Cmd>",
+       "<Cmd>{}</Cmd>", "256", "8"),
+    # cyclic commands (a datagram in a 1500-byte frame, WKC u16); cycle time > 0
+    el("cyclic-cmd", PD_CMD, "<Cmd>12</Cmd>", "<Cmd>{}</Cmd>", "15", "14",
+       cascades=frozenset({"wkc-mismatch"})),
+    el("cyclic-datalength", PD_CMD, "<DataLength>11</DataLength>",
+       "<DataLength>{}</DataLength>", "1487", "1472"),
+    C("cyclic-frame-too-long", PD_CMD, "<DataLength>11</DataLength>",
+      "<DataLength>{}</DataLength>", "1473", "1472",
+      "<Frame> of 2 datagrams needs 1501 bytes: an Ethernet frame carries 1500",
+      element="<Frame>"),
+    el("cyclic-datalength-neg", AL_STATUS, "<DataLength>2</DataLength>",
+       "<DataLength>{}</DataLength>", "-56", "0"),
+    el("cyclic-cnt", PD_CMD, "<Cnt>3</Cnt>", "<Cnt>{}</Cnt>", "65536", "65535",
+       cascades=frozenset({"wkc-mismatch"})),
+    el("cyclic-input-offs", PD_CMD, "<InputOffs>0</InputOffs>", "<InputOffs>{}</InputOffs>",
+       "-1", "0"),
+    el("cyclic-output-offs", PD_CMD, "<OutputOffs>0</OutputOffs>",
+       "<OutputOffs>{}</OutputOffs>", "16777217", "0"),
     C("cycle-time", None, "<CycleTime>1000</CycleTime>", "<CycleTime>{}</CycleTime>", "0",
-      "0.001", "cyclic task 1: <CycleTime> (ns)", slave=None),
-    # process image
-    C("image-bytesize", "<Inputs>", "<ByteSize>11</ByteSize>", "<ByteSize>{}</ByteSize>", "-1",
-      "0", "process image: <Inputs><ByteSize>", slave=None,
-      cascades=frozenset({"variable-outside-image", "process-data-outside-image"})),
-    C("variable-bitsize", "Drive.Inputs.Statusword<", "<BitSize>16</BitSize>",
-      "<BitSize>{}</BitSize>", "-1", "0", "'Drive.Inputs.Statusword' <BitSize>", slave=None),
+      "0.001", "<CycleTime> {} µs is outside 0.001.."),
+    C("cycle-time-nan", None, "<CycleTime>1000</CycleTime>", "<CycleTime>{}</CycleTime>",
+      "NaN", "4294967.295", "<CycleTime> {} µs is outside"),
+    # process image (16 MiB at most; every variable inside the <ByteSize> declared)
+    el("image-bytesize", "<Inputs>", "<ByteSize>11</ByteSize>", "<ByteSize>{}</ByteSize>", "-1",
+       "16777216"),
+    C("variable-past-image", STATUSWORD, "<BitSize>16</BitSize>", "<BitSize>{}</BitSize>", "89",
+      '88', 'variable "Drive.Inputs.Statusword": bits 0..88 lie past the 11-byte input image',
+      element="<Variable>"),
+    el("variable-bitsize", STATUSWORD, "<BitSize>16</BitSize>", "<BitSize>{}</BitSize>", "-1",
+       "0"),
+    el("variable-bitoffs", STATUSWORD, "<BitOffs>0</BitOffs>", "<BitOffs>{}</BitOffs>", "-16",
+       "0"),
+    # numbers that are none
+    C("not-a-number", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>", "#xZZ",
+      "#x3E9", "<PhysAddr>: not a number: '{}'"),
+    C("empty-required", None, "<PhysAddr>1001</PhysAddr>", "<PhysAddr>{}</PhysAddr>", "",
+      "1001", "<PhysAddr> is empty: expected a number"),
 ]  # fmt: skip
 
 
-def _run(cli, tmp_path: Path, text: str) -> tuple[int, dict]:
+def _validate(cli, tmp_path: Path, text: str) -> tuple[int, str, str]:
     path = tmp_path / "single_drive.xml"
     path.write_text(text)
-    code, out, _err = cli("eni", "validate", str(path), "-f", "json")
-    return code, json.loads(out)
+    return cli("eni", "validate", str(path), "-f", "json")
 
 
 def _errors(report: dict) -> Counter[tuple[str, str]]:
@@ -200,34 +236,53 @@ def _errors(report: dict) -> Counter[tuple[str, str]]:
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_just_outside_is_one_error_just_inside_none(case: Case, cli, tmp_path):
-    code, base = _run(cli, tmp_path, case.base)
+def test_just_outside_is_refused_with_its_line_just_inside_reads(case: Case, cli, tmp_path):
+    code, out, _err = _validate(cli, tmp_path, case.base)
+    base = json.loads(out)
     assert code == 0 and base["errors"] == 0, base
-    code, out = _run(cli, tmp_path, case.text(case.outside))
-    new = _errors(out) - _errors(base)
-    ranged = [f for f in out["findings"] if f["code"] == RANGE_CODE]
-    assert len(ranged) == 1, ranged
-    (finding,) = ranged
-    assert case.label in finding["message"], finding
-    assert f"{case.label} {_as_int(case.outside)} is outside" in finding["message"]
-    assert finding["slave"] == case.slave
-    assert {c for c, _m in new} - {RANGE_CODE} <= case.cascades, new
-    assert code == 1  # any error: exit 1
-    assert out["schema"] == "lolacli.eni-validate/2"
 
-    code, out = _run(cli, tmp_path, case.text(case.inside))
-    new = _errors(out) - _errors(base)
-    assert [f for f in out["findings"] if f["code"] == RANGE_CODE] == []
+    code, out, err = _validate(cli, tmp_path, case.text(case.outside))
+    assert (code, out) == (3, ""), (code, out, err)
+    assert "Traceback" not in err
+    (line,) = err.splitlines()
+    where = f"{tmp_path / 'single_drive.xml'}:{case.line}: "
+    assert line.startswith(f"lolacli: error: {where}"), (line, case.line)
+    assert line.count(str(tmp_path)) == 1, line  # the file and line once
+    assert case.says.format(case.outside, case.outside) in line, line
+
+    code, out, _err = _validate(cli, tmp_path, case.text(case.inside))
+    report = json.loads(out)
+    new = _errors(report) - _errors(base)
+    assert [f for f in report["findings"] if f["code"] == RANGE_CODE] == []
     assert {c for c, _m in new} <= case.cascades, new
     assert code == (1 if new else 0)
 
 
-def _as_int(text: str) -> int:
-    if text.startswith("#x"):
-        return int(text[2:], 16)
-    if "." in text:
-        return int(float(text) * 1000)  # <CycleTime> is µs, the finding says ns
-    return int(text)
+def test_every_command_reading_an_eni_refuses_it_alike(cli, tmp_path, corpus):
+    """`eni inspect|vars|validate|diff`, `bus timing|simulate|emulate|scan --eni`, `sdo read
+    --eni` and `capture analyze --eni`: the same one line, before any interface is opened."""
+    (case,) = [c for c in CASES if c.id == "cyclic-datalength-neg"]
+    bad = tmp_path / "bad.xml"
+    bad.write_text(case.text(case.outside))
+    good = tmp_path / "good.xml"
+    good.write_text(case.base)
+    expected = f"lolacli: error: {bad}:{case.line}: <DataLength> -56 is outside 0..1486"
+    for args in (
+        ("eni", "inspect", bad),
+        ("eni", "vars", bad),
+        ("eni", "validate", bad),
+        ("eni", "diff", good, bad),
+        ("bus", "timing", "--eni", bad),
+        ("bus", "simulate", "--eni", bad, "--cycles", "3"),
+        ("bus", "emulate", "-i", "nosuchif0", "--duration", "0.1", "--eni", bad),
+        ("bus", "scan", "-i", "nosuchif0", "--eni", bad),
+        ("sdo", "read", "1", "0x1018:01", "--eni", bad),
+        ("capture", "analyze", corpus / "pcap" / "ethercrab__twincat-run-ek1100-el1004.pcapng",
+         "--eni", bad),
+    ):
+        code, out, err = cli(*args)
+        assert code == 3, (args, code, out, err)
+        assert err.splitlines() == [err.strip()] and err.startswith(expected), (args, err)
 
 
 # --------------------------------------------------------------------------- model level
@@ -306,7 +361,16 @@ MODEL_CASES: list[tuple[str, Mutate, int, int, str, int | None]] = [
      lambda e, v: _slave(e, init_cmds=_init_cmd(e.slaves[0], logical_address=v)),
      2**32, 2**32 - 1, "(request INIT (acknowledge errors)) <Addr>", DRIVE),
     ("initcmd-data", lambda e, v: _slave(e, init_cmds=_init_cmd(e.slaves[0], data=bytes(v))),
-     0x800, 0x7FF, "(request INIT (acknowledge errors)) data length", DRIVE),
+     1487, 1486, "(request INIT (acknowledge errors)) data length", DRIVE),
+    ("initcmd-cmd", lambda e, v: _slave(e, init_cmds=_init_cmd(e.slaves[0], cmd=v)),
+     15, 14, "(request INIT (acknowledge errors)) <Cmd>", DRIVE),
+    ("initcmd-retries", lambda e, v: _slave(e, init_cmds=_init_cmd(e.slaves[0], retries=v)),
+     0x10000, 0xFFFF, "(request INIT (acknowledge errors)) <Retries>", DRIVE),
+    ("cyclic-datalength", lambda e, v: _cyclic_cmd(e, 1, data_length_bytes=v), -56, 0,
+     f"{BRD} <DataLength>", None),
+    ("image-inputs", lambda e, v: replace(
+        e, process_image=replace(e.process_image, inputs_bytes=v)),
+     16 * 2**20 + 1, 16 * 2**20, "process image: <Inputs><ByteSize>", None),
     ("cyclic-addr", lambda e, v: _cyclic_cmd(e, 0, logical_address=v), 2**32, 2**32 - 1,
      f"{LRW} <Addr>", None),
     ("cyclic-adp", lambda e, v: _cyclic_cmd(e, 1, adp=v), 0x10000, 0xFFFF,

@@ -115,3 +115,40 @@ def test_bad_files_are_the_loaders_errors(cache, tmp_path) -> None:
     with pytest.raises(EniError, match="bad.xml"):
         load_eni_cached(bad)
     assert not list(cache.glob("*.eni.pickle"))
+
+
+def test_a_cached_model_cannot_bypass_the_parsers_limits(cache, parses, tmp_path) -> None:
+    """An entry under the right key whose model holds a number the parser refuses (written
+    by other code, or by a parser before the limits) is not served: the file is parsed, and
+    its error is the parser's, with the line."""
+    from dataclasses import replace
+
+    path = tmp_path / "bad.xml"
+    text = SINGLE.read_text(encoding="utf-8")
+    path.write_text(text.replace("<DataLength>2</DataLength>", "<DataLength>-56</DataLength>"))
+    with pytest.raises(EniError, match=r"bad\.xml:\d+: <DataLength> -56 is outside"):
+        load_eni(path)
+    good = load_eni(SINGLE)
+    frame = good.cyclic[0].frames[0]
+    bad_cmd = replace(frame.commands[1], data_length_bytes=-56)
+    frames = (replace(frame, commands=(frame.commands[0], bad_cmd)),)
+    planted = replace(good, cyclic=(replace(good.cyclic[0], frames=frames),))
+    cache.mkdir(mode=0o700)
+    entry = cache / (cache_key(read_eni_bytes(path)) + ".eni.pickle")
+    entry.write_bytes(pickle.dumps(planted))
+    entry.chmod(0o600)
+    parses.clear()
+    with pytest.raises(EniError, match=r"bad\.xml:\d+: <DataLength> -56 is outside"):
+        load_eni_cached(path)
+    assert parses == [str(path)]
+
+
+def test_the_key_follows_the_parsers_limits_and_codecs() -> None:
+    """The key covers the modules the parser is made of: the limits it enforces and the
+    wire codecs it decodes with, not only the reader (each by name, size and mtime)."""
+    from lolacli.eni_cache import _package_fingerprint
+
+    parts = _package_fingerprint().decode().split("|")
+    names = {p.rsplit(":", 2)[0] for p in parts[1:]}
+    assert {"eni/parser.py", "eni/limits.py", "eni/model.py", "wire/frame.py"} <= names
+    assert {"wire/registers.py", "wire/commands.py"} <= names
