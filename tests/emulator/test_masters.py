@@ -898,6 +898,8 @@ def test_emulate_status_line_and_clean_sigterm(veth) -> None:
     assert "emulating 25 slaves" in err
     assert "INIT×25" in err and "frames" in err
     assert "stopped:" in err
+    # 80 columns, but the first line (it names the ENI's path, and scripts wait for it)
+    assert [line for line in err.splitlines()[1:] if len(line) > 80] == [], err
 
 
 def test_emulate_duration_stops_with_exit_0(veth) -> None:
