@@ -239,8 +239,14 @@ def _check_wkc(master: str, seen: dict, eth: dict, with_eni: dict, eni) -> None:
 
 def _check_states(name: str, seen: dict, eth: dict, with_eni: dict) -> None:
     """Slaves the master saw out of OP are the capture's not-op findings."""
+    unknown: set[int] = set()
     if name.startswith("pysoem"):
-        not_op = {i + 1 for i, s in enumerate(seen.get("states", [])) if s != 8}
+        # pysoem's last read_state reads every slave in one FPRD frame after a BRD that
+        # shows mixed states; when --drop-p drops that frame, every state reads 0: the
+        # master does not know them, and neither does the capture (it holds the request)
+        states = seen.get("states", [])
+        unknown = {i + 1 for i, s in enumerate(states) if s == 0}
+        not_op = {i + 1 for i, s in enumerate(states) if s not in (0, 8)}
     elif name == "kickcat-stuck-safeop":
         not_op = {1}
     else:
@@ -249,6 +255,8 @@ def _check_states(name: str, seen: dict, eth: dict, with_eni: dict) -> None:
         found = {f["message"] for f in rep["findings"] if f["kind"] == "not-op"}
         positions = {int(m.split("(position ")[1].split(")")[0]) for m in found
                      if "(position " in m}  # (BRD reads say it of the whole bus)
-        assert positions == not_op, found
+        assert not_op <= positions <= not_op | unknown, found
+        if unknown and not not_op:
+            assert found, "the capture shows no slave out of OP, the master read no state"
     if name.endswith("stuck-safeop"):
         assert not_op and not seen["reached_op"]
