@@ -389,16 +389,6 @@ class ProcessImage:
         self.linked.append(variable)
         return variable
 
-    def link_all(self, pattern: str = "*") -> dict[str, BusVariable]:
-        """A Bus Variable of the fitting type for every ENI variable matching ``pattern``."""
-        from fnmatch import fnmatchcase
-
-        return {
-            name: self.link(name, variable_for(v))
-            for name, v in self.variables.items()
-            if fnmatchcase(name, pattern)
-        }
-
 
 __all__ = [
     "BusBool",

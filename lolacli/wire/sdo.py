@@ -745,14 +745,6 @@ def download_request(
     return encode_sdo(message)
 
 
-def upload_response(index: int, subindex: int, data: bytes) -> bytes:
-    """The CoE payload of an initiate upload response carrying all of ``data``."""
-    if 0 < len(data) <= EXPEDITED_MAX_BYTES:
-        return encode_sdo(SdoUploadResponse(index, subindex, data))
-    message = SdoUploadResponse(index, subindex, data, expedited=False, complete_size=len(data))
-    return encode_sdo(message)
-
-
 def abort(index: int, subindex: int, code: int) -> bytes:
     """The CoE payload of an abort (CoE service SDO request, from either side)."""
     return encode_sdo(SdoAbort(index, subindex, code))
