@@ -20,7 +20,7 @@ import struct
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,8 +112,21 @@ def test_the_capture_holds_every_frame_up_to_its_end(veth) -> None:
         capture.close()
 
 
-def _emulate(iface: str, eni: Path, *extra: str) -> subprocess.Popen[bytes]:
-    return spawn_emulator(emulate_argv(iface, eni, *extra))
+@pytest.fixture
+def emulate(veth) -> Iterator[Callable[..., subprocess.Popen[bytes]]]:
+    """Start `bus emulate` on the slave side of the veth pair: ``emulate(eni, *options)``
+    returns once it answers. Whatever the test leaves running is stopped cleanly at its
+    end (exit 130 checked); a test that reads the emulator's report stops it itself."""
+    started: list[subprocess.Popen[bytes]] = []
+
+    def start(eni: Path, *extra: str) -> subprocess.Popen[bytes]:
+        started.append(spawn_emulator(emulate_argv(veth[1], eni, *extra)))
+        return started[-1]
+
+    yield start
+    for proc in started:
+        if proc.returncode is None:
+            stop_emulator(proc)
 
 
 _stop = stop_emulator
@@ -258,12 +271,12 @@ def _enable_drive(master, slave, target: int, deadline_s: float = 0.5) -> list[i
     return frames
 
 
-def test_pysoem_single_drive(veth, pysoem) -> None:
+def test_pysoem_single_drive(emulate, veth, pysoem) -> None:
     from lolacli.files import load_eni
 
     eni_path = EXAMPLES / "single_drive.xml"
     eni = load_eni(eni_path)
-    proc = _emulate(veth[1], eni_path)
+    proc = emulate(eni_path)
     master = pysoem.Master()
     capture = MasterCapture(veth[0])
     try:
@@ -301,16 +314,14 @@ def test_pysoem_single_drive(veth, pysoem) -> None:
     finally:
         master.close()
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
-def test_pysoem_lola_chain(veth, pysoem) -> None:
+def test_pysoem_lola_chain(emulate, veth, pysoem) -> None:
     from lolacli.files import load_eni
 
     eni_path = EXAMPLES / "lola.xml"
     eni = load_eni(eni_path)
-    proc = _emulate(veth[1], eni_path)
+    proc = emulate(eni_path)
     master = pysoem.Master()
     capture = MasterCapture(veth[0])
     try:
@@ -338,18 +349,16 @@ def test_pysoem_lola_chain(veth, pysoem) -> None:
     finally:
         master.close()
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
-def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(veth, pysoem) -> None:
+def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(emulate, veth, pysoem) -> None:
     """A 1 kHz master that also polls one slave's mailbox each cycle, round the line (as
     SOEM's ec_sample): no cycle lost, no slave falls out of OP (no SM watchdog, 0x001B).
     LOLACLI_SOAK_S sets how long (60 s for the acceptance soak)."""
     from lolacli.files import load_eni
 
     eni = load_eni(EXAMPLES / "lola.xml")
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml")
+    proc = emulate(EXAMPLES / "lola.xml")
     master = pysoem.Master()
     capture = MasterCapture(veth[0])
     try:
@@ -378,8 +387,6 @@ def test_pysoem_lola_chain_polls_a_mailbox_every_cycle(veth, pysoem) -> None:
     finally:
         master.close()
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
 KICKCAT_LINK_TIMEOUT_NS = 2_000_000  # KickCAT's default link timeout (start-up)
@@ -592,10 +599,10 @@ def _test_name() -> str:
     return os.environ.get("PYTEST_CURRENT_TEST", "").split(" ")[0]
 
 
-def test_kickcat_single_drive(veth) -> None:
+def test_kickcat_single_drive(emulate, veth) -> None:
     """KickCAT with its default timeouts; the emulator judged on the capture (_judge)."""
     kickcat = pytest.importorskip("kickcat")
-    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml")
+    proc = emulate(EXAMPLES / "single_drive.xml")
     errors: list[MasterError] = []
     capture = MasterCapture(veth[0])
 
@@ -638,8 +645,6 @@ def test_kickcat_single_drive(veth) -> None:
         _judge(capture, emulator, phases, errors, CYCLES)
     finally:
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
 def test_emulate_reports_missing_interface(cli) -> None:
@@ -648,14 +653,14 @@ def test_emulate_reports_missing_interface(cli) -> None:
     assert "no such interface: nosuchif0" in err
 
 
-def test_kickcat_lola_chain(veth) -> None:
+def test_kickcat_lola_chain(emulate, veth) -> None:
     """KickCAT with its default timeouts on the LOLA chain; the emulator judged on the
     capture (_judge)."""
     kickcat = pytest.importorskip("kickcat")
     from lolacli.files import load_eni
 
     eni = load_eni(EXAMPLES / "lola.xml")
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml")
+    proc = emulate(EXAMPLES / "lola.xml")
     errors: list[MasterError] = []
     capture = MasterCapture(veth[0])
 
@@ -697,8 +702,6 @@ def test_kickcat_lola_chain(veth) -> None:
         _judge(capture, emulator, phases, errors, CYCLES)
     finally:
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
 @pytest.fixture(scope="module")
@@ -731,20 +734,18 @@ def _slaveinfo(text: str) -> list[dict[str, str]]:
 
 
 @pytest.mark.parametrize("eni_name", ["single_drive.xml", "lola.xml"])
-def test_soem_slaveinfo_agrees_with_the_eni(veth, soem_tools_built, eni_name: str) -> None:
+def test_soem_slaveinfo_agrees_with_the_eni(emulate, veth, soem_tools_built, eni_name: str) -> None:
     from lolacli.files import load_eni
 
     eni = load_eni(EXAMPLES / eni_name)
-    proc = _emulate(veth[1], EXAMPLES / eni_name)
-    try:
-        done = subprocess.run(
-            [str(soem_tools_built["slaveinfo"]), veth[0], "-map"],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-    finally:
-        _stop(proc)
+    proc = emulate(EXAMPLES / eni_name)
+    done = subprocess.run(
+        [str(soem_tools_built["slaveinfo"]), veth[0], "-map"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    _stop(proc)
     assert done.returncode == 0, done.stdout + done.stderr
     assert f"{len(eni.slaves)} slaves found and configured." in done.stdout
     wkc = eni.cyclic_frames[0].commands[0].expected_wkc
@@ -771,13 +772,13 @@ def test_soem_slaveinfo_agrees_with_the_eni(veth, soem_tools_built, eni_name: st
     assert "PDO mapping according to CoE" in done.stdout
 
 
-def test_soem_simple_test_loses_no_cycle(veth, soem_tools_built) -> None:
+def test_soem_simple_test_loses_no_cycle(emulate, veth, soem_tools_built) -> None:
     """SOEM's simple_test on the LOLA chain: 10,000 cycles (5 ms apart), each with the
     working counter the ENI expects, no slave dropping out (its check thread would say)."""
     from lolacli.files import load_eni
 
     eni = load_eni(EXAMPLES / "lola.xml")
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml")
+    proc = emulate(EXAMPLES / "lola.xml")
     capture = MasterCapture(veth[0])
     try:
         with capture:
@@ -809,17 +810,17 @@ def test_soem_simple_test_loses_no_cycle(veth, soem_tools_built) -> None:
         _judge(capture, emulator, [(t0, t1, SOEM_TIMEOUT_NS, True)], missing, 10_000)
     finally:
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
-def test_a_master_silent_past_the_watchdog_trips_it_and_recovers_the_slave(veth, pysoem) -> None:
+def test_a_master_silent_past_the_watchdog_trips_it_and_recovers_the_slave(
+    emulate, veth, pysoem
+) -> None:
     """150 ms without a cyclic frame in OP: the drive's process-data watchdog (100 ms)
     trips it to SAFEOP+ERR 0x001B, as hardware does; the check every pysoem test runs
     after its cycles finds it, the capture shows the silence, the drive comes back to OP
     and is enabled."""
     eni_path = EXAMPLES / "single_drive.xml"
-    proc = _emulate(veth[1], eni_path)
+    proc = emulate(eni_path)
     master = pysoem.Master()
     capture = MasterCapture(veth[0])
     try:
@@ -849,12 +850,10 @@ def test_a_master_silent_past_the_watchdog_trips_it_and_recovers_the_slave(veth,
     finally:
         master.close()
         capture.close()
-        if proc.returncode is None:
-            _stop(proc)
 
 
-def test_pysoem_sees_a_slave_stuck_in_safeop(veth, pysoem) -> None:
-    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--stuck-safeop", "1")
+def test_pysoem_sees_a_slave_stuck_in_safeop(emulate, veth, pysoem) -> None:
+    emulate(EXAMPLES / "single_drive.xml", "--stuck-safeop", "1")
     master = pysoem.Master()
     try:
         master.open(veth[0])
@@ -874,7 +873,6 @@ def test_pysoem_sees_a_slave_stuck_in_safeop(veth, pysoem) -> None:
         assert slave.al_status == 0x0019  # no valid outputs
     finally:
         master.close()
-        _stop(proc)
 
 
 def test_emulate_status_line_and_clean_sigterm(veth) -> None:
@@ -929,8 +927,8 @@ def test_emulate_duration_stops_with_exit_0(veth) -> None:
     assert re.search(r"stopped: \d+ frames received", done.stderr), done.stderr
 
 
-def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
-    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--drop-p", "0.02", "--seed", "3")
+def test_pysoem_counts_frames_lost_by_the_drop_fault(emulate, veth, pysoem) -> None:
+    emulate(EXAMPLES / "single_drive.xml", "--drop-p", "0.02", "--seed", "3")
     master = pysoem.Master()
     try:
         master.open(veth[0])
@@ -942,7 +940,6 @@ def test_pysoem_counts_frames_lost_by_the_drop_fault(veth, pysoem) -> None:
         assert 15 <= len(bad) <= 120  # 2 % of 3000 = 60
     finally:
         master.close()
-        _stop(proc)
 
 
 def test_emulate_without_raw_socket_permission_exits_4() -> None:
@@ -974,8 +971,8 @@ def test_emulate_without_raw_socket_permission_exits_4() -> None:
     assert "Traceback" not in done.stderr
 
 
-def test_pysoem_finds_the_slaves_before_a_cut_cable(veth, pysoem) -> None:
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--link-down", "7")
+def test_pysoem_finds_the_slaves_before_a_cut_cable(emulate, veth, pysoem) -> None:
+    emulate(EXAMPLES / "lola.xml", "--link-down", "7")
     master = pysoem.Master()
     try:
         master.open(veth[0])
@@ -983,11 +980,10 @@ def test_pysoem_finds_the_slaves_before_a_cut_cable(veth, pysoem) -> None:
         assert master.slaves[-1].name == "Joint01 L Hip Yaw"  # SOEM reuses SII of equal ids
     finally:
         master.close()
-        _stop(proc)
 
 
-def test_pysoem_sees_damaged_frames_in_wkc_and_rx_error_counters(veth, pysoem) -> None:
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--corrupt-p", "0.01", "--seed", "5")
+def test_pysoem_sees_damaged_frames_in_wkc_and_rx_error_counters(emulate, veth, pysoem) -> None:
+    emulate(EXAMPLES / "lola.xml", "--corrupt-p", "0.01", "--seed", "5")
     master = pysoem.Master()
     try:
         master.open(veth[0])
@@ -1001,7 +997,6 @@ def test_pysoem_sees_damaged_frames_in_wkc_and_rx_error_counters(veth, pysoem) -
         assert invalid > 0  # 0x0300: invalid frame counter of port 0, over the whole line
     finally:
         master.close()
-        _stop(proc)
 
 
 def _read_counter(slave, pysoem, address: int) -> int:
@@ -1014,8 +1009,10 @@ def _read_counter(slave, pysoem, address: int) -> int:
     pytest.fail(f"FPRD 0x{address:04X} kept failing")
 
 
-def test_pysoem_sees_the_line_shorten_when_the_scheduled_link_loss_comes(veth, pysoem) -> None:
-    proc = _emulate(veth[1], EXAMPLES / "lola.xml", "--link-down", "3@1.5")
+def test_pysoem_sees_the_line_shorten_when_the_scheduled_link_loss_comes(
+    emulate, veth, pysoem
+) -> None:
+    emulate(EXAMPLES / "lola.xml", "--link-down", "3@1.5")
     master = pysoem.Master()
     try:
         master.open(veth[0])
@@ -1025,4 +1022,3 @@ def test_pysoem_sees_the_line_shorten_when_the_scheduled_link_loss_comes(veth, p
         assert _read_counter(master.slaves[2], pysoem, 0x0311) == 1  # lost link, port 1
     finally:
         master.close()
-        _stop(proc)
