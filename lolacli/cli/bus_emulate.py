@@ -10,6 +10,7 @@ import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import default_eni, stderr_console
+from lolacli.cli.options import not_nan
 
 
 @app.command("emulate")
@@ -57,7 +58,12 @@ def emulate_cmd(
     ] = None,
     duration_s: Annotated[
         float,
-        typer.Option("--duration", min=0.0, help="Stop after this many seconds (0: until Ctrl-C)."),
+        typer.Option(
+            "--duration",
+            min=0.0,
+            callback=not_nan,
+            help="Stop after this many seconds (0: until Ctrl-C).",
+        ),
     ] = 0.0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
     realtime_priority: Annotated[

@@ -11,6 +11,7 @@ import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json, warn
+from lolacli.cli.options import not_nan
 from lolacli.errors import InputError, UsageError
 
 
@@ -33,10 +34,13 @@ def timing_cmd(
         int | None, typer.Option("--slaves", min=0, help="Number of slaves (with --frame-bytes).")
     ] = None,
     link_mbit: Annotated[
-        float, typer.Option("--link-mbit", min=0.001, help="Link rate in Mbit/s.")
+        float, typer.Option("--link-mbit", min=0.001, callback=not_nan, help="Link rate in Mbit/s.")
     ] = 100.0,
     cable_m: Annotated[
-        float, typer.Option("--cable-m", min=0.0, help="Cable length per segment, metres.")
+        float,
+        typer.Option(
+            "--cable-m", min=0.0, callback=not_nan, help="Cable length per segment, metres."
+        ),
     ] = 1.0,
     per_slave_ns: Annotated[
         int | None,
@@ -51,7 +55,7 @@ def timing_cmd(
         float,
         typer.Option(
             "--host-latency-us",
-            min=0.0,
+            min=0.0, callback=not_nan,
             help="What the master's host adds to a round trip measured at its NIC (stack, "
             "driver, NIC queues, switch): part of the prediction, taken off a measured total "
             "before calibrating.",
@@ -84,7 +88,7 @@ def timing_cmd(
         float | None,
         typer.Option(
             "--budget-us",
-            min=0.0,
+            min=0.0, callback=not_nan,
             help="Cycle-time budget; exit 1 when the total exceeds it. Default: the ENI's "
             "cycle time.",
         ),

@@ -20,6 +20,7 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.options import not_nan
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -111,7 +112,13 @@ EsiOption = Annotated[
 ]
 TimeoutOption = Annotated[
     float,
-    typer.Option("--timeout", min=0.001, max=3600.0, help="Seconds to wait for each SDO answer."),
+    typer.Option(
+        "--timeout",
+        min=0.001,
+        max=3600.0,
+        callback=not_nan,
+        help="Seconds to wait for each SDO answer.",
+    ),
 ]
 
 
@@ -586,7 +593,13 @@ def serve_cmd(
         ),
     ] = False,
     duration_s: Annotated[
-        float, typer.Option("--duration", min=0.0, help="Stop after this many seconds (0: Ctrl-C).")
+        float,
+        typer.Option(
+            "--duration",
+            min=0.0,
+            callback=not_nan,
+            help="Stop after this many seconds (0: Ctrl-C).",
+        ),
     ] = 0.0,
 ) -> None:
     """Serve CANopen nodes from EDS files (canopen LocalNode) for tests and for trying
