@@ -15,37 +15,24 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json, silence_stdout
+from lolacli.cli.options import CaptureArgument, EniCheckOption, MaxLostOption, MaxWkcOption
 from lolacli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captures.")
 
-CaptureArgument = Annotated[
-    Path, typer.Argument(help="Capture file (pcap or pcapng).", show_default=False)
-]
 
 
 @app.command("analyze")
 def analyze_cmd(
     file: CaptureArgument,
-    eni: Annotated[
-        Path | None,
-        typer.Option("--eni", help="ENI: expected WKCs from its <Cnt> values, slaves and "
-                     "FMMU layout."),
-    ] = None,
+    eni: EniCheckOption = None,
     fmt: FormatOption = OutputFormat.human,
     plot: Annotated[
         Path | None,
         typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
     ] = None,
-    max_lost: Annotated[
-        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
-    ] = 0,
-    max_wkc: Annotated[
-        int,
-        typer.Option(
-            "--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."
-        ),
-    ] = 0,
+    max_lost: MaxLostOption = 0,
+    max_wkc: MaxWkcOption = 0,
     timeout: Annotated[
         str | None,
         typer.Option(

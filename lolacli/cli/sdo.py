@@ -20,7 +20,7 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import not_nan
+from lolacli.cli.options import EniOption, IfaceOption, not_nan
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -81,23 +81,11 @@ NodeOption = Annotated[
     int | None,
     typer.Option("--node", min=1, max=127, help="CANopen node ID (the same as SLAVE)."),
 ]
-IfaceOption = Annotated[
-    str | None,
-    typer.Option("--iface", "-i", metavar="IF", help="EtherCAT: the network interface."),
-]
 BackendOption = Annotated[
     str,
     typer.Option(
         "--backend",
         help="EtherCAT master: lolacli (ours, in process or --iface) or soem (pysoem, --iface).",
-    ),
-]
-EniOption = Annotated[
-    Path | None,
-    typer.Option(
-        "--eni",
-        help="ENI: the chain emulated in process (default: the embedded LOLA chain), or the "
-        "configuration of the --iface bus; resolves SLAVE names and station addresses.",
     ),
 ]
 EdsOption = Annotated[
