@@ -13,11 +13,11 @@ from lolacli.cli.common import default_eni, stderr_console
 from lolacli.cli.options import (
     DriftOption,
     DropOption,
+    DurationOption,
     EniOption,
     IfaceArgument,
     SeedOption,
     StuckSafeopOption,
-    not_nan,
 )
 
 
@@ -77,15 +77,6 @@ LinkDownOption = Annotated[
         callback=_usage("--link-down", _link_down),
         help="Cut the cable after slave position K (0: all), from the start or T "
         "after serving starts (seconds, or 500ms).",
-    ),
-]
-DurationOption = Annotated[
-    float,
-    typer.Option(
-        "--duration",
-        min=0.0,
-        callback=not_nan,
-        help="Stop after this many seconds (0: until Ctrl-C).",
     ),
 ]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")]

@@ -86,3 +86,15 @@ MaxWkcOption = Annotated[
     int,
     typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
 ]
+
+# ---------------------------------------------------------------- servers
+
+DurationOption = Annotated[
+    float,
+    typer.Option(
+        "--duration",
+        min=0.0,
+        callback=not_nan,
+        help="Stop after this many seconds (0: until Ctrl-C).",
+    ),
+]

@@ -20,7 +20,7 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import EniOption, IfaceOption, not_nan
+from lolacli.cli.options import DurationOption, EniOption, IfaceOption, not_nan
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -580,15 +580,7 @@ def serve_cmd(
             "(17) and right (18).",
         ),
     ] = False,
-    duration_s: Annotated[
-        float,
-        typer.Option(
-            "--duration",
-            min=0.0,
-            callback=not_nan,
-            help="Stop after this many seconds (0: Ctrl-C).",
-        ),
-    ] = 0.0,
+    duration_s: DurationOption = 0.0,
 ) -> None:
     """Serve CANopen nodes from EDS files (canopen LocalNode) for tests and for trying
     the CANopen commands without hardware: with --interface udp_multicast every process
@@ -596,33 +588,16 @@ def serve_cmd(
     with 0."""
     import time
 
-    from lolacli.errors import UsageError
     from lolacli.interrupt import exit_code
-    from lolacli.sdo.node import NodeServer, NodeSpec, gateway_nodes
+    from lolacli.sdo.node import NodeServer, node_specs
 
-    files, ids = list(eds or ()), list(node or ())
-    if len(files) != len(ids):
-        raise UsageError(f"{len(files)} --eds but {len(ids)} --node: give one node ID per EDS")
-    specs = [NodeSpec(f, n) for f, n in zip(files, ids, strict=True)]
-    if gateway:
-        specs += gateway_nodes()
-    if not specs:
-        raise UsageError("nothing to serve: give --eds FILE --node N, or --gateway")
-    taken = [s.node_id for s in specs]
-    if len(set(taken)) != len(taken):
-        raise UsageError(f"node IDs given twice: {taken}")
+    specs = node_specs(list(eds or ()), list(node or ()), gateway=gateway)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     try:
         with NodeServer(can, specs, interface=interface):  # closed however the block ends
             names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
-            sys.stderr.write(
-                "".join(
-                    f"{line}\n"
-                    for line in _wrapped(
-                        f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
-                    )
-                )
-            )
+            text = f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
+            sys.stderr.write("".join(f"{line}\n" for line in _wrapped(text)))
             sys.stderr.flush()
             while deadline is None or time.monotonic() < deadline:
                 time.sleep(0.05)  # the root's handlers raise a stop here at once
