@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -15,6 +14,7 @@ from lolacli.cli.options import (
     DropOption,
     DurationOption,
     EniOption,
+    EsiOption,
     IfaceArgument,
     SeedOption,
     StuckSafeopOption,
@@ -54,13 +54,6 @@ def _probability(value: float) -> float:
     return value
 
 
-EsiOption = Annotated[
-    list[Path] | None,
-    typer.Option(
-        "--esi",
-        help="ESI file; slaves whose identity it describes take their SII from it. Repeatable.",
-    ),
-]
 CorruptOption = Annotated[
     float,
     typer.Option(

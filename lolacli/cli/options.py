@@ -59,6 +59,14 @@ EniCheckOption = Annotated[
         help="ENI to check against (its slaves, WKCs and FMMU layout).",
     ),
 ]
+EsiOption = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--esi",
+        help="ESI file; slaves whose identity it describes take their SII and value types "
+        "from it. Repeatable.",
+    ),
+]
 CaptureArgument = Annotated[
     Path, typer.Argument(help="Capture file (pcap or pcapng).", show_default=False)
 ]

@@ -20,7 +20,13 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import DurationOption, EniOption, IfaceOption, not_nan
+from lolacli.cli.options import (
+    DurationOption,
+    EniOption,
+    EsiOption,
+    IfaceOption,
+    not_nan,
+)
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -90,13 +96,6 @@ BackendOption = Annotated[
 ]
 EdsOption = Annotated[
     Path | None, typer.Option("--eds", help="EDS/DCF of the CANopen node (value types, list).")
-]
-EsiOption = Annotated[
-    list[Path] | None,
-    typer.Option(
-        "--esi",
-        help="ESI file(s) of the EtherCAT slaves (value types, list; the emulated slaves' SII).",
-    ),
 ]
 TimeoutOption = Annotated[
     float,
