@@ -2,24 +2,19 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.options import EniCheckOption, IfaceArgument
 
 
 @app.command("scan")
 def scan_cmd(
-    iface: Annotated[
-        str, typer.Option("--iface", "-i", help="Interface of the bus (NIC, veth, TAP).")
-    ],
-    eni: Annotated[
-        Path | None,
-        typer.Option("--eni", help="ENI to compare with: every difference is exit 1."),
-    ] = None,
+    iface: IfaceArgument,
+    eni: EniCheckOption = None,
     state: Annotated[
         str | None,
         typer.Option(

@@ -10,15 +10,21 @@ import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json
+from lolacli.cli.options import (
+    DriftOption,
+    DropOption,
+    EniOption,
+    MaxLostOption,
+    MaxWkcOption,
+    SeedOption,
+    StuckSafeopOption,
+)
 from lolacli.errors import UsageError
 
 
 @app.command("simulate")
 def simulate_cmd(
-    eni: Annotated[
-        Path | None,
-        typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain."),
-    ] = None,
+    eni: EniOption = None,
     rate: Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")] = 2000.0,
     duration: Annotated[
         str | None,
@@ -40,13 +46,8 @@ def simulate_cmd(
         Path | None,
         typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
     ] = None,
-    drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
-    stuck_safeop: Annotated[
-        list[int] | None,
-        typer.Option(
-            "--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."
-        ),
-    ] = None,
+    drop_p: DropOption = 0.0,
+    stuck_safeop: StuckSafeopOption = None,
     link_down: Annotated[
         str | None,
         typer.Option(
@@ -56,10 +57,8 @@ def simulate_cmd(
             "into the cyclic run (seconds, or 500ms).",
         ),
     ] = None,
-    drift_ppb: Annotated[
-        int, typer.Option("--drift-ppb", help="Clock drift step along the line (ppb).")
-    ] = 0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
+    drift_ppb: DriftOption = 0,
+    seed: SeedOption = 0,
     shm: Annotated[
         str | None,
         typer.Option(
@@ -115,13 +114,8 @@ def simulate_cmd(
             "report says what the OS granted.",
         ),
     ] = 80,
-    max_lost: Annotated[
-        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
-    ] = 0,
-    max_wkc: Annotated[
-        int,
-        typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
-    ] = 0,
+    max_lost: MaxLostOption = 0,
+    max_wkc: MaxWkcOption = 0,
     max_overruns: Annotated[
         int,
         typer.Option(

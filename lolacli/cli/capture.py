@@ -15,51 +15,44 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json, silence_stdout
+from lolacli.cli.options import CaptureArgument, EniCheckOption, MaxLostOption, MaxWkcOption
 from lolacli.errors import UsageError
 
 app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captures.")
 
-CaptureArgument = Annotated[
-    Path, typer.Argument(help="Capture file (pcap or pcapng).", show_default=False)
+
+
+PlotOption = Annotated[
+    Path | None,
+    typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
+]
+TimeoutOption = Annotated[
+    str | None,
+    typer.Option(
+        "--timeout",
+        help="A frame unanswered for this long is lost, or late when its answer comes "
+        "later (5ms, 800us). Default: 10 x the median round trip, at least 1 ms.",
+    ),
+]
+AllOption = Annotated[
+    bool, typer.Option("--all", help="Show every SDO transaction, not the first 50.")
+]
+EngineOption = Annotated[
+    str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
 ]
 
 
 @app.command("analyze")
 def analyze_cmd(
     file: CaptureArgument,
-    eni: Annotated[
-        Path | None,
-        typer.Option("--eni", help="ENI: expected WKCs from its <Cnt> values, slaves and "
-                     "FMMU layout."),
-    ] = None,
+    eni: EniCheckOption = None,
     fmt: FormatOption = OutputFormat.human,
-    plot: Annotated[
-        Path | None,
-        typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
-    ] = None,
-    max_lost: Annotated[
-        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
-    ] = 0,
-    max_wkc: Annotated[
-        int,
-        typer.Option(
-            "--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."
-        ),
-    ] = 0,
-    timeout: Annotated[
-        str | None,
-        typer.Option(
-            "--timeout",
-            help="A frame unanswered for this long is lost, or late when its answer comes "
-            "later (5ms, 800us). Default: 10 x the median round trip, at least 1 ms.",
-        ),
-    ] = None,
-    show_all: Annotated[
-        bool, typer.Option("--all", help="Show every SDO transaction, not the first 50.")
-    ] = False,
-    engine: Annotated[
-        str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
-    ] = "auto",
+    plot: PlotOption = None,
+    max_lost: MaxLostOption = 0,
+    max_wkc: MaxWkcOption = 0,
+    timeout: TimeoutOption = None,
+    show_all: AllOption = False,
+    engine: EngineOption = "auto",
 ) -> None:
     """Out/return pairing, round trip, cycle period and jitter, lost and late frames, WKC
     verdict, AL states, SDO transactions and DC diagnostics of a capture, with findings.
@@ -68,14 +61,9 @@ def analyze_cmd(
     for OP, nothing checked against the --eni); frames still in flight when the capture
     ends are not lost."""
     from lolacli.capture.analyze import analyze_file
+    from lolacli.interrupt import stop_signals
 
-    timeout_ns = None
-    if timeout is not None:
-        from lolacli.timing.model import parse_duration_ns
-
-        timeout_ns = parse_duration_ns(timeout, None, "--timeout")
-        if timeout_ns <= 0:
-            raise UsageError(f"--timeout {timeout}: must be longer than 0")
+    timeout_ns = _timeout_ns(timeout)
     if plot is not None:
         from lolacli.capture.plots import plot_folder
 
@@ -85,8 +73,6 @@ def analyze_cmd(
         from lolacli.files import load_eni
 
         model = load_eni(eni)
-    from lolacli.interrupt import stop_signals
-
     # Ctrl-C or SIGTERM during the scan: the report of the frames read so far, then 130/143
     with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
         report = analyze_file(
@@ -102,13 +88,7 @@ def analyze_cmd(
 
         render_analysis(data, show_all=show_all)
     if stop():
-        from lolacli.text import number
-
-        read = "the whole file" if report.read_bytes is None else (
-            f"the first {number(report.read_bytes / 1e6, 'MB', 1)}")
-        sys.stderr.write(f"lolacli: stopped by {_signal_name(stop.exit_code)}; the analysis "
-                         f"covers {read}" + ("; no plots written" if plot else "") + "\n")
-        raise typer.Exit(stop.exit_code)
+        _stopped(report, stop.exit_code, plots=plot is not None)
     if plot is not None:
         from lolacli.capture.plots import write_plots
 
@@ -116,6 +96,29 @@ def analyze_cmd(
             sys.stderr.write(f"lolacli: wrote {written}\n")
     if report.failed:
         raise typer.Exit(1)
+
+
+def _timeout_ns(timeout: str | None) -> int | None:
+    """--timeout in ns (None: the analysis's default)."""
+    if timeout is None:
+        return None
+    from lolacli.timing.model import parse_duration_ns
+
+    timeout_ns = parse_duration_ns(timeout, None, "--timeout")
+    if timeout_ns <= 0:
+        raise UsageError(f"--timeout {timeout}: must be longer than 0")
+    return timeout_ns
+
+
+def _stopped(report: Any, code: int, *, plots: bool) -> None:
+    """Say how much of the file the analysis of a stopped scan covers; exit with ``code``."""
+    from lolacli.text import number
+
+    read = "the whole file" if report.read_bytes is None else (
+        f"the first {number(report.read_bytes / 1e6, 'MB', 1)}")
+    sys.stderr.write(f"lolacli: stopped by {_signal_name(code)}; the analysis "
+                     f"covers {read}" + ("; no plots written" if plots else "") + "\n")
+    raise typer.Exit(code)
 
 
 def _signal_name(code: int) -> str:

@@ -1,4 +1,4 @@
-"""Options and output helpers shared by every command group.
+"""Output helpers shared by every command group (the shared options: :mod:`.options`).
 
 Data goes to stdout (JSON, tables); hints, warnings and progress go to stderr. Commands
 raise :class:`~lolacli.errors.LolaError`; :func:`lolacli.cli.main.main` maps them to one line
@@ -10,27 +10,11 @@ from __future__ import annotations
 import json
 import os
 import sys
-from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
-import typer
-
-
-class OutputFormat(StrEnum):
-    human = "human"
-    json = "json"
-
-
-FormatOption = Annotated[
-    OutputFormat,
-    typer.Option("--format", "-f", help="Output format: human (tables) or json (stdout)."),
-]
-
-EniArgument = Annotated[
-    Path,
-    typer.Argument(help="ENI file (EtherCATConfig XML).", show_default=False),
-]
+from lolacli.cli.options import FormatOption as FormatOption  # the shared options
+from lolacli.cli.options import OutputFormat as OutputFormat
 
 
 def default_eni() -> Path:

@@ -6,7 +6,6 @@ import sys
 from typing import Any
 
 import typer
-from typer._click.exceptions import UsageError as ClickUsageError
 from typer.core import TyperGroup
 
 from lolacli import __version__
@@ -20,7 +19,6 @@ from lolacli.cli import (  # noqa: F401
     eni,
     sdo,
 )
-from lolacli.cli.coerce import install as _light_parameters
 from lolacli.cli.common import debug_enabled
 
 
@@ -41,9 +39,12 @@ class _LolaGroup(TyperGroup):
         except KeyboardInterrupt as exc:
             sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}\n")
             raise typer.Exit(exit_code(exc)) from None
-        except ClickUsageError as exc:  # wrong arguments: one line, exit 2
+        except typer.TyperException as exc:
+            if exc.exit_code != 2:  # click's UsageError and its kinds: wrong arguments
+                raise
             _traceback_if_debug()
-            path = exc.ctx.command_path if exc.ctx is not None else "lolacli"
+            usage_ctx = getattr(exc, "ctx", None)
+            path = usage_ctx.command_path if usage_ctx is not None else "lolacli"
             message = " ".join(exc.format_message().split())
             sys.stderr.write(f"{path}: error: {message} (see {path} --help)\n")
             raise typer.Exit(2) from None
@@ -58,7 +59,6 @@ def _traceback_if_debug() -> None:
         traceback.print_exc()
 
 
-_light_parameters()  # simple parameters without pydantic: a third of a short command's start-up
 app = typer.Typer(
     cls=_LolaGroup,
     name="lolacli",

@@ -20,6 +20,13 @@ from typing import Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.options import (
+    DurationOption,
+    EniOption,
+    EsiOption,
+    IfaceOption,
+    not_nan,
+)
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -80,10 +87,6 @@ NodeOption = Annotated[
     int | None,
     typer.Option("--node", min=1, max=127, help="CANopen node ID (the same as SLAVE)."),
 ]
-IfaceOption = Annotated[
-    str | None,
-    typer.Option("--iface", "-i", metavar="IF", help="EtherCAT: the network interface."),
-]
 BackendOption = Annotated[
     str,
     typer.Option(
@@ -91,27 +94,18 @@ BackendOption = Annotated[
         help="EtherCAT master: lolacli (ours, in process or --iface) or soem (pysoem, --iface).",
     ),
 ]
-EniOption = Annotated[
-    Path | None,
-    typer.Option(
-        "--eni",
-        help="ENI: the chain emulated in process (default: the embedded LOLA chain), or the "
-        "configuration of the --iface bus; resolves SLAVE names and station addresses.",
-    ),
-]
 EdsOption = Annotated[
     Path | None, typer.Option("--eds", help="EDS/DCF of the CANopen node (value types, list).")
 ]
-EsiOption = Annotated[
-    list[Path] | None,
-    typer.Option(
-        "--esi",
-        help="ESI file(s) of the EtherCAT slaves (value types, list; the emulated slaves' SII).",
-    ),
-]
 TimeoutOption = Annotated[
     float,
-    typer.Option("--timeout", min=0.001, max=3600.0, help="Seconds to wait for each SDO answer."),
+    typer.Option(
+        "--timeout",
+        min=0.001,
+        max=3600.0,
+        callback=not_nan,
+        help="Seconds to wait for each SDO answer.",
+    ),
 ]
 
 
@@ -585,9 +579,7 @@ def serve_cmd(
             "(17) and right (18).",
         ),
     ] = False,
-    duration_s: Annotated[
-        float, typer.Option("--duration", min=0.0, help="Stop after this many seconds (0: Ctrl-C).")
-    ] = 0.0,
+    duration_s: DurationOption = 0.0,
 ) -> None:
     """Serve CANopen nodes from EDS files (canopen LocalNode) for tests and for trying
     the CANopen commands without hardware: with --interface udp_multicast every process
@@ -595,33 +587,16 @@ def serve_cmd(
     with 0."""
     import time
 
-    from lolacli.errors import UsageError
     from lolacli.interrupt import exit_code
-    from lolacli.sdo.node import NodeServer, NodeSpec, gateway_nodes
+    from lolacli.sdo.node import NodeServer, node_specs
 
-    files, ids = list(eds or ()), list(node or ())
-    if len(files) != len(ids):
-        raise UsageError(f"{len(files)} --eds but {len(ids)} --node: give one node ID per EDS")
-    specs = [NodeSpec(f, n) for f, n in zip(files, ids, strict=True)]
-    if gateway:
-        specs += gateway_nodes()
-    if not specs:
-        raise UsageError("nothing to serve: give --eds FILE --node N, or --gateway")
-    taken = [s.node_id for s in specs]
-    if len(set(taken)) != len(taken):
-        raise UsageError(f"node IDs given twice: {taken}")
+    specs = node_specs(list(eds or ()), list(node or ()), gateway=gateway)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
     try:
         with NodeServer(can, specs, interface=interface):  # closed however the block ends
             names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
-            sys.stderr.write(
-                "".join(
-                    f"{line}\n"
-                    for line in _wrapped(
-                        f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
-                    )
-                )
-            )
+            text = f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
+            sys.stderr.write("".join(f"{line}\n" for line in _wrapped(text)))
             sys.stderr.flush()
             while deadline is None or time.monotonic() < deadline:
                 time.sleep(0.05)  # the root's handlers raise a stop here at once

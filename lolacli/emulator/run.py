@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -269,3 +270,83 @@ def serve(
         if on_ready is not None:
             on_ready(server.scheduling)
         return server.serve(should_stop, on_status=on_status, status_interval_s=status_interval_s)
+
+
+def parse_cpu(text: str) -> int | str:
+    """Where a server runs, as ``--cpu`` says it: "follow", "any" or a CPU number;
+    UsageError otherwise."""
+    if text in ("follow", "any"):
+        return text
+    if not text.isdigit():
+        raise UsageError(f"{text!r}: expected follow, any or a CPU number")
+    return int(text)
+
+
+@dataclass(frozen=True, slots=True)
+class EmulationStatus:
+    """What a served chain has done so far (``bus emulate``'s status line)."""
+
+    frames: int
+    frames_per_s: float
+    cycles: int
+    lost: int
+    damaged: int
+    states: str  # :func:`state_summary`
+
+
+class Emulation:
+    """An ENI's chain with the faults of ``options``, served on an interface so a real
+    master can drive it (``lolacli bus emulate``). Slaves that an ``esi`` device describes
+    take their SII from it (:func:`make_chain`); the errors of a bad ENI or bad options
+    come from the constructor, before anything is served."""
+
+    def __init__(
+        self, eni: Eni, options: EmulateOptions = EmulateOptions(), *,
+        esi: Sequence[EsiFile] = (),
+    ) -> None:
+        self.eni = eni
+        self.options = options
+        self.esi_files = tuple(esi)
+        self.chain = make_chain(eni, options, esi=self.esi_files)
+        #: the ENI's slaves that an ESI device describes
+        self.esi = esi_matches(eni, self.esi_files) if self.esi_files else ()
+
+    def status(self, stats: ServerStats) -> EmulationStatus:
+        s = self.chain.stats
+        elapsed = max(1e-9, (time.monotonic_ns() - stats.started_ns) / 1e9)
+        return EmulationStatus(
+            s.frames, s.frames / elapsed, s.logical_frames, s.dropped, s.corrupted,
+            state_summary(self.chain),
+        )
+
+    def serve(
+        self,
+        iface: str,
+        should_stop: Callable[[], bool],
+        *,
+        duration_s: float = 0.0,
+        on_ready: Callable[[str], None] | None = None,
+        on_status: Callable[[ServerStats], None] | None = None,
+        realtime_priority: int | None = None,
+        keep_cpus_awake: bool = True,
+        cpu: int | str = "follow",
+    ) -> ServerStats:
+        """Serve the chain on ``iface`` until ``should_stop()`` or, when ``duration_s`` is
+        over 0, that long; the arguments as :func:`serve`'s. A cable cut the options
+        schedule counts from ``on_ready`` (frames are answered from then on)."""
+        deadline = time.monotonic() + duration_s if duration_s > 0 else None
+
+        def ready(scheduling: str) -> None:
+            arm_link_loss(self.chain, self.options, time.monotonic_ns())  # the server's clock
+            if on_ready is not None:
+                on_ready(scheduling)
+
+        def stop() -> bool:
+            return should_stop() or (deadline is not None and time.monotonic() >= deadline)
+
+        scratch = make_chain(self.eni, EmulateOptions(), esi=self.esi_files)  # to warm up
+        return serve(
+            iface, self.chain, stop, on_status, on_ready=ready,
+            realtime_priority=realtime_priority, scratch=scratch,
+            keep_cpus_awake=keep_cpus_awake, cpu=cpu,
+        )

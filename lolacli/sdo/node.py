@@ -47,6 +47,27 @@ def gateway_nodes() -> list[NodeSpec]:
     ]
 
 
+def node_specs(
+    eds: list[Path], node_ids: list[int], *, gateway: bool = False
+) -> list[NodeSpec]:
+    """The nodes ``sdo serve`` serves: each EDS with its node ID, in order, then the LOLA
+    gateway's sensors; UsageError when the counts differ, nothing is left to serve or a
+    node ID is given twice."""
+    from lolacli.errors import UsageError
+
+    if len(eds) != len(node_ids):
+        raise UsageError(f"{len(eds)} --eds but {len(node_ids)} --node: give one node ID per EDS")
+    specs = [NodeSpec(f, n) for f, n in zip(eds, node_ids, strict=True)]
+    if gateway:
+        specs += gateway_nodes()
+    if not specs:
+        raise UsageError("nothing to serve: give --eds FILE --node N, or --gateway")
+    taken = [s.node_id for s in specs]
+    if len(set(taken)) != len(taken):
+        raise UsageError(f"node IDs given twice: {taken}")
+    return specs
+
+
 def sensor_callback(node_id: int, clock: Callable[[], float]) -> Callable[..., Any]:
     """A LocalNode read callback: sines for 0x6010/0x6020 entries, a 1 kHz sample counter."""
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 
 import pytest
 
@@ -204,3 +205,20 @@ def test_cli_options_of_the_other_bus_are_usage_errors(cli, channel, gateway, tm
     assert code == 2 and "--iface" in err
     code, _out, err = cli("sdo", "read", "1", "0x1000", "--backend", "twincat")
     assert code == 2 and "unknown --backend" in err
+
+
+def test_node_specs_refuse_what_sdo_serve_cannot_serve(cli) -> None:
+    from lolacli.sdo.node import example_eds, node_specs
+
+    imu = example_eds("lola_imu.eds")
+    assert [s.node_id for s in node_specs([imu], [5], gateway=True)] == [5, 16, 17, 18]
+    for eds, ids, gateway, said in (
+        ([imu], [], False, "1 --eds but 0 --node"),
+        ([], [], False, "nothing to serve"),
+        ([imu], [16], True, "node IDs given twice: [16, 16, 17, 18]"),
+    ):
+        with pytest.raises(UsageError, match=re.escape(said)):
+            node_specs(eds, ids, gateway=gateway)
+    code, out, err = cli("sdo", "serve", "--can", "x", "--interface", "virtual")
+    assert (code, out) == (2, "")
+    assert err == "lolacli: error: nothing to serve: give --eds FILE --node N, or --gateway\n"

@@ -171,3 +171,40 @@ def test_calibration_inverts_prediction(n_bytes, slaves, delay, cable_m):
         est.predicted_total_ns, est.wire_time_ns, est.cable_delay_ns, slaves
     )
     assert back == delay
+
+
+# --------------------------------------------------------------------------- bus timing
+
+
+def test_timing_request_from_numbers_needs_no_file() -> None:
+    from lolacli.timing.bus import TimingRequest
+
+    request = TimingRequest(frame_bytes=100, slaves=5)
+    assert not request.reads_eni and not request.reads_capture
+    timing = request.run()  # no ENI reader, no report: none is asked for
+    assert timing.doc["sources"] == {"frame_bytes": "--frame-bytes", "slaves": "--slaves",
+                                     "measured": None}
+    assert timing.doc["slaves"] == 5 and timing.within_budget is None
+
+
+def test_timing_request_contradictions_are_usage_errors() -> None:
+    from lolacli.timing.bus import TimingRequest
+
+    for options in ({"eni": "a.xml", "slaves": 3}, {"frame_bytes": 100},
+                  {"measured": "1us", "capture": "x.pcap"}):
+        with pytest.raises(UsageError):
+            TimingRequest(**options)  # type: ignore[arg-type]
+
+
+def test_timing_request_reads_the_eni_after_checking_the_measured_total() -> None:
+    from lolacli.timing.bus import TimingRequest
+
+    read: list[str] = []
+
+    def reader():  # type: ignore[no-untyped-def]
+        read.append("eni")
+        raise AssertionError("not to be read")
+
+    with pytest.raises(UsageError):
+        TimingRequest(eni="a.xml", measured="soon").run(reader)
+    assert read == []

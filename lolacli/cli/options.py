@@ -1,0 +1,108 @@
+"""Command-line options that several commands share, each defined once here: the same
+flag, type, bounds and help text wherever it appears. A command's own options stay in its
+module.
+
+Checks a range cannot express go in ``callback=``: :func:`not_nan` for bounded numbers
+(typer's range types let ``nan`` through, as every comparison with it is false).
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def not_nan(value: float | None) -> float | None:
+    """A bounded float option's value, refused when it is not a number (``nan``)."""
+    if value is not None and value != value:
+        raise typer.BadParameter(f"{value} is not a number")
+    return value
+
+
+class OutputFormat(StrEnum):
+    human = "human"
+    json = "json"
+
+
+FormatOption = Annotated[
+    OutputFormat,
+    typer.Option("--format", "-f", help="Output format: human (tables) or json (stdout)."),
+]
+
+# ---------------------------------------------------------------- the bus and its ENI
+
+_IFACE = typer.Option(
+    "--iface", "-i", metavar="IF", help="EtherCAT: the network interface (NIC, veth, TAP)."
+)
+#: the interface a command needs (``bus emulate``, ``bus scan``)
+IfaceArgument = Annotated[str, _IFACE]
+#: the interface of a command that runs in process without one (``sdo``)
+IfaceOption = Annotated[str | None, _IFACE]
+
+#: an ENI that stands for the chain (emulated, or the live bus's configuration)
+EniOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--eni",
+        help="ENI of the chain: the one emulated, or the configuration of the --iface bus. "
+        "Default: the embedded LOLA chain.",
+    ),
+]
+#: an ENI that a bus or a capture is checked against
+EniCheckOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--eni",
+        help="ENI to check against (its slaves, WKCs and FMMU layout).",
+    ),
+]
+EsiOption = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--esi",
+        help="ESI file; slaves whose identity it describes take their SII and value types "
+        "from it. Repeatable.",
+    ),
+]
+CaptureArgument = Annotated[
+    Path, typer.Argument(help="Capture file (pcap or pcapng).", show_default=False)
+]
+
+# ---------------------------------------------------------------- faults of an emulated chain
+
+DropOption = Annotated[
+    float, typer.Option("--drop-p", help="Probability to lose a frame.")
+]
+StuckSafeopOption = Annotated[
+    list[int] | None,
+    typer.Option("--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."),
+]
+DriftOption = Annotated[
+    int, typer.Option("--drift-ppb", help="Clock drift step along the line (ppb).")
+]
+SeedOption = Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")]
+
+# ---------------------------------------------------------------- verdict thresholds
+
+MaxLostOption = Annotated[
+    int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
+]
+MaxWkcOption = Annotated[
+    int,
+    typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
+]
+
+# ---------------------------------------------------------------- servers
+
+DurationOption = Annotated[
+    float,
+    typer.Option(
+        "--duration",
+        min=0.0,
+        callback=not_nan,
+        help="Stop after this many seconds (0: until Ctrl-C).",
+    ),
+]
