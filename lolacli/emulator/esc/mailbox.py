@@ -75,7 +75,8 @@ class Mailbox(SyncManagers):
         self._mailbox_write_counter = counter
         self.counters.mailbox_requests += 1
         if self.app is not None:
-            self._mailbox_queue.extend(self.app.mailbox_request(request))
+            read_bytes = self.sync_manager(self.layout.mailbox_in_sm).length
+            self._mailbox_queue.extend(self.app.mailbox_request(request, read_bytes))
         self._post_next_mailbox()
 
     def _post_next_mailbox(self) -> None:
