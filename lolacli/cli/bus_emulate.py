@@ -46,6 +46,15 @@ def emulate_cmd(
         int, typer.Option("--drift-ppb", help="Clock drift step along the line.")
     ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
+    foe_password: Annotated[
+        int,
+        typer.Option(
+            "--foe-password",
+            min=0,
+            max=0xFFFF_FFFF,
+            help="The slaves' FoE password (firmware read and write in BOOT).",
+        ),
+    ] = 0,
     link_down: Annotated[
         str | None,
         typer.Option(
@@ -130,6 +139,7 @@ def emulate_cmd(
         cut[0] if cut else None,
         cut[1] if cut else 0.0,
         corrupt_p,
+        foe_password,
     )
     chain = make_chain(model, options, esi=esi_files)
     deadline = time.monotonic() + duration_s if duration_s > 0 else None

@@ -18,6 +18,7 @@ from lolacli.cli import (  # noqa: F401
     bus_timing,
     capture,
     eni,
+    foe,
     sdo,
 )
 from lolacli.cli.coerce import install as _light_parameters
@@ -62,7 +63,7 @@ _light_parameters()  # simple parameters without pydantic: a third of a short co
 app = typer.Typer(
     cls=_LolaGroup,
     name="lolacli",
-    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation, SDO.",
+    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation, SDO, FoE.",
     rich_markup_mode=None,
     pretty_exceptions_enable=False,
     no_args_is_help=True,
@@ -72,6 +73,7 @@ app.add_typer(eni.app, name="eni")
 app.add_typer(bus.app, name="bus")
 app.add_typer(capture.app, name="capture")
 app.add_typer(sdo.app, name="sdo")
+app.add_typer(foe.app, name="foe")
 
 
 def _version(value: bool) -> None:
