@@ -45,18 +45,27 @@ class SlaveApplication:
 
     def __init__(self, device: Device, mailbox_in_bytes: int, *, foe_password: int = 0) -> None:
         self.device = device
-        self.sdo = SdoServer(device.od, mailbox_in_bytes) if mailbox_in_bytes else None
         self.has_coe = mailbox_in_bytes > 0
+        self._coe = CoeHandler(SdoServer(device.od, mailbox_in_bytes) if self.has_coe else None)
         self.files = FileStore()
-        self.foe = FoeServer(self.files, password=foe_password) if mailbox_in_bytes else None
+        self.foe = FoeServer(self.files, password=foe_password) if self.has_coe else None
         self.mailbox = MailboxDispatcher()
-        if self.sdo is not None:
-            self.mailbox.register(CoeHandler(self.sdo))
+        if self.has_coe:
+            self.mailbox.register(self._coe)
         if self.foe is not None:
             self.mailbox.register(self.foe)
         # called before Python uses the device: the chain's C core, which may hold the
         # device's state between cycles, gives it back (lolacli.emulator.core)
         self.before_use: Callable[[], None] | None = None
+
+    @property
+    def sdo(self) -> SdoServer | None:
+        """The SDO server behind CoE (None: requests are taken and never answered)."""
+        return self._coe.server
+
+    @sdo.setter
+    def sdo(self, server: SdoServer | None) -> None:
+        self._coe.server = server
 
     def mailbox_request(self, request: bytes, read_bytes: int) -> list[bytes]:
         if self.before_use is not None:

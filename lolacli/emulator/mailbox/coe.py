@@ -1,6 +1,7 @@
 """CoE in the mailbox: the SDO server (:class:`~lolacli.emulator.coe_server.SdoServer`,
 SDO up/download and SDO Information) as a :class:`~lolacli.emulator.mailbox.MailboxHandler`.
-Served in PREOP, SAFEOP and OP; a bootloader in BOOT speaks no CoE."""
+Served in PREOP, SAFEOP and OP; a bootloader in BOOT speaks no CoE. Without a server
+(``server`` None) requests are taken and never answered, as by a firmware that hangs."""
 
 from __future__ import annotations
 
@@ -16,11 +17,11 @@ class CoeHandler:
     mailbox_type = MailboxType.CoE
     states = COE_STATES
 
-    def __init__(self, server: SdoServer) -> None:
+    def __init__(self, server: SdoServer | None) -> None:
         self.server = server
 
     def handle(self, request: bytes, context: MailboxContext) -> list[bytes]:
-        return self.server.handle(request)
+        return self.server.handle(request) if self.server is not None else []
 
     def state_changed(self, state: int) -> None:
         """An SDO transfer is one request at a time: nothing to end."""
