@@ -146,9 +146,12 @@ class LolaFoeTarget(FoeTarget):
             raise TransportError(f"{self.slave.where} did not enter BOOT: {exc}") from None
         mailbox = MailboxClient(bus.port, layout, timeout_ns=bus.timeout_ns)
         try:
-            return run(FoeClient(mailbox, self.slave.where))
-        finally:
-            leave_boot(bus.port, self.slave)
+            result = run(FoeClient(mailbox, self.slave.where))
+        except BaseException:
+            _quietly(lambda: leave_boot(bus.port, self.slave))  # the first error tells
+            raise
+        leave_boot(bus.port, self.slave)
+        return result
 
     def write(
         self, name: str, data: bytes, password: int = 0, *, progress: Progress | None = None
@@ -168,6 +171,14 @@ class LolaFoeTarget(FoeTarget):
             lambda c: c.read(name, password, max_bytes=max_bytes, progress=progress)
         )
         return data, _result(self, "read", done)
+
+
+def _quietly(call: Callable[[], object]) -> None:
+    """``call()`` on the way out of a failed transfer: its own failure is not the news."""
+    try:
+        call()
+    except Exception:  # noqa: BLE001 - the transfer's error is raised instead
+        pass
 
 
 def _result(target: FoeTarget, direction: str, done: FoeTransfer) -> FoeResult:
@@ -236,9 +247,12 @@ class SoemFoeTarget(FoeTarget):
         self.slave.amend_mbx("in", inn, in_bytes)
         self._state(p.BOOT_STATE, "BOOT")
         try:
-            return run()
-        finally:
-            self._state(p.INIT_STATE, "INIT")
+            result = run()
+        except BaseException:
+            _quietly(lambda: self._state(p.INIT_STATE, "INIT"))  # the first error tells
+            raise
+        self._state(p.INIT_STATE, "INIT")
+        return result
 
     def _check(self, result: int) -> None:
         if result > 0:

@@ -140,3 +140,25 @@ def test_bad_usage_and_input(cli, tmp_path: Path, args: list[str], code: int) ->
     got, _out, err = cli("foe", *[a.replace("{fw}", str(fw)) for a in args])
     assert got == code, err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_ctrl_c_is_exit_130(tmp_path: Path) -> None:
+    """SIGINT while the command runs (the transfer of 15 MiB takes seconds here; on a
+    fast host the signal may come before it starts): one line, exit 130."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    big = tmp_path / "big.bin"
+    big.write_bytes(random.Random(3).randbytes(15 * MIB))
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lolacli", "foe", "write", "2", str(big)],
+        cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert out == "" and err.strip().splitlines() == ["lolacli: stopped by SIGINT"]
