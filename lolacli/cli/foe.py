@@ -84,9 +84,13 @@ def _run(fmt: OutputFormat, base: dict[str, Any], call: Any) -> Any:
 
 
 def _say(result: Any, verb: str, path: Path) -> None:
+    """Three lines, each fitted to the terminal (80 columns when piped)."""
+    import shutil
+    import textwrap
+
     from lolacli.text import number, plural
 
-    size = plural(result.bytes, "byte")
+    size = number(result.bytes, "bytes", 0)
     rate = result.bytes / result.seconds / 1024 if result.seconds > 0 else 0.0
     how = [number(result.seconds, "s", 2), number(rate, "KiB/s", 1)]
     if result.packets is not None:
@@ -98,7 +102,10 @@ def _say(result: Any, verb: str, path: Path) -> None:
         f"  {', '.join(how)} ({result.backend}); slave back in INIT",
         f"  file {path}",
     ]
-    sys.stdout.write("".join(line + "\n" for line in lines))
+    width = max(40, shutil.get_terminal_size((80, 24)).columns)
+    wrap = textwrap.TextWrapper(width, subsequent_indent="    ", break_on_hyphens=False)
+    out = [w for line in lines for w in wrap.wrap(line)]
+    sys.stdout.write("".join(line + "\n" for line in out))
 
 
 def _document(result: Any, path: Path, data: bytes) -> dict[str, Any]:

@@ -113,7 +113,7 @@ def test_the_commands_in_process(cli, tmp_path: Path) -> None:
     code, out, _err = cli("foe", "write", "1", str(firmware), "--name", "x")
     assert code == 0
     lines = out.splitlines()
-    assert lines[0] == "slave 1: wrote 'x', 5000 bytes" and "slave back in INIT" in lines[1]
+    assert lines[0] == "slave 1: wrote 'x', 5,000 bytes" and "slave back in INIT" in lines[1]
     assert all(len(line) <= 80 for line in lines)
     # each command is a chain of its own: the file written above is gone
     code, doc = _json(cli, "read", "1", "app.bin", "-o", str(tmp_path / "back.bin"))
