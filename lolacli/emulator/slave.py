@@ -72,6 +72,10 @@ class SlaveApplication:
             self.before_use()
         return self.mailbox.handle(request, read_bytes)
 
+    def mailbox_posted(self, message: bytes) -> bytes:
+        """An emergency (or any message posted unasked) with the slave's next counter."""
+        return self.mailbox.numbered(message)
+
     def process_data_bytes(self) -> tuple[int, int]:
         return self.device.process_data_bytes()
 

@@ -265,3 +265,17 @@ def test_a_file_too_large_for_the_flash_gets_disk_full() -> None:
         if isinstance(answer, FoeError):
             break
     assert answer == FoeError(FoeErrorCode.DISK_FULL, "")
+
+
+def test_an_emergency_counts_on_the_same_counter_as_the_answers() -> None:
+    m = BootMaster()  # PREOP, standard mailbox
+    mb = ENI.slaves[0].mailbox
+    assert mb is not None
+    out, inn = (mb.out_start, mb.out_length_bytes), (mb.in_start, mb.in_length_bytes)
+    first = m.ask(MailboxType.CoE, encode_sdo(SdoUploadRequest(0x1018, 1)), out, inn)
+    m.chain.drive_fault(1)  # a CoE emergency, posted unasked
+    emergency = decode_mailbox(m.fprd(STATION, inn[0], inn[1]))
+    assert emergency.mailbox_type == MailboxType.CoE and emergency.payload[1] >> 4 == 1
+    last = m.ask(MailboxType.CoE, encode_sdo(SdoUploadRequest(0x1018, 1)), out, inn)
+    after = first.counter % 7 + 1
+    assert [emergency.counter, last.counter] == [after, after % 7 + 1]

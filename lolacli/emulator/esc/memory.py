@@ -27,6 +27,10 @@ class EscApplication(Protocol):
         mailbox) -> mailbox messages to send back in the read mailbox of ``read_bytes``."""
         ...
 
+    def mailbox_posted(self, message: bytes) -> bytes:
+        """A message the firmware posts unasked (an emergency), as it numbers it."""
+        ...
+
     def process_data_bytes(self) -> tuple[int, int]:
         """(outputs, inputs) sizes the current PDO mapping needs, in bytes."""
         ...

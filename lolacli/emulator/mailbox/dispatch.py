@@ -96,12 +96,13 @@ class MailboxDispatcher:
         self.errors += 1
         return mailbox_error(detail)
 
+    def numbered(self, message: bytes) -> bytes:
+        """``message`` with the slave's next counter (whatever its writer put there): the
+        answers of every handler and the messages posted unasked count on one counter."""
+        self.counter = next_counter(self.counter)
+        head = bytearray(message[:MAILBOX_HEADER_BYTES])
+        head[5] = (head[5] & ~_COUNTER_MASK & 0xFF) | self.counter << 4
+        return bytes(head) + message[MAILBOX_HEADER_BYTES:]
+
     def _numbered(self, messages: list[bytes]) -> list[bytes]:
-        """The messages with the slave's next counters (whatever the handler wrote)."""
-        out = []
-        for message in messages:
-            self.counter = next_counter(self.counter)
-            head = bytearray(message[:MAILBOX_HEADER_BYTES])
-            head[5] = (head[5] & ~_COUNTER_MASK & 0xFF) | self.counter << 4
-            out.append(bytes(head) + message[MAILBOX_HEADER_BYTES:])
-        return out
+        return [self.numbered(m) for m in messages]
