@@ -89,6 +89,22 @@ class SdoAbortError(LolaError):
         )
 
 
+class FoeError(LolaError):
+    """A slave answered an FoE transfer with an FoE error (ETG.1000.6 Table 92; exit 1).
+
+    ``code`` is the error code (0x8000…; ``None`` where the master does not tell it, as
+    SOEM), ``text`` its meaning and ``slave_text`` what the slave wrote with it."""
+
+    def __init__(self, where: str, code: int | None, text: str, slave_text: str = "") -> None:
+        self.where = where
+        self.code = code
+        self.text = text
+        self.slave_text = slave_text
+        said = f" ({slave_text})" if slave_text and slave_text != text else ""
+        number = f" 0x{code:04X}" if code is not None else ""
+        super().__init__(f"{where}: FoE error{number}: {text}{said}")
+
+
 class TransitionRefusedError(LolaError):
     """A slave refused an AL state transition (or did not reach the state in time).
 

@@ -62,6 +62,15 @@ CorruptOption = Annotated[
         help="Probability to damage a frame inside the line (RX error counters, lower WKC).",
     ),
 ]
+FoePasswordOption = Annotated[
+    int,
+    typer.Option(
+        "--foe-password",
+        min=0,
+        max=0xFFFF_FFFF,
+        help="The slaves' FoE password (firmware read and write in BOOT).",
+    ),
+]
 LinkDownOption = Annotated[
     str | None,
     typer.Option(
@@ -115,6 +124,7 @@ def emulate_cmd(
     stuck_safeop: StuckSafeopOption = None,
     drift_ppb: DriftOption = 0,
     seed: SeedOption = 0,
+    foe_password: FoePasswordOption = 0,
     link_down: LinkDownOption = None,
     duration_s: DurationOption = 0.0,
     quiet: QuietOption = False,
@@ -132,7 +142,7 @@ def emulate_cmd(
     cut: Any = link_down  # (position, seconds) from its callback
     options = EmulateOptions(
         drop_p, tuple(stuck_safeop or ()), drift_ppb, seed,
-        cut[0] if cut else None, cut[1] if cut else 0.0, corrupt_p,
+        cut[0] if cut else None, cut[1] if cut else 0.0, corrupt_p, foe_password,
     )
     emulation = Emulation(
         load_eni(eni if eni is not None else default_eni()), options,

@@ -17,6 +17,7 @@ from lolacli.cli import (  # noqa: F401
     bus_timing,
     capture,
     eni,
+    foe,
     sdo,
 )
 from lolacli.cli.common import debug_enabled
@@ -62,7 +63,7 @@ def _traceback_if_debug() -> None:
 app = typer.Typer(
     cls=_LolaGroup,
     name="lolacli",
-    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation, SDO.",
+    help="EtherCAT bus commissioning and diagnostics: ENI, timing, captures, emulation, SDO, FoE.",
     rich_markup_mode=None,
     pretty_exceptions_enable=False,
     no_args_is_help=True,
@@ -72,6 +73,7 @@ app.add_typer(eni.app, name="eni")
 app.add_typer(bus.app, name="bus")
 app.add_typer(capture.app, name="capture")
 app.add_typer(sdo.app, name="sdo")
+app.add_typer(foe.app, name="foe")
 
 
 def _version(value: bool) -> None:

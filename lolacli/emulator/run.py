@@ -30,6 +30,7 @@ class EmulateOptions:
     link_down_after: int | None = None  # cable cut after this 1-based position
     link_down_at_s: float = 0.0  # ... this long after serving starts (0: from the start)
     corrupt_probability: float = 0.0
+    foe_password: int = 0  # every slave's FoE password (BOOT: firmware read and write)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,13 +77,17 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
         raise UsageError(f"drop probability {options.drop_probability} is not in [0, 1]")
     if not 0.0 <= options.corrupt_probability <= 1.0:
         raise UsageError(f"corrupt probability {options.corrupt_probability} is not in [0, 1]")
+    if not 0 <= options.foe_password <= 0xFFFF_FFFF:
+        raise UsageError(f"FoE password {options.foe_password} is not a 32-bit unsigned number")
     faults = Faults(
         drop_probability=options.drop_probability,
         seed=options.seed,
         corrupt_probability=options.corrupt_probability,
     )
     try:  # the ENI/ESI readers take any integer; SII and register fields have fixed widths
-        chain = build_chain(eni, faults=faults, drift_ppb=options.drift_ppb)
+        chain = build_chain(
+            eni, faults=faults, drift_ppb=options.drift_ppb, foe_password=options.foe_password
+        )
         for m in esi_matches(eni, esi):
             ident = eni.slaves[m.position - 1].identity
             revision = None if m.exact_revision else ident.revision

@@ -105,6 +105,10 @@ class SiiLayout:
     mailbox_out_bytes: int = 0
     mailbox_in_start: int = 0
     mailbox_in_bytes: int = 0
+    bootstrap_out_start: int = 0
+    bootstrap_out_bytes: int = 0
+    bootstrap_in_start: int = 0
+    bootstrap_in_bytes: int = 0
     protocols: int = 0
     name: str = ""
     sync_managers: tuple[SiiSyncManager, ...] = ()
@@ -134,6 +138,8 @@ class SiiSpec:
     serial: int = 0
     station_alias: int = 0
     mailbox: tuple[int, int, int, int] | None = None  # out start, out len, in start, in len
+    #: the bootstrap mailbox (BOOT state) as ``mailbox``; None: the standard mailbox's
+    bootstrap: tuple[int, int, int, int] | None = None
     protocols: int = 0
     coe_details: int = 0
     ds402_channels: int = 0
@@ -182,6 +188,7 @@ def build_sii(spec: SiiSpec) -> bytes:
     if given and not alias:
         alias = _U16.unpack_from(config, 8)[0]  # the ESI's word 4
     out_start, out_len, in_start, in_len = spec.mailbox or (0, 0, 0, 0)
+    boot_out, boot_out_len, boot_in, boot_in_len = spec.bootstrap or spec.mailbox or (0, 0, 0, 0)
     header = SiiHeader(
         station_alias=alias,
         vendor_id=spec.vendor_id,
@@ -197,10 +204,10 @@ def build_sii(spec: SiiSpec) -> bytes:
         version=1,
         checksum=0,
         checksum_ok=True,
-        bootstrap_rx_mailbox_offset=out_start,
-        bootstrap_rx_mailbox_bytes=out_len,
-        bootstrap_tx_mailbox_offset=in_start,
-        bootstrap_tx_mailbox_bytes=in_len,
+        bootstrap_rx_mailbox_offset=boot_out,
+        bootstrap_rx_mailbox_bytes=boot_out_len,
+        bootstrap_tx_mailbox_offset=boot_in,
+        bootstrap_tx_mailbox_bytes=boot_in_len,
     )
     general = SiiGeneral(
         group_index=2,
@@ -236,6 +243,26 @@ def build_sii(spec: SiiSpec) -> bytes:
 
 # ------------------------------------------------------------ from an ENI
 DEFAULT_MAILBOX = (0x1000, 128, 0x1080, 128)
+#: each direction of the bootstrap mailbox of an emulated slave: a bootloader's larger
+#: mailbox carries a firmware in fewer FoE packets (one ESI of the corpus states this
+#: very layout, 0x1000/0x1400 of 1 KiB each)
+BOOTSTRAP_MAILBOX_BYTES = 0x400
+
+
+def bootstrap_mailbox(
+    mailbox: tuple[int, int, int, int] | None,
+) -> tuple[int, int, int, int] | None:
+    """The bootstrap mailbox of an emulated slave with the standard ``mailbox``: out where
+    the standard one starts, in right after it, :data:`BOOTSTRAP_MAILBOX_BYTES` each (in
+    BOOT no process data uses the RAM after it); the standard mailbox where that would run
+    past the ESC's 64 KiB."""
+    if mailbox is None:
+        return None
+    start = mailbox[0]
+    size = BOOTSTRAP_MAILBOX_BYTES
+    if start + 2 * size > 0x10000:
+        return mailbox
+    return (start, size, start + size, size)
 
 
 def _sm(start: int, length: int, control: int, enable: int, kind: int) -> SiiSyncManager:
@@ -319,6 +346,7 @@ def sii_spec_from_slave(slave: Slave, *, complete_access: bool = False) -> SiiSp
         revision=ident.revision,
         serial=ident.serial,
         mailbox=mailbox,
+        bootstrap=bootstrap_mailbox(mailbox),
         protocols=int(protocols),
         coe_details=int(coe),
         ds402_channels=1 if any(e.index == 0x6040 for p in slave.pdos for e in p.entries) else 0,
@@ -482,6 +510,10 @@ def sii_layout(image: bytes) -> SiiLayout:
         mailbox_out_bytes=h.rx_mailbox_bytes,
         mailbox_in_start=h.tx_mailbox_offset,
         mailbox_in_bytes=h.tx_mailbox_bytes,
+        bootstrap_out_start=h.bootstrap_rx_mailbox_offset,
+        bootstrap_out_bytes=h.bootstrap_rx_mailbox_bytes,
+        bootstrap_in_start=h.bootstrap_tx_mailbox_offset,
+        bootstrap_in_bytes=h.bootstrap_tx_mailbox_bytes,
         protocols=h.mailbox_protocols,
         name=_first_string(cats.get(SiiCategory.STRINGS, b"")),
         sync_managers=sms,

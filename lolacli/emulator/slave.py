@@ -1,8 +1,10 @@
-"""An emulated slave: ESC + device + CoE server, and a chain built from an ENI.
+"""An emulated slave: ESC + device + mailbox protocols, and a chain built from an ENI.
 
 :func:`build_chain` is the one call that turns an ENI model into a running line of
 slaves: for each ENI slave an SII image (:mod:`lolacli.emulator.sii`), a device model
-(:func:`lolacli.devices.device_for`) and, for mailbox slaves, an SDO server.
+(:func:`lolacli.devices.device_for`) and, for mailbox slaves, the protocols behind the
+mailbox (:mod:`lolacli.emulator.mailbox`): an SDO server (CoE) in PREOP and above and a
+bootloader's file access (FoE) in BOOT, with the slave's files kept in its own store.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from lolacli.devices.base import ASSIGN_RX, ASSIGN_TX, MAPPING_RX, MAPPING_TX, D
 from lolacli.emulator.chain import Chain, ChainTiming, Faults
 from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.esc import DcClock, Esc
+from lolacli.emulator.mailbox import MailboxDispatcher
+from lolacli.emulator.mailbox.coe import CoeHandler
+from lolacli.emulator.mailbox.foe import FileStore, FoeServer
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
 from lolacli.eni.model import CoeInitCmd, Direction, Eni, Pdo, PdoEntry, Slave
@@ -34,20 +39,42 @@ MAX_PDO_ENTRIES = 254
 
 
 class SlaveApplication:
-    """The PDI side of one ESC: a device and its SDO server (implements EscApplication)."""
+    """The PDI side of one ESC: a device and the protocols of its mailbox, CoE (its SDO
+    server, ``sdo``) and FoE (``foe``, over the slave's ``files``); implements
+    EscApplication. ``foe_password`` is the password FoE transfers need."""
 
-    def __init__(self, device: Device, mailbox_in_bytes: int) -> None:
+    def __init__(self, device: Device, mailbox_in_bytes: int, *, foe_password: int = 0) -> None:
         self.device = device
-        self.sdo = SdoServer(device.od, mailbox_in_bytes) if mailbox_in_bytes else None
         self.has_coe = mailbox_in_bytes > 0
+        self._coe = CoeHandler(SdoServer(device.od, mailbox_in_bytes) if self.has_coe else None)
+        self.files = FileStore()
+        self.foe = FoeServer(self.files, password=foe_password) if self.has_coe else None
+        self.mailbox = MailboxDispatcher()
+        if self.has_coe:
+            self.mailbox.register(self._coe)
+        if self.foe is not None:
+            self.mailbox.register(self.foe)
         # called before Python uses the device: the chain's C core, which may hold the
         # device's state between cycles, gives it back (lolacli.emulator.core)
         self.before_use: Callable[[], None] | None = None
 
-    def mailbox_request(self, request: bytes) -> list[bytes]:
+    @property
+    def sdo(self) -> SdoServer | None:
+        """The SDO server behind CoE (None: requests are taken and never answered)."""
+        return self._coe.server
+
+    @sdo.setter
+    def sdo(self, server: SdoServer | None) -> None:
+        self._coe.server = server
+
+    def mailbox_request(self, request: bytes, read_bytes: int) -> list[bytes]:
         if self.before_use is not None:
             self.before_use()
-        return self.sdo.handle(request) if self.sdo is not None else []
+        return self.mailbox.handle(request, read_bytes)
+
+    def mailbox_posted(self, message: bytes) -> bytes:
+        """An emergency (or any message posted unasked) with the slave's next counter."""
+        return self.mailbox.numbered(message)
 
     def process_data_bytes(self) -> tuple[int, int]:
         return self.device.process_data_bytes()
@@ -57,6 +84,7 @@ class SlaveApplication:
             self.before_use()
         self.device.od.al_state = int(state)  # SDO access rights follow the AL state
         self.device.state_changed(int(state))
+        self.mailbox.state_changed(int(state))
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
         if self.before_use is not None:
@@ -64,13 +92,15 @@ class SlaveApplication:
         return self.device.cycle(outputs, t_ns)
 
 
-def build_slave(slave: Slave, *, drift_ppb: int = 0, start_ns: int = 0) -> Esc:
+def build_slave(
+    slave: Slave, *, drift_ppb: int = 0, start_ns: int = 0, foe_password: int = 0
+) -> Esc:
     """The ESC of one ENI slave with its device behind it."""
     slave = with_process_data_pdos(slave)
     sii = sii_from_slave(slave, complete_access=True)  # real CiA 402 drives offer it
     device = device_for(slave)
     mailbox_in = slave.mailbox.in_length_bytes if slave.mailbox is not None else 0
-    app = SlaveApplication(device, mailbox_in)
+    app = SlaveApplication(device, mailbox_in, foe_password=foe_password)
     device.od.al_state = int(AlState.INIT)
     return Esc(sii, app=app, clock=DcClock(start_ns=start_ns, drift_ppb=drift_ppb))
 
@@ -82,12 +112,14 @@ def build_chain(
     faults: Faults | None = None,
     drift_ppb: int = 0,
     engine: str | None = None,
+    foe_password: int = 0,
 ) -> Chain:
     """All slaves of ``eni`` in line order. ``drift_ppb`` spreads clock rates along the
     line (slave i runs ``i × drift_ppb`` fast) so DC has something to correct; ``engine``
-    as :func:`~lolacli.emulator.chain.chain_engine` takes it."""
+    as :func:`~lolacli.emulator.chain.chain_engine` takes it; ``foe_password`` is the
+    password of every slave's FoE files."""
     slaves = [
-        build_slave(s, drift_ppb=i * drift_ppb, start_ns=i * 1_234_567)
+        build_slave(s, drift_ppb=i * drift_ppb, start_ns=i * 1_234_567, foe_password=foe_password)
         for i, s in enumerate(eni.slaves)
     ]
     return Chain(slaves, timing=timing, faults=faults, engine=engine)
@@ -125,9 +157,7 @@ def with_process_data_pdos(slave: Slave) -> Slave:
     return replace(slave, pdos=tuple(pdos))
 
 
-def _pdo_chunks(
-    indexes: list[int], entries: list[PdoEntry]
-) -> list[tuple[int, list[PdoEntry]]]:
+def _pdo_chunks(indexes: list[int], entries: list[PdoEntry]) -> list[tuple[int, list[PdoEntry]]]:
     """The filler entries spread over the PDOs: ENTRIES_PER_PDO each, the last PDO the
     rest, and where the rest is more than one mapping holds, the PDOs after it (0x1A00,
     0x1A01, ...) as many as it takes."""

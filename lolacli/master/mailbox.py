@@ -93,6 +93,13 @@ class MailboxClient:
     def request(self, mailbox_type: int, payload: bytes, *, timeout_ns: int | None = None) -> bytes:
         """Send ``payload`` as a mailbox of ``mailbox_type``; the payload of the answer of
         the same type. TransportError on timeout, WireError for a mailbox error reply."""
+        deadline = self.send(mailbox_type, payload, timeout_ns=timeout_ns)
+        return self._receive(mailbox_type, deadline)
+
+    def send(self, mailbox_type: int, payload: bytes, *, timeout_ns: int | None = None) -> int:
+        """Write ``payload`` as a mailbox of ``mailbox_type`` once the slave has taken the
+        one before (a message without answer, as FoE's last ack); TransportError on
+        timeout. The deadline of the wait (the answer's too) is returned."""
         self.counter = next_counter(self.counter)
         box = encode_mailbox_message(mailbox_type, payload, self.counter, self.layout.out_bytes)
         deadline = self.port.now_ns() + (self.timeout_ns if timeout_ns is None else timeout_ns)
@@ -102,9 +109,8 @@ class MailboxClient:
                 Datagram.physical(Command.FPWR, station, self.layout.out_start, box)
             )
             if d.wkc == 1:
-                break
+                return deadline
             self._wait(deadline, "write the mailbox")
-        return self._receive(mailbox_type, deadline)
 
     def receive(self, mailbox_type: int, *, timeout_ns: int | None = None) -> bytes:
         """The payload of the next message of ``mailbox_type`` the slave posts, without

@@ -1,4 +1,5 @@
-"""SOEM's own C tools (``slaveinfo``, ``simple_test``), built from source for the tests.
+"""SOEM's own C tools (``slaveinfo``, ``simple_test``, ``firm_update``), built from source
+for the tests.
 
 The build goes to a cache folder outside the repository (``$XDG_CACHE_HOME/lolacli`` or
 ``~/.cache/lolacli``), once per pysoem version. The sources are the sdist of the installed
@@ -19,7 +20,7 @@ import sys
 import tarfile
 from pathlib import Path
 
-TOOLS = ("slaveinfo", "simple_test")
+TOOLS = ("slaveinfo", "simple_test", "firm_update")
 _CONTEXT_BEFORE = "    &EcatError,         // .ecaterror     =\n    &ec_DCtime,"
 _CONTEXT_UPSTREAM = (
     "    &EcatError,         // .ecaterror     =\n"

@@ -86,7 +86,7 @@ def test_al_state_machine_refusals_and_acknowledge(drive_bus: Bus) -> None:
     drive_bus.one(C.APWR, 0, r.AL_CONTROL, b"\x11\x00")  # ack + INIT
     assert not esc.al_error and esc.al_status_code == 0
     drive_bus.one(C.APWR, 0, r.AL_CONTROL, b"\x13\x00")  # BOOT
-    assert esc.al_status_code == AlStatusCode.BOOTSTRAP_NOT_SUPPORTED
+    assert esc.al_status_code == AlStatusCode.INVALID_MAILBOX_CONFIGURATION_BOOT  # SMs unset
 
 
 def _configure_mailbox(bus: Bus) -> None:

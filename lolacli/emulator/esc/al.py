@@ -100,7 +100,7 @@ class AlStateMachine(Mailbox):
 
     def _transition_check(self, current: int, requested: int) -> int | None:
         if requested == AlState.BOOT:
-            return AlStatusCode.BOOTSTRAP_NOT_SUPPORTED
+            return self._check_bootstrap_sms()
         if current == AlState.INIT and requested == AlState.PREOP:
             return self._check_mailbox_sms()
         if current == AlState.PREOP and requested == AlState.SAFEOP:
@@ -144,21 +144,42 @@ class AlStateMachine(Mailbox):
         layout = self.layout
         if layout.mailbox_out_bytes == 0:
             return None
+        ok = self._mailbox_sms_at(layout.mailbox_out_start, 0xFFFF, layout.mailbox_in_start, 0xFFFF)
+        return None if ok else AlStatusCode.INVALID_MAILBOX_CONFIGURATION_PREOP
+
+    def _check_bootstrap_sms(self) -> int | None:
+        """INIT → BOOT (ETG.1000.6 Table 9): SM0/SM1 set up as the SII's bootstrap
+        mailbox; a slave whose SII states none has no bootloader."""
+        layout = self.layout
+        if not (layout.bootstrap_out_bytes and layout.bootstrap_in_bytes):
+            return AlStatusCode.BOOTSTRAP_NOT_SUPPORTED
+        ok = self._mailbox_sms_at(
+            layout.bootstrap_out_start,
+            layout.bootstrap_out_bytes,
+            layout.bootstrap_in_start,
+            layout.bootstrap_in_bytes,
+        )
+        return None if ok else AlStatusCode.INVALID_MAILBOX_CONFIGURATION_BOOT
+
+    def _mailbox_sms_at(self, out_start: int, out_bytes: int, in_start: int, in_bytes: int) -> bool:
+        """The mailbox SMs enabled as mailboxes, master → slave at ``out_start`` and back
+        at ``in_start``, neither longer than the slave's buffer (``out_bytes``,
+        ``in_bytes``)."""
+        layout = self.layout
         out = self.sync_manager(layout.mailbox_out_sm)
         inn = self.sync_manager(layout.mailbox_in_sm)
-        ok = (
+        return (
             out.enabled
             and inn.enabled
-            and out.start == layout.mailbox_out_start
-            and inn.start == layout.mailbox_in_start
+            and out.start == out_start
+            and inn.start == in_start
             and out.mode == r.SM_MODE_MAILBOX
             and inn.mode == r.SM_MODE_MAILBOX
             and out.direction == r.SM_DIRECTION_WRITE
             and inn.direction == r.SM_DIRECTION_READ
-            and out.length > 0
-            and inn.length > 0
+            and 0 < out.length <= out_bytes
+            and 0 < inn.length <= in_bytes
         )
-        return None if ok else AlStatusCode.INVALID_MAILBOX_CONFIGURATION_PREOP
 
     def _process_sizes(self) -> tuple[int, int]:
         if self.app is not None:

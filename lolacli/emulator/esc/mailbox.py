@@ -75,7 +75,8 @@ class Mailbox(SyncManagers):
         self._mailbox_write_counter = counter
         self.counters.mailbox_requests += 1
         if self.app is not None:
-            self._mailbox_queue.extend(self.app.mailbox_request(request))
+            read_bytes = self.sync_manager(self.layout.mailbox_in_sm).length
+            self._mailbox_queue.extend(self.app.mailbox_request(request, read_bytes))
         self._post_next_mailbox()
 
     def _post_next_mailbox(self) -> None:
@@ -89,6 +90,9 @@ class Mailbox(SyncManagers):
         self._set_sm_full(index, True)
 
     def post_mailbox(self, message: bytes) -> None:
-        """Queue an unsolicited mailbox message (e.g. an emergency) for the master."""
+        """Queue an unsolicited mailbox message (e.g. an emergency) for the master, with
+        the counter the firmware gives it."""
+        if self.app is not None:
+            message = self.app.mailbox_posted(message)
         self._mailbox_queue.append(message)
         self._post_next_mailbox()

@@ -22,8 +22,13 @@ PLAN_FREE_REGISTERS = 0x0F00  # digital outputs and user RAM: no frame plan depe
 class EscApplication(Protocol):
     """What sits behind the PDI: a device with mailbox server and process data."""
 
-    def mailbox_request(self, request: bytes) -> list[bytes]:
-        """A complete mailbox written by the master -> mailbox messages to send back."""
+    def mailbox_request(self, request: bytes, read_bytes: int) -> list[bytes]:
+        """A complete mailbox written by the master (the whole buffer of the write
+        mailbox) -> mailbox messages to send back in the read mailbox of ``read_bytes``."""
+        ...
+
+    def mailbox_posted(self, message: bytes) -> bytes:
+        """A message the firmware posts unasked (an emergency), as it numbers it."""
         ...
 
     def process_data_bytes(self) -> tuple[int, int]:
