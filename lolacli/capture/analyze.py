@@ -40,7 +40,6 @@ from lolacli.capture.reader import (
     Interface,
     parse_idb,
 )
-from lolacli.capture.stats import summary_us
 from lolacli.capture.verdict import (
     FAILURE,
     INFO,
@@ -58,6 +57,7 @@ from lolacli.findings import Finding, Findings, failed, first
 from lolacli.findings import verdict as verdict_of
 from lolacli.interrupt import never
 from lolacli.text import plural, station
+from lolacli.timing.stats import Summary, summarize_array, summarize_chunks
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
@@ -79,13 +79,14 @@ OBS_SLOTS = 1 << 10
 Progress = Callable[[int, int], None]
 
 
-def _jitter(stats: dict[str, float | int] | None) -> dict[str, float] | None:
+def _us(summary: Summary | None) -> dict[str, float | int] | None:
+    """A summary of ns in the report's µs: ``ns / 1000``, not rounded."""
+    return None if summary is None else summary.to_dict(divisor=1000.0, digits=None)
+
+
+def _jitter(summary: Summary | None) -> dict[str, float] | None:
     """Cycle jitter: std and the largest deviation from the median (µs)."""
-    if stats is None:
-        return None
-    med = float(stats["median"])
-    deviation = max(abs(float(stats["min"]) - med), abs(float(stats["max"]) - med))
-    return {"std": float(stats["std"]), "max_deviation": deviation}
+    return None if summary is None else summary.jitter(divisor=1000.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,9 +98,9 @@ class CaptureReport:
     engine: str
     counts: dict[str, int]
     datagrams_by_cmd: dict[str, int]
-    round_trip_stats: dict[str, Any] | None
-    round_trip_cyclic_stats: dict[str, Any] | None
-    cycle_period_stats: dict[str, Any] | None
+    round_trip_stats: Summary | None  # ns
+    round_trip_cyclic_stats: Summary | None
+    cycle_period_stats: Summary | None
     cyclic_stream: str
     direction_rule: str
     wkc_verdict: WkcVerdict
@@ -157,13 +158,13 @@ class CaptureReport:
             "pairs": c["pairs"],
             "unmatched_outgoing": c["outgoing_frames"] - c["pairs"],
             "unmatched_returned": c["unmatched_returned"],
-            "round_trip_us": self.round_trip_stats,
-            "round_trip_cyclic_us": self.round_trip_cyclic_stats,
+            "round_trip_us": _us(self.round_trip_stats),
+            "round_trip_cyclic_us": _us(self.round_trip_cyclic_stats),
             "cyclic_stream": self.cyclic_stream,
             "cyclic_frames": c["cyclic_frames"],
             # cyclic frames never answered at all (lost or still in flight at the end)
             "cyclic_unmatched": c["cyclic_frames"] - c["cyclic_pairs"],
-            "cycle_period_us": self.cycle_period_stats,
+            "cycle_period_us": _us(self.cycle_period_stats),
             "cycle_jitter_us": _jitter(self.cycle_period_stats),
             "unusable_stats": list(self.unusable_stats),
             "lost_frames": self.lost_frames,
@@ -634,7 +635,7 @@ class _Pass:
         }
         keep = self.keep_series
         all_rt = self.rt_cyclic + self.rt_other
-        rt_stats = summary_us(all_rt)
+        rt_stats = summarize_chunks(all_rt)
         findings = Findings()
         fate = self._fate(all_rt, rt_stats, given_timeout_ns, st[S.S_END_TS])
         rule = self._direction_rule(st)
@@ -664,8 +665,8 @@ class _Pass:
             counts=counts,
             datagrams_by_cmd=by_cmd,
             round_trip_stats=rt_stats,
-            round_trip_cyclic_stats=summary_us(self.rt_cyclic),
-            cycle_period_stats=summary_us(self.periods),
+            round_trip_cyclic_stats=summarize_chunks(self.rt_cyclic),
+            cycle_period_stats=summarize_chunks(self.periods),
             cyclic_stream="logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature",
             direction_rule=rule,
             wkc_verdict=wkc,
@@ -693,9 +694,9 @@ class _Pass:
         # (frames of other EtherCAT types count here too, not in S_ECAT)
         return "packet_type" if st[S.S_DIR_PT] >= st[S.S_ECAT] else "packet_type+mac"
 
-    def _fate(self, all_rt: list[np.ndarray], rt_stats: dict[str, Any] | None,
+    def _fate(self, all_rt: list[np.ndarray], rt_stats: Summary | None,
               given: int | None, end_ts: int) -> FrameFate:
-        median = None if rt_stats is None else float(rt_stats["median"]) * 1000
+        median = None if rt_stats is None else rt_stats.median
         limit = timeout_ns(median, given)
         odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
         late_count = sum(int(np.count_nonzero(c > limit[0])) for c in all_rt)
@@ -739,15 +740,14 @@ class _Pass:
                     frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
-        sizes = np.repeat(np.arange(self.bursts.size), self.bursts)
+        sizes = summarize_array(np.repeat(np.arange(self.bursts.size), self.bursts))
         values = _cat(self.dc_values, np.int64)
         return {
             "drift_compensation_datagrams": st[S.S_DC_DGRAMS],
-            "drift_compensation_bursts": int(sizes.size),
+            "drift_compensation_bursts": 0 if sizes is None else sizes.count,
             "burst_size": None
-            if sizes.size == 0
-            else {"min": int(sizes.min()), "median": float(np.median(sizes)),
-                  "max": int(sizes.max())},
+            if sizes is None
+            else {"min": int(sizes.min), "median": sizes.median, "max": int(sizes.max)},
             "burst_gap_us": S.BURST_GAP_NS / 1000.0,
             "system_time_difference_reads": int(values.size),
             "system_time_difference_max_abs_ns": int(np.abs(values).max()) if values.size else None,
