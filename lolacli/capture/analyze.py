@@ -1,7 +1,7 @@
 """Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
 
 :func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
-:func:`lolacli.capture.scan.scan` (its C twin, or numba-compiled, when available) walk the
+:func:`lolacli.capture.scan.scan` (its C twin when built) walk the
 records. The scanner pairs frames, counts commands, counts the working counters and AL
 states it sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
 configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
@@ -253,8 +253,8 @@ def analyze_file(
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
-    ``engine`` is ``"auto"`` (C when built, else numba when installed, except for files
-    under 2 MB), ``"c"``, ``"numba"`` or ``"python"``; all give identical results.
+    ``engine`` is ``"auto"`` (C when built, else Python), ``"c"`` or ``"python"``; both
+    give identical results.
     ``progress(done_bytes, total_bytes)`` is called after every slice of the file
     (:data:`SLICE_BYTES`), and ``should_stop()`` polled there: when it says stop, the
     report covers the frames read so far (``interrupted``, a finding ``interrupted``).
@@ -301,7 +301,7 @@ def _np(values: Any) -> np.ndarray:
 def _rows(out: Any, n: int) -> np.ndarray:
     """A copy of the first ``n`` values of a scanner output array. The kernel writes the
     next rows from 0 again after each drain, so a view kept past it would be overwritten
-    (the c and numba engines' outputs are numpy arrays; the Python engine's lists copy
+    (the c engine's outputs are numpy arrays; the Python engine's lists copy
     anyway)."""
     return np.array(out[:n], dtype=np.int64)
 

@@ -1,6 +1,6 @@
 """`lolacli capture …` commands: analyze, list.
 
-The library (``lolacli.capture``: numpy, numba) and rich/matplotlib are imported inside
+The library (``lolacli.capture``: numpy) and rich/matplotlib are imported inside
 the commands.
 """
 
@@ -58,7 +58,7 @@ def analyze_cmd(
         bool, typer.Option("--all", help="Show every SDO transaction, not the first 50.")
     ] = False,
     engine: Annotated[
-        str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
+        str, typer.Option("--engine", help="auto | c | python", hidden=True)
     ] = "auto",
 ) -> None:
     """Out/return pairing, round trip, cycle period and jitter, lost and late frames, WKC
@@ -94,6 +94,10 @@ def analyze_cmd(
             timeout_ns=timeout_ns, max_lost=max_lost, max_wkc_mismatches=max_wkc,
             should_stop=stop,
         )
+    from lolacli.capture.fast import fallback_note
+
+    if (note := fallback_note()) is not None:
+        sys.stderr.write(note + "\n")
     data = report.to_dict()
     if fmt is OutputFormat.json:
         emit_json(data)
