@@ -1,8 +1,9 @@
 """Build of the optional C kernels; everything else is in pyproject.toml.
 
 ``optional=True``: without a C compiler the install still succeeds; the capture scanner
-then runs on numba or plain Python (``lolacli.capture.fast.choose_engine``) and the
-emulated chain on its Python reference code (``lolacli.emulator.chain.chain_engine``).
+then runs its plain-Python reference (``lolacli.capture.fast.choose_engine``; ``capture
+analyze`` says so on stderr) and the emulated chain its Python reference code
+(``lolacli.emulator.chain.chain_engine``).
 """
 
 from setuptools import Extension, setup

@@ -3,7 +3,9 @@
     python benchmarks/capture_throughput.py                  # 1 M cyclic pairs (2 M frames)
     python benchmarks/capture_throughput.py --frames 200000  # quick
     python benchmarks/capture_throughput.py --rss-gb 2       # also a ~2 GB file: peak RSS
-    python benchmarks/capture_throughput.py --engine numba   # another scanner engine
+    python benchmarks/capture_throughput.py --engine python  # another scanner engine
+    python benchmarks/capture_throughput.py --frames 400000 --engines c,python --corpus
+                                          # engines against each other, same files, same run
 
 The capture is what a 2 kHz master produces: per cycle one outgoing frame with an LRW
 (``--lrw-bytes`` of process data) and a BRD of the AL status, and its returned copy
@@ -13,7 +15,12 @@ sits between two cycles, and every 50,000th return is dropped (a lost frame). Th
 written with numpy-built chunks (fixed-size records), never per frame in Python.
 
 Both tools run as subprocesses on the same file in the same run; wall time includes their
-start-up. tshark: ``tshark -r F -T fields -e frame.time_epoch -e ecat.cmd -e ecat.idx
+start-up. ``--engines A,B`` times ``capture analyze`` once per scanner engine on the same
+file (tshark once), and ``--corpus`` also times the whole command on each corpus capture
+per engine (median of ``--repeat`` runs): the figures that decide whether a second
+engine earns its place (issue 24: at least 2x on what a user sees).
+
+tshark: ``tshark -r F -T fields -e frame.time_epoch -e ecat.cmd -e ecat.idx
 -e ecat.cnt > /dev/null``.
 """
 
@@ -207,7 +214,9 @@ def _row_after_cycle(m: int, first: int, rows: int) -> int:
 ENGINE = "auto"
 
 
-def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float, bytes, int]:
+def _timed(
+    cmd: list[str], stdout: int | None = subprocess.PIPE, engine: str | None = None
+) -> tuple[float, bytes, int]:
     """Wall time, stdout, and peak RSS (kB) of one command, measured by a wrapper."""
     sink = "subprocess.PIPE" if stdout else "subprocess.DEVNULL"
     probe = (
@@ -219,7 +228,7 @@ def _timed(cmd: list[str], stdout: int | None = subprocess.PIPE) -> tuple[float,
         "sys.stderr.write(json.dumps([dt, rss, p.returncode]))\n"
         "sys.stdout.buffer.write(p.stdout or b'')\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=ENGINE)
+    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=engine or ENGINE)
     r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT)
     dt, rss, rc = json.loads(r.stderr.decode().strip().splitlines()[-1])
     return dt, r.stdout, rss if rc in (0, 1) else -1
@@ -240,10 +249,12 @@ def analyze_cmd(path: Path) -> list[str]:
     ]
 
 
-def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float]:
+def bench(
+    path: Path, expected: dict[str, int], tshark: bool, engine: str | None = None
+) -> dict[str, float]:
     size = path.stat().st_size
-    _timed(analyze_cmd(path))  # warm the page cache and numba's on-disk cache
-    dt, out, rss = _timed(analyze_cmd(path))
+    _timed(analyze_cmd(path), engine=engine)  # warm the page and bytecode caches
+    dt, out, rss = _timed(analyze_cmd(path), engine=engine)
     rep = json.loads(out)
     assert rep["frames_total"] == expected["frames"], (rep["frames_total"], expected)
     # (a dropped return of the capture's very last cycle is in flight at its end, not lost)
@@ -285,6 +296,47 @@ def bench(path: Path, expected: dict[str, int], tshark: bool) -> dict[str, float
     return result
 
 
+ENGINES = ("auto", "c", "python")
+
+
+def _ratios(results: dict[str, object], fmt: str, engines: list[str]) -> None:
+    if len(engines) < 2:
+        return
+    rates = {e: results[f"{fmt}-{e}"]["lolacli_frames_per_s"] for e in engines}  # type: ignore[index]
+    best = max(rates, key=lambda e: rates[e])
+    for e in engines:
+        if e != best:
+            print(f"  {best} / {e}: {rates[best] / rates[e]:8.1f} x frames/s")
+
+
+def bench_corpus(engines: list[str], repeat: int) -> dict[str, dict[str, float]]:
+    """Whole-command wall time of ``capture analyze --format json`` on each corpus capture
+    per engine (median of ``repeat``, engines interleaved so that load drifts hit both)."""
+    corpus = Path(os.environ.get("LOLACLI_CORPUS", ROOT.parent / "shared" / "corpus"))
+    files = sorted((corpus / "pcap").glob("*.pcap*"), key=lambda p: p.stat().st_size)
+    out: dict[str, dict[str, float]] = {}
+    print(f"corpus captures ({len(files)}), whole command, median of {repeat}:")
+    print("  " + "file".ljust(52) + "".join(f"{e:>10}" for e in engines) + "  frames")
+    for path in files:
+        times: dict[str, list[float]] = {e: [] for e in engines}
+        frames = 0
+        for _ in range(repeat):
+            for e in engines:
+                dt, o, _rss = _timed(analyze_cmd(path), engine=e)
+                times[e].append(dt)
+                frames = json.loads(o)["frames_total"] if o else frames
+        med = {e: sorted(v)[len(v) // 2] for e, v in times.items()}
+        out[path.name] = {**{f"{e}_s": med[e] for e in engines}, "frames": frames}
+        print(
+            "  " + path.name[:51].ljust(52) + "".join(f"{med[e]:9.3f}s" for e in engines)
+            + f"  {frames}"
+        )
+    if len(engines) > 1:
+        totals = {e: sum(v[f"{e}_s"] for v in out.values()) for e in engines}
+        print("  total: " + ", ".join(f"{e} {t:.2f} s" for e, t in totals.items()))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument(
@@ -306,13 +358,28 @@ def main() -> None:
     ap.add_argument("--json", action="store_true", help="print the results as JSON at the end")
     ap.add_argument(
         "--engine",
-        choices=("auto", "c", "numba", "python"),
+        choices=ENGINES,
         default="auto",
         help="capture scanner engine (LOLACLI_ENGINE); default auto (c when built)",
     )
+    ap.add_argument(
+        "--engines",
+        default=None,
+        help="comma-separated engines to time one after the other on the same files",
+    )
+    ap.add_argument(
+        "--corpus",
+        action="store_true",
+        help="also time the whole command on each corpus capture, per engine",
+    )
+    ap.add_argument("--repeat", type=int, default=5, help="runs per corpus capture (median)")
     args = ap.parse_args()
     global ENGINE
     ENGINE = args.engine
+    engines = args.engines.split(",") if args.engines else [args.engine]
+    for e in engines:
+        if e not in ENGINES:
+            ap.error(f"--engines: unknown engine {e!r} ({', '.join(ENGINES)})")
     folder = args.keep or Path(tempfile.mkdtemp(prefix="lolacli-bench-"))
     folder.mkdir(parents=True, exist_ok=True)
     results: dict[str, object] = {}
@@ -328,7 +395,12 @@ def main() -> None:
                 f"{fmt}: {expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
                 f"(written in {time.perf_counter() - t:.1f} s)"
             )
-            results[fmt] = bench(path, expected, not args.no_tshark)
+            for k, engine in enumerate(engines):
+                key = fmt if len(engines) == 1 else f"{fmt}-{engine}"
+                results[key] = bench(path, expected, not args.no_tshark and k == 0, engine)
+            _ratios(results, fmt, engines)
+        if args.corpus:
+            results["corpus"] = bench_corpus(engines, args.repeat)
         if args.rss_gb:
             frame_bytes = 28 + len(_cyclic_template(args.lrw_bytes)) + 8
             cycles = int(args.rss_gb * 1e9 / frame_bytes / 2)

@@ -71,16 +71,12 @@ def cli():
     return run
 
 
-@pytest.fixture(params=["c", "numba"])
-def fast(request: pytest.FixtureRequest) -> str:
-    """A compiled capture-scanner engine: a test taking ``fast`` runs once per engine
-    (and compares it with the plain-Python reference)."""
+@pytest.fixture
+def fast() -> str:
+    """The compiled capture-scanner engine, C (a test taking ``fast`` compares it with
+    the plain-Python reference)."""
     from lolacli.capture.cengine import c_available
-    from lolacli.capture.fast import numba_available
 
-    engine: str = request.param
-    if engine == "c" and not c_available():
+    if not c_available():
         pytest.fail("the C scanner was not built: install a C compiler, then pip install -e .")
-    if engine == "numba" and not numba_available():
-        pytest.skip("numba is not installed (extra 'fast')")
-    return engine
+    return "c"

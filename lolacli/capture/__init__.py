@@ -1,8 +1,8 @@
 """Capture reading (pcap, pcapng; streaming) and analysis.
 
 ``analyze_file(path, eni=None, progress=None, ...) -> CaptureReport`` is the entry point;
-``CaptureReport.to_dict()`` follows the ``lolacli.capture/1`` JSON contract. numpy (and
-numba, when installed) are imported only when :func:`analyze_file` is called.
+``CaptureReport.to_dict()`` follows the ``lolacli.capture/1`` JSON contract. numpy is
+imported only when :func:`analyze_file` is called.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
 
 :func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
-:func:`lolacli.capture.scan.scan` (its C twin, or numba-compiled, when available) walk the
+:func:`lolacli.capture.scan.scan` (its C twin when built) walk the
 records. The scanner pairs frames, counts commands, counts the working counters and AL
 states it sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
 configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
@@ -40,7 +40,6 @@ from lolacli.capture.reader import (
     Interface,
     parse_idb,
 )
-from lolacli.capture.stats import summary_us
 from lolacli.capture.verdict import (
     FAILURE,
     INFO,
@@ -58,6 +57,7 @@ from lolacli.findings import Finding, Findings, failed, first
 from lolacli.findings import verdict as verdict_of
 from lolacli.interrupt import never
 from lolacli.text import plural, station
+from lolacli.timing.stats import Summary, summarize_array, summarize_chunks
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
@@ -79,13 +79,14 @@ OBS_SLOTS = 1 << 10
 Progress = Callable[[int, int], None]
 
 
-def _jitter(stats: dict[str, float | int] | None) -> dict[str, float] | None:
+def _us(summary: Summary | None) -> dict[str, float | int] | None:
+    """A summary of ns in the report's µs: ``ns / 1000``, not rounded."""
+    return None if summary is None else summary.to_dict(divisor=1000.0, digits=None)
+
+
+def _jitter(summary: Summary | None) -> dict[str, float] | None:
     """Cycle jitter: std and the largest deviation from the median (µs)."""
-    if stats is None:
-        return None
-    med = float(stats["median"])
-    deviation = max(abs(float(stats["min"]) - med), abs(float(stats["max"]) - med))
-    return {"std": float(stats["std"]), "max_deviation": deviation}
+    return None if summary is None else summary.jitter(divisor=1000.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,9 +98,9 @@ class CaptureReport:
     engine: str
     counts: dict[str, int]
     datagrams_by_cmd: dict[str, int]
-    round_trip_stats: dict[str, Any] | None
-    round_trip_cyclic_stats: dict[str, Any] | None
-    cycle_period_stats: dict[str, Any] | None
+    round_trip_stats: Summary | None  # ns
+    round_trip_cyclic_stats: Summary | None
+    cycle_period_stats: Summary | None
     cyclic_stream: str
     direction_rule: str
     wkc_verdict: WkcVerdict
@@ -157,13 +158,13 @@ class CaptureReport:
             "pairs": c["pairs"],
             "unmatched_outgoing": c["outgoing_frames"] - c["pairs"],
             "unmatched_returned": c["unmatched_returned"],
-            "round_trip_us": self.round_trip_stats,
-            "round_trip_cyclic_us": self.round_trip_cyclic_stats,
+            "round_trip_us": _us(self.round_trip_stats),
+            "round_trip_cyclic_us": _us(self.round_trip_cyclic_stats),
             "cyclic_stream": self.cyclic_stream,
             "cyclic_frames": c["cyclic_frames"],
             # cyclic frames never answered at all (lost or still in flight at the end)
             "cyclic_unmatched": c["cyclic_frames"] - c["cyclic_pairs"],
-            "cycle_period_us": self.cycle_period_stats,
+            "cycle_period_us": _us(self.cycle_period_stats),
             "cycle_jitter_us": _jitter(self.cycle_period_stats),
             "unusable_stats": list(self.unusable_stats),
             "lost_frames": self.lost_frames,
@@ -252,8 +253,8 @@ def analyze_file(
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
 
-    ``engine`` is ``"auto"`` (C when built, else numba when installed, except for files
-    under 2 MB), ``"c"``, ``"numba"`` or ``"python"``; all give identical results.
+    ``engine`` is ``"auto"`` (C when built, else Python), ``"c"`` or ``"python"``; both
+    give identical results.
     ``progress(done_bytes, total_bytes)`` is called after every slice of the file
     (:data:`SLICE_BYTES`), and ``should_stop()`` polled there: when it says stop, the
     report covers the frames read so far (``interrupted``, a finding ``interrupted``).
@@ -300,7 +301,7 @@ def _np(values: Any) -> np.ndarray:
 def _rows(out: Any, n: int) -> np.ndarray:
     """A copy of the first ``n`` values of a scanner output array. The kernel writes the
     next rows from 0 again after each drain, so a view kept past it would be overwritten
-    (the c and numba engines' outputs are numpy arrays; the Python engine's lists copy
+    (the c engine's outputs are numpy arrays; the Python engine's lists copy
     anyway)."""
     return np.array(out[:n], dtype=np.int64)
 
@@ -634,7 +635,7 @@ class _Pass:
         }
         keep = self.keep_series
         all_rt = self.rt_cyclic + self.rt_other
-        rt_stats = summary_us(all_rt)
+        rt_stats = summarize_chunks(all_rt)
         findings = Findings()
         fate = self._fate(all_rt, rt_stats, given_timeout_ns, st[S.S_END_TS])
         rule = self._direction_rule(st)
@@ -664,8 +665,8 @@ class _Pass:
             counts=counts,
             datagrams_by_cmd=by_cmd,
             round_trip_stats=rt_stats,
-            round_trip_cyclic_stats=summary_us(self.rt_cyclic),
-            cycle_period_stats=summary_us(self.periods),
+            round_trip_cyclic_stats=summarize_chunks(self.rt_cyclic),
+            cycle_period_stats=summarize_chunks(self.periods),
             cyclic_stream="logical" if st[S.S_MODE] == S.MODE_LOGICAL else "signature",
             direction_rule=rule,
             wkc_verdict=wkc,
@@ -693,9 +694,9 @@ class _Pass:
         # (frames of other EtherCAT types count here too, not in S_ECAT)
         return "packet_type" if st[S.S_DIR_PT] >= st[S.S_ECAT] else "packet_type+mac"
 
-    def _fate(self, all_rt: list[np.ndarray], rt_stats: dict[str, Any] | None,
+    def _fate(self, all_rt: list[np.ndarray], rt_stats: Summary | None,
               given: int | None, end_ts: int) -> FrameFate:
-        median = None if rt_stats is None else float(rt_stats["median"]) * 1000
+        median = None if rt_stats is None else rt_stats.median
         limit = timeout_ns(median, given)
         odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
         late_count = sum(int(np.count_nonzero(c > limit[0])) for c in all_rt)
@@ -739,15 +740,14 @@ class _Pass:
                     frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
-        sizes = np.repeat(np.arange(self.bursts.size), self.bursts)
+        sizes = summarize_array(np.repeat(np.arange(self.bursts.size), self.bursts))
         values = _cat(self.dc_values, np.int64)
         return {
             "drift_compensation_datagrams": st[S.S_DC_DGRAMS],
-            "drift_compensation_bursts": int(sizes.size),
+            "drift_compensation_bursts": 0 if sizes is None else sizes.count,
             "burst_size": None
-            if sizes.size == 0
-            else {"min": int(sizes.min()), "median": float(np.median(sizes)),
-                  "max": int(sizes.max())},
+            if sizes is None
+            else {"min": int(sizes.min), "median": sizes.median, "max": int(sizes.max)},
             "burst_gap_us": S.BURST_GAP_NS / 1000.0,
             "system_time_difference_reads": int(values.size),
             "system_time_difference_max_abs_ns": int(np.abs(values).max()) if values.size else None,

@@ -2,7 +2,8 @@
 through ctypes with the same arguments as :func:`lolacli.capture.scan.scan`.
 
 The extension is optional: when no C compiler was available at install time it is simply
-missing, :func:`c_available` says so and the numba or Python engine runs instead.
+missing, :func:`c_available` says so and the Python engine runs instead (the CLI says
+so on stderr, once: :func:`lolacli.capture.fast.fallback_note`).
 
 The C code trusts the lengths it is given, so every call checks here, in Python, that
 the arrays are what the kernel assumes (dtype, contiguity, sizes); a mismatch raises

@@ -1,58 +1,63 @@
-"""Pick the scanner engine: the C kernel (built at install), numba-compiled (extra
-``fast``) or plain Python. All three give identical results; the tests compare them.
+"""Pick the scanner engine: the C kernel (``_cscan.c``, built by ``pip install`` when a C
+compiler is present) or the plain-Python reference (:mod:`lolacli.capture.scan`). Both
+give identical results; the tests compare them on every path and its damage.
 
-The functions of :mod:`lolacli.capture.scan` are compiled into a private namespace, so
-that the plain-Python originals stay importable beside the compiled ones (the tests
-compare both). numba is imported here only, and only when asked for.
+Why two and no more (issue 24: a second implementation stays only where it is at least
+2x faster on a figure a user sees; ``benchmarks/capture_throughput.py --engines``): on a
+generated 1 M-frame capture ``capture analyze`` ran at 1.74 M frames/s with C, 0.13 M
+with the numba-compiled scanner that was here, 0.016 M with Python (C 108x Python, 13.6x
+numba); on the largest corpus capture (22,298 frames) C 0.78 s, Python 1.71 s, numba
+2.69 s for the whole command; on the small corpus captures C and Python tie (start-up
+dominates) and numba lost 3-4x (its import and LLVM start-up). numba was removed.
+
+When the C kernel is missing (no compiler at install), ``auto`` runs Python and
+:func:`fallback_note` gives the CLI its one stderr line about it, once per process.
 """
 
 from __future__ import annotations
 
 import os
-from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
-
-import numpy as np
 
 from lolacli.capture import scan
 from lolacli.errors import UsageError
 
-_COMPILED: SimpleNamespace | None = None
+ENGINES = ("c", "python")
 
+#: engines that were, and what to say when asked for one
+REMOVED = {
+    "numba": "was removed: the C engine is 3-14x faster; use auto (C when built, else "
+             "Python)",
+}
 
-def numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+#: one stderr line within 80 columns
+FALLBACK_NOTE = "lolacli: C scanner not built (install gcc, reinstall): Python scans ~100x slower"
 
-
-#: Below this file size the plain-Python scanner finishes before numba has even loaded
-#: its compiled kernel (about 0.7 s of import and LLVM start-up; Python scans ~5 MB/s).
-SMALL_FILE_BYTES = 2 * 1024 * 1024
-
-
-ENGINES = ("c", "numba", "python")
+_fallback_used = False
+_fallback_noted = False
 
 
 def choose_engine(engine: str = "auto", file_bytes: int | None = None) -> str:
-    """``"c"``, ``"numba"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``,
-    which takes C when it was built (it loads in milliseconds), else Python for files
-    under :data:`SMALL_FILE_BYTES` and numba (when installed) above.
+    """``"c"`` or ``"python"``; ``LOLACLI_ENGINE`` overrides ``"auto"``, which takes C
+    when it was built, else Python (and :func:`fallback_note` says so once).
+    ``file_bytes`` is accepted for callers that pass it; no engine depends on it now.
 
-    Raises :class:`~lolacli.errors.UsageError` for an unknown or unavailable engine."""
+    Raises :class:`~lolacli.errors.UsageError` for an unknown, removed or unavailable
+    engine."""
+    global _fallback_used
+    source = "--engine"
     if engine == "auto":
         engine = os.environ.get("LOLACLI_ENGINE", "auto")
+        source = "LOLACLI_ENGINE"
     if engine == "auto":
         from lolacli.capture.cengine import c_available
 
         if c_available():
             return "c"
-        if file_bytes is not None and file_bytes < SMALL_FILE_BYTES:
-            return "python"
-        return "numba" if numba_available() else "python"
+        _fallback_used = True
+        return "python"
+    if engine in REMOVED:
+        raise UsageError(f"{source} {engine} {REMOVED[engine]}")
     if engine not in ENGINES:
         raise UsageError(f"unknown capture engine {engine!r} (auto, {', '.join(ENGINES)})")
     if engine == "c":
@@ -61,40 +66,23 @@ def choose_engine(engine: str = "auto", file_bytes: int | None = None) -> str:
         if not c_available():
             raise UsageError("capture engine c is not built: install a C compiler (gcc), "
                              "then reinstall lolacli")
-    if engine == "numba" and not numba_available():
-        raise UsageError("capture engine numba needs numba: pip install 'lolacli[fast]'")
     return engine
+
+
+def fallback_note() -> str | None:
+    """The line to print once when ``auto`` ran Python because the C kernel is missing:
+    the first call after that returns it, every other call None."""
+    global _fallback_noted
+    if not _fallback_used or _fallback_noted:
+        return None
+    _fallback_noted = True
+    return FALLBACK_NOTE
 
 
 def kernels(engine: str) -> Any:
     """An object with ``scan``, ``rehash`` and ``finish`` for the engine."""
     if engine == "python":
         return scan
-    if engine == "c":
-        from lolacli.capture.cengine import CKernels
+    from lolacli.capture.cengine import CKernels
 
-        return CKernels()
-    global _COMPILED
-    if _COMPILED is None:
-        _COMPILED = _compile()
-    return _COMPILED
-
-
-def _compile() -> SimpleNamespace:
-    import numba
-
-    source_path = Path(scan.__file__)
-    namespace: dict[str, Any] = {"__name__": "lolacli.capture.scan"}
-    code = compile(source_path.read_text(encoding="utf-8"), str(source_path), "exec")
-    exec(code, namespace)  # noqa: S102  (our own module, compiled for numba)
-    namespace["_byte"] = _byte_int64
-    for name in scan.KERNELS:
-        inline: Any = "always" if name in scan.INLINE else "never"
-        namespace[name] = numba.njit(cache=True, nogil=True, inline=inline)(namespace[name])
-    return SimpleNamespace(**{name: namespace[name] for name in scan.KERNELS})
-
-
-def _byte_int64(buf: Any, p: Any) -> Any:
-    """``scan._byte`` for compiled kernels: a uint8 widened to int64 (numba would keep
-    it unsigned, and unsigned mixed with signed integers promotes to float)."""
-    return np.int64(buf[p])
+    return CKernels()

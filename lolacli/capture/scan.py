@@ -1,10 +1,9 @@
 """The capture scanner: walks pcap/pcapng records in a byte buffer and analyses each
 EtherCAT frame in one pass (pure; no IO).
 
-This module is written in the small subset of Python that numba compiles: integers,
-indexing, loops, no objects. :mod:`lolacli.capture.fast` compiles it with ``numba.njit``;
-without numba the very same functions run as plain Python (slower, same results), and
-``_cscan.c`` repeats it statement for statement in C.
+This module is the reference ("python" engine), written as integers, indexing and loops,
+no objects, so that ``_cscan.c`` (the "c" engine, :mod:`lolacli.capture.cengine`) can
+repeat it statement for statement in C; :mod:`lolacli.capture.fast` picks the engine.
 
 Everything lives in flat integer arrays (lists in plain-Python mode):
 
@@ -182,9 +181,9 @@ def _u32(buf: Any, p: Any, big: Any) -> Any:
 def _mix(h: Any, v: Any) -> Any:
     """``(h ^ v) * FNV mod 2^63``, then a shift-xor; ``h`` and ``v`` in [0, 2^63).
 
-    The product is built from 32-bit halves so that no intermediate leaves int64: numba
-    (LLVM) takes signed overflow to be impossible, and dropped the 63-bit mask that once
-    followed a plain wrapping multiply (its keys then differed from Python's and C's)."""
+    The product is built from 32-bit halves so that no intermediate leaves int64: signed
+    overflow is undefined in C (an LLVM-compiled twin once dropped the 63-bit mask that
+    followed a plain wrapping multiply, and its keys differed from Python's)."""
     x = h ^ v
     lo = x & 0xFFFFFFFF
     low = lo * FNV_LO                                     # < 2^41
@@ -218,7 +217,7 @@ def _addr_key(cmd: Any, addr: Any) -> Any:
 
 def _ts_ns(units: Any, mode: Any, a: Any, b: Any, off: Any) -> Any:
     """Nanoseconds of raw pcapng units (``units`` < 2^63), or :data:`TS_BAD` beyond
-    :data:`TS_LIMIT_NS`. Every intermediate value fits in int64 (numba, C)."""
+    :data:`TS_LIMIT_NS`. Every intermediate value fits in int64 (C)."""
     if mode == 0:
         if a > 0 and units > TS_LIMIT_NS // a:
             return TS_BAD
@@ -775,19 +774,3 @@ def finish(st: Any, o_burst: Any) -> Any:
         st[S_N_BURST] += 1
         st[S_DC_BURST] = 0
 
-
-#: Everything called per frame is inlined: a call that passes arrays costs reference
-#: counting of each array in numba, which would dominate the per-frame time. Not
-#: ``_slot`` and ``_observe``: inlined (numba 0.60-0.61), the table lookups gave wrong
-#: results (the engine-equivalence tests caught it).
-INLINE = frozenset({
-    "_byte", "_u16", "_u32", "_mix", "_key", "_adp_incremented", "_addr_key", "_ts_ns",
-    "_push", "_bad", "_count_stream", "_returned_extras", "_config_write", "_drift", "_ecat",
-    "_packet", "_full", "_pcapng_record",
-})
-
-KERNELS = (
-    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_adp_incremented", "_addr_key",
-    "_ts_ns", "_push", "_bad", "_count_stream", "_observe", "_returned_extras", "_config_write",
-    "_drift", "_ecat", "_packet", "_full", "scan", "_pcapng_record", "rehash", "finish",
-)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -123,8 +124,11 @@ def timing_cmd(
     report = None
     if capture is not None:  # request.reads_capture
         from lolacli.capture import analyze_file
+        from lolacli.capture.fast import fallback_note
 
         report = analyze_file(capture).to_dict()
+        if (note := fallback_note()) is not None:  # the C scanner is not built
+            sys.stderr.write(note + "\n")
     timing = request.run(lambda: load_eni(eni if eni is not None else default_eni()),
                          report, warn)
     if fmt is OutputFormat.json:

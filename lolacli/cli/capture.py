@@ -1,6 +1,6 @@
 """`lolacli capture …` commands: analyze, list.
 
-The library (``lolacli.capture``: numpy, numba) and rich/matplotlib are imported inside
+The library (``lolacli.capture``: numpy) and rich/matplotlib are imported inside
 the commands.
 """
 
@@ -38,7 +38,7 @@ AllOption = Annotated[
     bool, typer.Option("--all", help="Show every SDO transaction, not the first 50.")
 ]
 EngineOption = Annotated[
-    str, typer.Option("--engine", help="auto | c | numba | python", hidden=True)
+    str, typer.Option("--engine", help="auto | c | python", hidden=True)
 ]
 
 
@@ -80,6 +80,10 @@ def analyze_cmd(
             timeout_ns=timeout_ns, max_lost=max_lost, max_wkc_mismatches=max_wkc,
             should_stop=stop,
         )
+    from lolacli.capture.fast import fallback_note
+
+    if (note := fallback_note()) is not None:
+        sys.stderr.write(note + "\n")
     data = report.to_dict()
     if fmt is OutputFormat.json:
         emit_json(data)

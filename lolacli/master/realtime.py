@@ -158,17 +158,17 @@ class CycleClock:
         periods = np.diff(sent)
         period = summarize_array(periods)
         lateness = np.asarray(self.lateness_ns, dtype=np.int64)
-        median = float(np.median(periods)) if periods.size else None
+        jitter = period.jitter(divisor=1e3) if period is not None else None
         end = int(sent[-1]) if sent.size else 0
         in_flight = sum(1 for t in self._outstanding.values() if t > end - in_flight_ns)
         offset = summarize_array(lateness)
         return {
             "cycle_period_us": period.to_dict(scale=1e-3) if period is not None else None,
             "cycle_jitter_us": {
-                "std": round(float(periods.std()) / 1e3, 3),
-                "max_deviation_from_median": round(float(np.abs(periods - median).max()) / 1e3, 3),
+                "std": round(jitter["std"], 3),
+                "max_deviation_from_median": round(jitter["max_deviation"], 3),
             }
-            if median is not None
+            if jitter is not None
             else None,
             "send_offset_us": offset.to_dict(scale=1e-3) if offset is not None else None,
             "overruns": int((lateness > self.cycle_ns // 2).sum()),

@@ -163,8 +163,7 @@ class LolaSession(Session):
     """lolacli's own master: the emulated chain in process (no ``--iface``) or a live bus."""
 
     def __init__(self, options: TransportOptions) -> None:
-        from lolacli.eni_cache import load_eni_cached
-        from lolacli.files import load_esi
+        from lolacli.files import load_eni, load_esi
         from lolacli.sdo.lola_client import LolaBus
 
         self.esi = [load_esi(p) for p in options.esi]
@@ -172,7 +171,7 @@ class LolaSession(Session):
             from lolacli.emulator.run import EmulateOptions, make_chain
             from lolacli.master.transport import ChainTransport
 
-            eni = load_eni_cached(options.eni if options.eni is not None else default_eni())
+            eni = load_eni(options.eni if options.eni is not None else default_eni())
             chain = make_chain(eni, EmulateOptions(), esi=self.esi)
             name = Path(eni.source).name if eni.source else "ENI"
             where = f"of the emulated chain ({name})"
@@ -181,7 +180,7 @@ class LolaSession(Session):
         else:
             from lolacli.master.transport import RawSocketTransport
 
-            config = load_eni_cached(options.eni) if options.eni is not None else None
+            config = load_eni(options.eni) if options.eni is not None else None
             transport = RawSocketTransport(options.iface)  # TransportError: exit 4
             self.source = config.source if config is not None else options.iface
             self.bus = LolaBus(

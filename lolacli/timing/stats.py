@@ -1,26 +1,49 @@
-"""Summary statistics of a run: {count, min, mean, median, std, p99, max}.
+"""The one statistics summary of the product: ``{count, min, mean, median, std, p99, max}``.
 
-Conventions, numpy's defaults (the same as :func:`lolacli.capture.stats.summary_us`, which
-computes them exactly over chunked captures):
+Every figure that summarises a series (round trips and cycle periods of a capture, the
+round trips, sections and wake-ups of ``bus simulate``, the real-time master's periods)
+is a :class:`Summary` made by :func:`summarize_array` (one series) or
+:func:`summarize_chunks` (a series kept in chunks) from integers (nanoseconds, counts).
+Conventions, numpy's defaults:
 
 * ``std`` is the population standard deviation (ddof = 0);
 * ``median`` and ``p99`` are linear-interpolation percentiles (numpy ``method="linear"``,
   Hyndman & Fan type 7): rank = q/100 × (n − 1), interpolated between neighbours.
 
-:func:`summarize_array` returns ``None`` for an empty input, which the JSON contracts
-render as ``null``.
+The results are exact, and the same however the series is cut into chunks: a 2 GB
+capture holds millions of round trips, kept as a list of chunks; concatenating them (and
+sorting a copy for the median) would double or triple the memory. Instead the order
+statistics are found by histogram refinement over the chunks: a histogram of up to
+65,536 integer bins over the current window locates the bin that holds the wanted rank,
+the window shrinks to that bin, and once it holds few values they are gathered and
+partitioned. Mean and std come from exact integer sums.
+
+:func:`summarize_array` returns ``None`` for an empty series, which the JSON contracts render
+as ``null``; :meth:`Summary.to_dict` gives the contract's keys in the contract's unit.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 STAT_KEYS = ("count", "min", "mean", "median", "std", "p99", "max")
+
+BINS = 1 << 16
+GATHER_MAX = 1 << 20
+
+_Chunk = npt.NDArray[np.integer[Any]]
 
 
 @dataclass(frozen=True, slots=True)
 class Summary:
+    """The summary of a series, in the series' own unit (e.g. ns)."""
+
     count: int
     min: float
     mean: float
@@ -29,33 +52,143 @@ class Summary:
     p99: float
     max: float
 
-    def to_dict(self, scale: float = 1.0, digits: int | None = 3) -> dict[str, float | int]:
-        """Keys of :data:`STAT_KEYS`; values multiplied by ``scale`` (e.g. 1e-3 for ns → µs)."""
+    def to_dict(
+        self, scale: float = 1.0, digits: int | None = 3, divisor: float = 1.0
+    ) -> dict[str, float | int]:
+        """Keys of :data:`STAT_KEYS`; every value but ``count`` is ``value * scale /
+        divisor``, rounded to ``digits`` (None: not rounded).
+
+        Two contracts use it: ``bus simulate`` and the real-time master report µs as
+        ``round(ns * 1e-3, 3)`` (``scale=1e-3``); ``capture analyze`` reports them
+        unrounded as ``ns / 1000`` (``divisor=1000.0, digits=None``), to the last bit."""
         out: dict[str, float | int] = {"count": self.count}
-        for key, value in asdict(self).items():
-            if key != "count":
-                v = value * scale
-                out[key] = round(v, digits) if digits is not None else v
+        for key in STAT_KEYS[1:]:
+            v = getattr(self, key) * scale / divisor
+            out[key] = round(v, digits) if digits is not None else v
         return out
 
+    def jitter(self, scale: float = 1.0, divisor: float = 1.0) -> dict[str, float]:
+        """Jitter of a cycle period: its std and the largest deviation from the median
+        (``max |x - median|``), in the unit of :meth:`to_dict` (unrounded; each value is
+        converted before the difference is taken)."""
+        lo, med, hi = (v * scale / divisor for v in (self.min, self.median, self.max))
+        return {"std": self.std * scale / divisor,
+                "max_deviation": max(abs(lo - med), abs(hi - med))}
 
-def summarize_array(values: Any) -> Summary | None:
-    """The same statistics with numpy (for large arrays); ``None`` when empty."""
-    import numpy as np
 
-    arr = np.asarray(values, dtype=np.float64).ravel()
-    if arr.size == 0:
+def summarize_array(values: npt.ArrayLike) -> Summary | None:
+    """The summary of a series of integers (a list, an array); ``None`` when empty.
+
+    Raises :class:`TypeError` for values that are not integers."""
+    return summarize_chunks([np.asarray(values)])
+
+
+def summarize_chunks(chunks: Iterable[_Chunk]) -> Summary | None:
+    """The summary of the series made of ``chunks`` (integer arrays) one after the other;
+    the same, to the last bit, however the series is cut. ``None`` when empty."""
+    parts = [c for c in chunks if c.size]
+    for c in parts:
+        if not np.issubdtype(c.dtype, np.integer):
+            raise TypeError(f"summarize: integers expected, not {c.dtype}")
+    n = sum(int(c.size) for c in parts)
+    if n == 0:
         return None
-    p50, p99 = np.percentile(arr, [50, 99])
+    lo = min(int(c.min()) for c in parts)
+    hi = max(int(c.max()) for c in parts)
+    s1, s2 = _moments(parts, lo)
+    mean = (lo * n + s1) / n
+    std = math.sqrt((s2 * n - s1 * s1) / (n * n))
+    pos = (n - 1) * 0.99
+    p_lo = int(math.floor(pos))
+    p_hi = min(p_lo + 1, n - 1)
+    wanted = sorted({(n - 1) // 2, n // 2, p_lo, p_hi})
+    memo: dict[int, int] = {}
+    if n <= GATHER_MAX:
+        # small enough to gather: one partition finds every wanted rank at once
+        v = np.concatenate([c.astype(np.int64) for c in parts])
+        v.partition(wanted)
+        memo = {k: int(v[k]) for k in wanted}
+    histograms: dict[tuple[int, int], npt.NDArray[np.int64]] = {}
+
+    def rank(k: int) -> float:
+        if k not in memo:
+            memo[k] = order_statistic(parts, k, lo, hi, histograms)
+        return float(memo[k])
+
     return Summary(
-        count=int(arr.size),
-        min=float(arr.min()),
-        mean=float(arr.mean()),
-        median=float(p50),
-        std=float(arr.std()),
-        p99=float(p99),
-        max=float(arr.max()),
+        count=n,
+        min=float(lo),
+        mean=mean,
+        median=(rank((n - 1) // 2) + rank(n // 2)) / 2.0,
+        std=std,
+        p99=rank(p_lo) + (rank(p_hi) - rank(p_lo)) * (pos - p_lo),
+        max=float(hi),
     )
 
 
-__all__ = ["STAT_KEYS", "Summary", "summarize_array"]
+def _window_counts(chunks: Sequence[_Chunk], lo: int, hi: int, bins: int) -> npt.NDArray[np.int64]:
+    span = hi - lo + 1
+    counts = np.zeros(bins, np.int64)
+    for c in chunks:
+        v = c[(c >= lo) & (c <= hi)].astype(np.int64)
+        if v.size:
+            counts += np.bincount(((v - lo) * bins) // span, minlength=bins)
+    return counts
+
+
+def _gather(chunks: Sequence[_Chunk], lo: int, hi: int) -> npt.NDArray[np.int64]:
+    parts = [c[(c >= lo) & (c <= hi)].astype(np.int64) for c in chunks]
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
+
+def order_statistic(
+    chunks: Sequence[_Chunk], rank: int, lo: int, hi: int,
+    cache: dict[tuple[int, int], npt.NDArray[np.int64]] | None = None,
+) -> int:
+    """The value of 0-based ``rank`` in the sorted union of ``chunks`` (all within
+    ``[lo, hi]``). ``cache`` shares window histograms between ranks."""
+    cache = {} if cache is None else cache
+    below = 0  # values smaller than the window
+    population = sum(int(c.size) for c in chunks)
+    while True:
+        span = hi - lo + 1
+        if span == 1:
+            return lo
+        if population <= GATHER_MAX:
+            v = _gather(chunks, lo, hi)
+            k = rank - below
+            v.partition(k)
+            return int(v[k])
+        bins = min(span, BINS)
+        counts = cache.get((lo, hi))
+        if counts is None:
+            counts = cache[(lo, hi)] = _window_counts(chunks, lo, hi, bins)
+        cum = np.cumsum(counts)
+        b = int(np.searchsorted(cum, rank - below, side="right"))
+        before = int(cum[b - 1]) if b > 0 else 0
+        below += before
+        population = int(counts[b])
+        lo, hi = lo + -(-b * span // bins), lo + -(-(b + 1) * span // bins) - 1
+
+
+def _moments(chunks: Sequence[_Chunk], lo: int) -> tuple[int, int]:
+    """Exact sums of the offsets from ``lo`` and of their squares, so that mean and std do
+    not depend on how the series is chunked (nor overflow int64): each offset (below
+    2^64) is split into three 22-bit limbs whose products sum in uint64 without overflow."""
+    m22 = np.uint64((1 << 22) - 1)
+    base = np.uint64(lo % (1 << 64))
+    s1 = s2 = 0
+    for c in chunks:
+        for i in range(0, c.size, 1 << 16):
+            d = c[i : i + (1 << 16)].astype(np.int64).astype(np.uint64) - base
+            x0, x1, x2 = d & m22, (d >> np.uint64(22)) & m22, d >> np.uint64(44)
+            t = [int(v) for v in (x0.sum(), x1.sum(), x2.sum())]
+            s1 += t[0] + (t[1] << 22) + (t[2] << 44)
+            p = [int(np.dot(a, b)) for a, b in
+                 ((x0, x0), (x0, x1), (x1, x1), (x0, x2), (x1, x2), (x2, x2))]
+            s2 += (p[0] + (p[1] << 23) + ((p[2] + 2 * p[3]) << 44) + (p[4] << 67)
+                   + (p[5] << 88))
+    return s1, s2
+
+
+__all__ = ["STAT_KEYS", "Summary", "order_statistic", "summarize_array", "summarize_chunks"]

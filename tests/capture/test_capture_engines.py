@@ -1,8 +1,8 @@
 """The compiled engines against the plain-Python reference on damaged real captures.
 
 Each corpus capture (its first 48 KiB) is mutated many times: bytes flipped anywhere after
-the file header, records cut short, lengths overwritten. Whatever the damage, the C (and
-numba) scanner must report exactly what scan.py reports, or fail with the same error.
+the file header, records cut short, lengths overwritten. Whatever the damage, the C
+scanner must report exactly what scan.py reports, or fail with the same error.
 """
 
 from __future__ import annotations
@@ -204,7 +204,8 @@ def test_time_span_starts_at_the_first_analysed_frame(tmp_path, fast):
 
 def test_engines_hash_frames_alike_in_signature_mode(tmp_path, fast):
     """Without logical traffic the cyclic stream is the most frequent frame signature; on
-    a tie the table order of the hashed signatures decides. numba (LLVM) once dropped the
+    a tie the table order of the hashed signatures decides. numba (LLVM; that engine is
+    gone, the rule holds for C) once dropped the
     63-bit mask after the hash's wrapping multiply (signed overflow is undefined there):
     its keys, and so its stream, differed from Python's. Addresses with bit 31 set and
     40 frame kinds, one round trip each (kind k: k+1 µs), so a key difference shows."""

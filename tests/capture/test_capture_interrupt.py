@@ -57,16 +57,13 @@ def large(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-@pytest.mark.parametrize("engine", ["c", "numba", "python"])
+@pytest.mark.parametrize("engine", ["c", "python"])
 def test_the_scanner_returns_to_python_every_slice(large: Path, engine: str) -> None:
     """Progress is reported, and the stop polled, after every slice at most: a stop asked
     once eight slices are read ends the analysis within the ninth, with a partial report
     of the frames read so far."""
     from lolacli.capture import writer as w
-    from lolacli.capture.fast import numba_available
 
-    if engine == "numba" and not numba_available():
-        pytest.skip("numba is not installed (extra 'fast')")
     slice_bytes = SLICE_BYTES_PYTHON if engine == "python" else SLICE_BYTES
     seen: list[int] = []
     report = analyze_file(large, engine=engine, keep_series=True,

@@ -27,15 +27,12 @@ SMALL_CHUNK = 1 << 16
 needs_tshark = pytest.mark.skipif(not tshark_available(), reason="tshark not installed")
 
 
-@pytest.fixture(params=["c", "numba", "python"])
+@pytest.fixture(params=["c", "python"])
 def engine(request: pytest.FixtureRequest) -> str:
     from lolacli.capture.cengine import c_available
-    from lolacli.capture.fast import numba_available
 
     if request.param == "c" and not c_available():
         pytest.fail("the C scanner was not built: install a C compiler, then pip install -e .")
-    if request.param == "numba" and not numba_available():
-        pytest.skip("numba is not installed (extra 'fast')")
     return str(request.param)
 
 

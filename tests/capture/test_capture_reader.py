@@ -286,15 +286,13 @@ def test_random_bytes_without_header_exit_3(cli, tmp_path):
 
 def test_engine_choice(monkeypatch):
     from lolacli.capture import cengine
-    from lolacli.capture.fast import SMALL_FILE_BYTES, choose_engine, numba_available
+    from lolacli.capture.fast import choose_engine
 
     monkeypatch.delenv("LOLACLI_ENGINE", raising=False)
     # the C kernel, when built, serves every size: it loads in milliseconds
     assert cengine.c_available()
     assert choose_engine("auto", 100) == "c" == choose_engine("auto", 10**9)
     assert choose_engine("python", 10**9) == "python"
-    monkeypatch.setenv("LOLACLI_ENGINE", "numba")
-    assert choose_engine("auto", 10) == "numba"
     monkeypatch.setenv("LOLACLI_ENGINE", "python")
     assert choose_engine("auto", 10**9) == "python"
     with pytest.raises(UsageError):
@@ -302,14 +300,51 @@ def test_engine_choice(monkeypatch):
     monkeypatch.setenv("LOLACLI_ENGINE", "fortran")
     with pytest.raises(UsageError):
         choose_engine("auto")
-    # an install without a C compiler: Python for small files, numba above
+    # the removed engine: a usage error that says what to use instead
+    monkeypatch.setenv("LOLACLI_ENGINE", "numba")
+    with pytest.raises(UsageError, match="LOLACLI_ENGINE numba was removed.*use auto"):
+        choose_engine("auto")
     monkeypatch.delenv("LOLACLI_ENGINE")
-    monkeypatch.setattr(cengine, "c_available", lambda: False)
-    assert choose_engine("auto", SMALL_FILE_BYTES - 1) == "python"
-    expected = "numba" if numba_available() else "python"
-    assert choose_engine("auto", SMALL_FILE_BYTES) == expected
-    with pytest.raises(UsageError, match="not built"):
-        choose_engine("c")
+    with pytest.raises(UsageError, match="--engine numba was removed"):
+        choose_engine("numba")
+
+
+def test_removed_engine_is_one_usage_line(cli, tmp_path):
+    path = write_pcap(tmp_path / "c.pcap", cyclic(2))
+    code, out, err = cli("capture", "analyze", str(path), "--engine", "numba")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "numba was removed" in err and "Traceback" not in err
+
+
+def test_without_the_c_scanner_python_runs_and_says_so_once(tmp_path, corpus):
+    """A copy of the package without the built C scanner, as an install without a C
+    compiler leaves it: `capture analyze` runs the Python reference, with the same
+    report, and says so in one stderr line (within 80 columns)."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import lolacli
+    from lolacli.capture.fast import FALLBACK_NOTE
+
+    src = Path(lolacli.__file__).resolve().parent
+    shutil.copytree(src, tmp_path / "lolacli",
+                    ignore=shutil.ignore_patterns("_cscan*.so", "__pycache__"))
+    capture = corpus / "pcap" / "ethercrab__replay-sdo-error.pcapng"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    env.pop("LOLACLI_ENGINE", None)
+    done = subprocess.run(
+        [sys.executable, "-m", "lolacli", "capture", "analyze", str(capture), "-f", "json"],
+        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120,
+    )
+    assert done.returncode in (0, 1), done.stderr
+    assert done.stderr.splitlines() == [FALLBACK_NOTE] and len(FALLBACK_NOTE) <= 80
+    doc = json.loads(done.stdout)
+    assert doc["engine"] == "python"
+    reference = analyze_file(capture, engine="c").to_dict()
+    doc.pop("engine"), reference.pop("engine")
+    assert doc == json.loads(json.dumps(reference))
 
 
 def test_unknown_engine_is_a_usage_error(cli, tmp_path):

@@ -297,15 +297,8 @@ OUTCOMES: Counter[str] = Counter()
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory: pytest.TempPathFactory):
-    """A folder for the files `sdo read` opens, and the model cache they go through."""
-    base = tmp_path_factory.mktemp("mutations")
-    old = os.environ.get("LOLACLI_CACHE_DIR")
-    os.environ["LOLACLI_CACHE_DIR"] = str(base / "cache")
-    yield base
-    if old is None:
-        del os.environ["LOLACLI_CACHE_DIR"]
-    else:
-        os.environ["LOLACLI_CACHE_DIR"] = old
+    """A folder for the files `sdo read` opens."""
+    return tmp_path_factory.mktemp("mutations")
 
 
 @pytest.fixture(scope="module")

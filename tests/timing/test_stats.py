@@ -1,16 +1,16 @@
-"""Statistics helper: hand-computed values, and agreement with the capture's exact
-chunked statistics (:func:`lolacli.capture.stats.summary_us`, an independent implementation)."""
+"""The one statistics summary: hand-computed values, numpy as the oracle, and the two JSON
+forms (``bus simulate``'s rounded µs, ``capture analyze``'s unrounded ns / 1000)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lolacli.capture.stats import summary_us
-from lolacli.timing.stats import STAT_KEYS, summarize_array
+from lolacli.timing.stats import STAT_KEYS, summarize_array, summarize_chunks
 
 
 def test_hand_computed():
@@ -24,9 +24,15 @@ def test_hand_computed():
 
 
 def test_single_value_and_empty():
-    s = summarize_array([124.1])
-    assert s is not None and s.std == 0 and s.p99 == 124.1 and s.median == 124.1
-    assert summarize_array(np.array([])) is None
+    s = summarize_array([124])
+    assert s is not None and s.std == 0 and s.p99 == 124 and s.median == 124
+    assert summarize_array(np.array([], np.int64)) is None
+    assert summarize_array([]) is None
+
+
+def test_only_integers():
+    with pytest.raises(TypeError):
+        summarize_array([1.5, 2.0])
 
 
 def test_to_dict_scales_and_has_the_contract_keys():
@@ -43,15 +49,28 @@ def test_to_dict_scales_and_has_the_contract_keys():
         "p99": 2.98,
         "max": 3.0,
     }
+    exact = s.to_dict(divisor=1000.0, digits=None)
+    assert math.isclose(exact["std"], math.sqrt(2 / 3), rel_tol=1e-15)
+    assert exact["p99"] == 2.98
+
+
+def test_jitter_is_std_and_the_largest_deviation_from_the_median():
+    s = summarize_array([500_000, 499_000, 500_000, 503_500])
+    assert s is not None
+    j = s.jitter(divisor=1000.0)
+    assert j == {"std": s.std / 1000.0, "max_deviation": 3.5}
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.integers(0, 10**10), min_size=1, max_size=300))
-def test_agrees_with_the_capture_statistics(values):
-    a = summarize_array(np.array(values))
-    b = summary_us([np.array(values, np.int64)])
-    assert a is not None and b is not None
-    assert tuple(b) == STAT_KEYS and a.count == b["count"]
-    for key in STAT_KEYS[1:]:
-        x, y = getattr(a, key) / 1000.0, float(b[key])
-        assert math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-6), key
+@given(st.lists(st.integers(0, 10**10), min_size=1, max_size=300), st.data())
+def test_agrees_with_numpy_however_cut(values, data):
+    v = np.array(values, np.int64)
+    s = summarize_array(v)
+    assert s is not None and s.count == v.size
+    x = v.astype(np.float64)
+    expected = {"min": x.min(), "mean": x.mean(), "median": np.median(x), "std": x.std(),
+                "p99": np.percentile(x, 99), "max": x.max()}
+    for key, value in expected.items():
+        assert math.isclose(getattr(s, key), value, rel_tol=1e-9, abs_tol=1e-6), key
+    cuts = sorted(data.draw(st.lists(st.integers(0, v.size), max_size=5)))
+    assert summarize_chunks(np.split(v, cuts)) == s

@@ -1,11 +1,17 @@
-"""Chunked exact statistics against numpy on the concatenated series."""
+"""The summary of a chunked series (a capture's round trips) against numpy on the
+concatenated series, to the last bit however it is cut, and in the capture's µs."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lolacli.capture import stats
+from lolacli.timing import stats
+
+
+def _us(summary):
+    """As ``capture analyze`` reports it: µs = ns / 1000, not rounded."""
+    return summary.to_dict(divisor=1000.0, digits=None)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -28,7 +34,7 @@ def test_summary_equals_numpy(monkeypatch, seed, gather_max):
     cuts = np.sort(rng.integers(0, n, 5))
     chunks = [c.astype(np.int32) if np.abs(c).max(initial=0) < 2**31 else c
               for c in np.split(v, cuts)]
-    got = stats.summary_us(chunks)
+    got = _us(stats.summarize_chunks(chunks))
     x = v.astype(np.float64) / 1000.0
     assert got["count"] == n
     assert got["min"] == x.min() and got["max"] == x.max()
@@ -37,12 +43,13 @@ def test_summary_equals_numpy(monkeypatch, seed, gather_max):
     assert got["mean"] == pytest.approx(x.mean(), rel=1e-12, abs=1e-9)
     assert got["std"] == pytest.approx(x.std(), rel=1e-9, abs=1e-9)
     # chunking does not change anything
-    assert stats.summary_us([v]) == got
+    assert _us(stats.summarize_chunks([v])) == got
 
 
 def test_empty_is_none():
-    assert stats.summary_us([]) is None
-    assert stats.summary_us([np.zeros(0, np.int32)]) is None
+    assert stats.summarize_chunks([]) is None
+    assert stats.summarize_chunks([np.zeros(0, np.int32)]) is None
+    assert stats.summarize_array([]) is None
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -55,7 +62,7 @@ def test_std_is_exact_over_the_whole_int64_range(seed):
     v = rng.integers(-(2**63), 2**63 - 1, 300, dtype=np.int64, endpoint=True)
     v[:2] = -(2**63), 2**63 - 1
     exact = statistics.pstdev([int(x) for x in v]) / 1000.0
-    whole = stats.summary_us([v])
+    whole = _us(stats.summarize_chunks([v]))
     assert whole["std"] == pytest.approx(exact, rel=1e-15)
     for cuts in ([1], [7, 100, 101], list(range(0, 300, 13))):
-        assert stats.summary_us(np.split(v, cuts)) == whole
+        assert _us(stats.summarize_chunks(np.split(v, cuts))) == whole
