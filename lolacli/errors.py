@@ -2,7 +2,7 @@
 
 Every error the library raises on purpose is a :class:`LolaError`. Each class carries the
 fields a caller needs to act on it, and the process exit code the CLI maps it to (see the
-exit-code table in DESIGN.md): 1 check failed, 2 usage, 3 bad input, 4 bus or transport.
+exit codes in README.md): 1 check failed, 2 usage, 3 bad input, 4 bus or transport.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ states it sees and tracks DC drift compensation as it goes; the rare mailbox dat
 configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
 :mod:`lolacli.capture.layout`). Verdicts are drawn once the whole file is read
 (:mod:`lolacli.capture.wkc`, :mod:`lolacli.capture.verdict`), because their references
-(median round trip, expected WKC) need all of it. Definitions follow DESIGN.md
+(median round trip, expected WKC) need all of it. Definitions follow docs/architecture.md
 (Direction, Pairing, Cyclic stream, Expected WKC, Lost frame, WKC verdict, Timestamp
 quality); the JSON shape is ``lolacli.capture/1``.
 

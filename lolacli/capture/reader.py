@@ -436,7 +436,7 @@ ETHERTYPE_VLAN = 0x8100
 class LinkHeader:
     """The link layer of one captured frame: what it carries, where, and which way.
 
-    ``returned``: for Ethernet, the locally administered bit of the source MAC (DESIGN.md
+    ``returned``: for Ethernet, the locally administered bit of the source MAC (docs/architecture.md
     "Direction"); for Linux cooked frames, a packet type other than "sent by this host".
     """
 

@@ -12,7 +12,7 @@ Everything lives in flat integer arrays (lists in plain-Python mode):
 * the pairing table ``pk/pn/pv`` (open addressing, key = 63-bit hash of the frame's
   (command, index, address key) sequence; per key a stack of ``DEPTH`` pending outgoing
   frames, ``PCOLS`` values each: timestamp, ``frame << 1 | cyclic``, echo evidence).
-  A return pops the most recent one (DESIGN.md "Pairing"); a frame pushed out of a full
+  A return pops the most recent one (docs/architecture.md "Pairing"); a frame pushed out of a full
   stack is written to ``o_evict`` (it can no longer be answered: lost or in flight);
 * the stream table ``sk/sc`` (outgoing frames per (command, address key) signature), used
   to pick the cyclic stream when there is no logical traffic;
@@ -26,7 +26,7 @@ Everything lives in flat integer arrays (lists in plain-Python mode):
   ``o_cfg`` flags the master's writes of station addresses, AL control and FMMUs, which
   the driver decodes from the buffer (:mod:`lolacli.capture.layout`).
 
-Direction (DESIGN.md "Direction"): ``st[S_DIRMODE]`` 0 takes the packet type of Linux
+Direction (docs/architecture.md "Direction"): ``st[S_DIRMODE]`` 0 takes the packet type of Linux
 cooked captures (SLL/SLL2: 4 = sent by this host) and the locally administered bit of the
 source MAC of Ethernet frames; 1 infers it: a frame is the echo of the pending frame with
 the same datagram sequence, indexes and lengths when its WKC sum is not smaller and, if it
@@ -90,7 +90,7 @@ S_TS_SEEN = 40
 S_BACKWARDS = 41
 S_BACK_F0 = 42  # frame numbers of the first BACK_KEEP backward steps
 S_MALF_F0 = 45  # frame numbers of the first BACK_KEEP malformed frames
-S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (DESIGN.md)
+S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (docs/architecture.md)
 S_BRD_MAX = 49  # the highest WKC a BRD/BWR came back with: the slaves on the line
 S_RT_EST = 50  # running average of round trips (direction inference: the echo window)
 S_SIZE = 64

@@ -1,11 +1,11 @@
 """Findings: what a capture says about the bus, each with its frame numbers (pure).
 
-DESIGN.md "Lost frame": an outgoing frame no return matches at all is lost, unless it
-was sent within the capture's last ``timeout`` (in flight at the end); a return later than
-the timeout is late. The timeout defaults to 10 x the median round trip, at least 1 ms.
-DESIGN.md "Timestamp quality": round trips of 0 (quantised timestamps), timestamps going
-backwards and cut-short files are findings, and the statistics built on them are marked
-unusable.
+Definitions in docs/architecture.md, "Lost, late, in flight": an outgoing frame no return
+matches at all is lost, unless it was sent within the capture's last ``timeout`` (in
+flight at the end); a return later than the timeout is late. The timeout defaults to
+10 x the median round trip, at least 1 ms. "Timestamp quality": round trips of 0
+(quantised timestamps), timestamps going backwards and cut-short files are findings, and
+the statistics built on them are marked unusable.
 
 Findings are the product's one model (:mod:`lolacli.findings`).
 """

@@ -1,4 +1,4 @@
-"""WKC verdict (DESIGN.md "WKC verdict"): the expected working counter of each cyclic
+"""WKC verdict (docs/architecture.md "Expected WKC"): the expected working counter of each cyclic
 datagram, where it comes from, and how the observed values compare (pure).
 
 The scanner counts, per cyclic datagram (command, address key, length) and returned WKC

@@ -2,7 +2,7 @@
 
 Data goes to stdout (JSON, tables); hints, warnings and progress go to stderr. Commands
 raise :class:`~lolacli.errors.LolaError`; :func:`lolacli.cli.main.main` maps them to one line
-on stderr and the exit code of DESIGN.md.
+on stderr and the exit code of README.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """JSON-ready reports over an :class:`~lolacli.eni.model.Eni` (pure: model in, dicts out).
 
-Contracts (DESIGN.md "JSON contracts"): ``lolacli.eni/1`` (inspect), ``lolacli.eni-vars/1``.
-Wire numbers follow DESIGN.md "Definitions": frame bytes from
+Contracts (docs/cli.md): ``lolacli.eni/1`` (inspect), ``lolacli.eni-vars/1``.
+Wire numbers follow docs/architecture.md "Definitions": frame bytes from
 :func:`lolacli.wire.frame.frame_bytes_on_wire`, wire time ``8 × bytes / rate``, and the time
 with overhead adds preamble+SFD (8 B) and the inter-frame gap (12 B).
 """

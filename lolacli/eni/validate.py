@@ -3,8 +3,9 @@
 Each check is a small function ``(eni) -> Iterator[Finding]``; :func:`validate_eni` runs them
 all. Codes are stable strings (scripts filter on them). Severity ``error`` means the bus will
 not run as configured (or a master will flag WKC errors); ``warning`` means the file is odd
-but usable. Working counters follow DESIGN.md "Expected WKC": per slave addressed, read 1,
-write 1, read-write 3; an LRW on a slave with only inputs counts 1, with only outputs 2.
+but usable. Working counters follow docs/architecture.md, "Expected WKC": per slave
+addressed, read 1, write 1, read-write 3; an LRW on a slave with only inputs counts 1,
+with only outputs 2.
 """
 
 from __future__ import annotations

@@ -104,7 +104,7 @@ def _timer_slack(slack_ns: int) -> tuple[Any, int]:
 
 
 def is_cyclic(frame: bytes) -> bool:
-    """A frame with a logical datagram (LRW/LRD/LWR): the cyclic stream (DESIGN.md)."""
+    """A frame with a logical datagram (LRW/LRD/LWR): the cyclic stream (docs/architecture.md)."""
     pos, end = _FIRST_DATAGRAM, len(frame)
     while pos + DATAGRAM_HEADER_BYTES <= end:
         if frame[pos] in LOGICAL:

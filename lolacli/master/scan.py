@@ -27,7 +27,7 @@ watchdog, once nobody sends cyclic frames).
 
 With an ENI, :func:`compare_with_eni` lists every difference by position: missing, extra
 or wrong slaves (vendor/product), wrong revisions, unreadable identities, where the line
-ends early, states not reached. The report is ``lolacli.scan/1`` (DESIGN.md).
+ends early, states not reached. The report is ``lolacli.scan/1`` (docs/cli.md).
 """
 
 from __future__ import annotations

@@ -77,7 +77,7 @@ class FrameProcessor(Protocol):
 
 def frame_time_on_wire_ns(frame_length: int, link_bit_s: int = LINK_100_MBIT_S) -> int:
     """How long a frame of ``frame_length`` bytes (without FCS) occupies the master's
-    port: FCS, padding to 64, preamble/SFD and the inter-frame gap (DESIGN.md)."""
+    port: FCS, padding to 64, preamble/SFD and the inter-frame gap (docs/architecture.md)."""
     on_wire = max(frame_length + FCS_BYTES, MIN_FRAME_BYTES)
     return (on_wire + PREAMBLE_SFD_BYTES + INTER_FRAME_GAP_BYTES) * 8 * 1_000_000_000 // link_bit_s
 

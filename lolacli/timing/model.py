@@ -1,6 +1,6 @@
 """Frame-time model of one EtherCAT line: wire time, slave delays, cable, round trip (pure).
 
-Definitions (DESIGN.md "Definitions"):
+Definitions (docs/architecture.md "Definitions"):
 
 * **frame bytes** = 14 + 2 + Σ(10 + data + 2) + 4, padded to 64;
 * **wire time** = 8 × frame bytes / link rate (846 B at 100 Mbit/s → 67.68 µs, the LOLA
@@ -91,7 +91,7 @@ class DelaySource(StrEnum):
 
 
 def frame_bytes(datagram_data_lengths: Sequence[int]) -> int:
-    """Frame bytes on the wire for datagrams of these data lengths (DESIGN.md)."""
+    """Frame bytes on the wire for datagrams of these data lengths (docs/architecture.md)."""
     return frame_bytes_on_wire(tuple(datagram_data_lengths))
 
 

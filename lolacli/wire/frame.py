@@ -123,7 +123,7 @@ class EthernetHeader:
         """True when the first source-MAC octet has the locally administered bit set.
 
         The first ESC of the chain sets it, so a frame seen with it set has passed the
-        slaves (DESIGN.md "Direction").
+        slaves (docs/architecture.md "Direction").
         """
         return bool(self.src[0] & 0x02)
 
@@ -159,7 +159,7 @@ class Frame:
 
 
 def frame_bytes_on_wire(datagram_data_lengths: list[int] | tuple[int, ...]) -> int:
-    """Frame bytes per DESIGN.md: 14 + 2 + Σ(10 + data + 2) + FCS 4, padded to 64."""
+    """Frame bytes per docs/architecture.md: 14 + 2 + Σ(10 + data + 2) + FCS 4, padded to 64."""
     total = ETH_HEADER_BYTES + ECAT_HEADER_BYTES + FCS_BYTES
     total += sum(DATAGRAM_HEADER_BYTES + n + WKC_BYTES for n in datagram_data_lengths)
     return max(total, MIN_FRAME_BYTES)
