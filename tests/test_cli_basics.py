@@ -14,6 +14,16 @@ def test_unknown_command_is_usage_error(cli):
     assert code == 2
 
 
+def test_a_group_without_its_command_shows_its_help(cli):
+    """``lolacli bus`` (no command): the group's help as it is laid out, exit 2, as
+    ``lolacli`` alone does; not the help squeezed into one error line."""
+    for group in ("eni", "bus", "capture", "sdo", "foe"):
+        code, _, err = cli(group)
+        assert code == 2
+        assert err.startswith(f"Usage: lolacli {group} ") and "\nCommands:\n" in err, err
+        assert "error:" not in err
+
+
 def test_help_does_not_import_heavy_libraries():
     probe = (
         "import sys\n"

@@ -45,6 +45,9 @@ class _LolaGroup(TyperGroup):
                 raise
             _traceback_if_debug()
             usage_ctx = getattr(exc, "ctx", None)
+            if usage_ctx is not None and exc.format_message() == usage_ctx.get_help():
+                sys.stderr.write(exc.format_message() + "\n")  # a group without a command:
+                raise typer.Exit(2) from None  # its help, as the root's (no_args_is_help)
             path = usage_ctx.command_path if usage_ctx is not None else "lolacli"
             message = " ".join(exc.format_message().split())
             sys.stderr.write(f"{path}: error: {message} (see {path} --help)\n")
