@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from lolacli.errors import SdoAbortError, UsageError, WireError
-from lolacli.sdo.dictionary import Dictionary
+from lolacli.od import Dictionary
 from lolacli.sdo.entry_type import (
     Describes,
     EntryType,
@@ -260,7 +260,7 @@ def complete_value(
     if subindex == 0 and raw:
         items.append(_item(lookup, index, 0, raw[0]))
         pos = 2
-    subs = [e.subindex for e in obj.entries if e.subindex > 0]
+    subs = [e.subindex for e in obj if e.subindex > 0]
     if count is not None:
         subs = [s for s in subs if s <= count]
     note = ""
@@ -288,7 +288,7 @@ def complete_value(
         )
         pos += size
     return SdoValue(
-        slave, index, subindex, raw, items, obj.object_code, source, obj.name, True, note
+        slave, index, subindex, raw, items, obj.object_code.name, source, obj.name, True, note
     )
 
 

@@ -47,13 +47,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from lolacli.sdo.dictionary import (
-    OdEntry,
-    OdObject,
-    standard_name,
-    standard_object,
-    standard_type,
-)
+from lolacli.od import OdEntry, OdObject
+from lolacli.od.cia301 import standard_name, standard_object, standard_type
 from lolacli.wire.datatypes import DataType, bit_size, int_range, size_bytes, type_name
 
 EDS, ESI, ENI, SDO_INFO, CIA301, OPTION, GUESS = (
@@ -70,7 +65,7 @@ TYPE_SOURCES = (OPTION, EDS, ESI, ENI, SDO_INFO, CIA301, GUESS)
 
 
 class Describes(Protocol):
-    """A source of object descriptions: a :class:`~lolacli.sdo.dictionary.Dictionary`
+    """A source of object descriptions: a :class:`~lolacli.od.Dictionary`
     (EDS, ESI, ENI, SDO Information read whole) or the slave's SDO Information service
     asked entry by entry. ``source`` is its ``type_source``."""
 

@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from lolacli.errors import UsageError
+from lolacli.od import Dictionary
 from lolacli.sdo.address import parse_node_id, resolve_ref, slave_refs
 from lolacli.sdo.client import SdoClient
-from lolacli.sdo.dictionary import Dictionary
 from lolacli.sdo.entry_type import TypeLookup
 
 BACKENDS = ("lolacli", "soem")
@@ -140,7 +140,7 @@ class SoemSession(Session):
         self.bus = SoemBus(options.iface, timeout_s=options.timeout_s)
 
     def target(self, spec: str | int) -> Target:
-        from lolacli.sdo.dictionary import from_eni
+        from lolacli.eni.dictionary import from_eni
         from lolacli.sdo.files import esi_dictionary
 
         on_bus = self.bus.slaves()
@@ -193,7 +193,7 @@ class LolaSession(Session):
             )
 
     def target(self, spec: str | int) -> Target:
-        from lolacli.sdo.dictionary import from_eni
+        from lolacli.eni.dictionary import from_eni
 
         ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
         client = self.bus.client(ref)
