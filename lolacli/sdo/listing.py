@@ -6,7 +6,7 @@ matching the slave's identity. With no transport, the file alone (``--esi`` with
 ``--eni`` to pick the device by SLAVE's identity).
 
 Each entry's type and name come from the one lookup of every ``sdo`` command
-(:meth:`lolacli.sdo.entry_type.TypeLookup.entry_type`), the listed dictionary taking the
+(:meth:`lolacli.od.lookup.TypeLookup.entry_type`), the listed dictionary taking the
 place of its source in it, so that ``sdo list`` and ``sdo read`` say the same of an entry.
 """
 
@@ -16,8 +16,8 @@ from typing import Any
 
 from lolacli.errors import UsageError
 from lolacli.od import Dictionary, OdEntry
+from lolacli.od.lookup import EntryType, TypeLookup
 from lolacli.sdo.client import json_value
-from lolacli.sdo.entry_type import EntryType, TypeLookup
 from lolacli.sdo.session import TransportOptions, open_session
 from lolacli.text import plural
 

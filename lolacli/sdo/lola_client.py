@@ -133,7 +133,7 @@ class LolaClient:
 
     def sdo_info(self) -> SdoInfoEntries:
         """The slave's SDO Information service as a source of entry types and names,
-        asked entry by entry (:mod:`lolacli.sdo.entry_type`)."""
+        asked entry by entry (:mod:`lolacli.od.lookup`)."""
         if self._info is None:
             self._info = SdoInfoEntries(self)
         return self._info

@@ -1,5 +1,5 @@
 """The one lookup of an entry's type and name, and the one way a value is printed
-(lolacli/sdo/entry_type.py), on real dictionaries: the LOLA ENI's PDO entries of drive 5,
+(lolacli/od/lookup.py), on real dictionaries: the LOLA ENI's PDO entries of drive 5,
 the Elmo ESI that describes that drive, the gateway IMU's EDS."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from lolacli.eni.dictionary import from_eni
 from lolacli.od import RECORD, Dictionary, OdEntry, OdObject
-from lolacli.sdo.entry_type import TypeLookup, format_real, format_value
+from lolacli.od.lookup import TypeLookup, format_real, format_value
 from lolacli.sdo.files import esi_dictionary, load_eds
 from lolacli.sdo.node import example_eds
 from lolacli.wire.datatypes import DataType

@@ -1,11 +1,13 @@
 """One way to type and print a value: ``sdo read``, ``sdo write``, ``sdo check`` and ``sdo
-list`` say the same data type, name and value of an entry (lolacli/sdo/entry_type.py).
+list`` say the same data type, name and value of an entry (lolacli/od/lookup.py).
 
 The same objects go through all four commands, in process: on the emulated LOLA chain
 (identity, a PDO mapping entry, the drive's INTEGER8 mode and INTEGER32 target position,
 a segmented VISIBLE_STRING, the gateway's REAL32), and on python-can's virtual bus
 against canopen LocalNodes serving the gateway IMU's EDS and, for a BOOLEAN, the corpus's
-python-canopen sample EDS. Each command's JSON gives the same ``data_type`` and ``name``;
+python-canopen sample EDS; and on a drive whose ENI types an INTEGER24, a non-ASCII
+VISIBLE_STRING, a REAL32 and a BOOLEAN, also against the drive's own SDO Information.
+Each command's JSON gives the same ``data_type`` and ``name``;
 each human line says ``NAME  TYPE = VALUE`` in the same words, and ``sdo list`` gives the
 value the node starts with as its default in the same form.
 """
@@ -258,8 +260,8 @@ def test_one_entry_typed_alike_by_every_command_and_the_drives_sdo_information(t
     same type, name and printed value; the drive's own SDO Information describes each with
     the same type, and a value typed by it alone prints the same."""
     from lolacli.od import access_text
+    from lolacli.od.lookup import TypeLookup, describe
     from lolacli.sdo.client import read, write
-    from lolacli.sdo.entry_type import TypeLookup, describe
     from lolacli.sdo.session import TransportOptions, open_session
     from lolacli.wire.datatypes import DataType
 
