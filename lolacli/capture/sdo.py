@@ -32,9 +32,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import WireError
-from lolacli.od import Dictionary, ObjectCode, OdEntry, OdObject, info_entry
+from lolacli.od import Dictionary, ObjectCode, OdEntry, OdObject, info_entry, object_code
 from lolacli.od.lookup import TypeLookup, decode, format_value, json_value
-from lolacli.od.model import object_code
 from lolacli.wire.coe import CoeService, decode_coe_header
 from lolacli.wire.mailbox import MailboxHeader, MailboxType, decode_mailbox
 from lolacli.wire.sdo import (

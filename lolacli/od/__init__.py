@@ -20,6 +20,7 @@ from lolacli.od.model import (
     access_word,
     from_sdo_info,
     info_entry,
+    object_code,
     pdo_configuration,
     typed_value,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "access_word",
     "from_sdo_info",
     "info_entry",
+    "object_code",
     "pdo_configuration",
     "typed_value",
 ]

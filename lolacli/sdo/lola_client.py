@@ -25,8 +25,7 @@ from lolacli.errors import (
     UsageError,
     WireError,
 )
-from lolacli.od import Dictionary, OdEntry, OdObject, info_entry
-from lolacli.od.model import object_code
+from lolacli.od import Dictionary, OdEntry, OdObject, info_entry, object_code
 from lolacli.sdo.address import SlaveRef, slave_refs
 
 if TYPE_CHECKING:
