@@ -1,7 +1,7 @@
 """Could canopen.objectdictionary be the OD model of the emulated drives? The hot paths, measured.
 
 The emulator answers SDO through ``lolacli/emulator/coe_server.py`` (``SdoServer.handle``)
-against the drive's ``lolacli.devices.od.ObjectDictionary``, and its devices read and
+against the drive's ``lolacli.od.Dictionary`` (the one model), and its devices read and
 write entries every cycle. This script builds the LOLA joint drive (``Cia402Drive`` of the
 embedded ENI's slave 5), copies its dictionary into a ``canopen.ObjectDictionary`` with a
 ``canopen.LocalNode`` holding the values (canopen's own server-side store: lookup, access
@@ -29,10 +29,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from lolacli.devices.cia402 import Cia402Drive  # noqa: E402
-from lolacli.devices.od import ObjectCode  # noqa: E402
 from lolacli.emulator.coe_server import SdoServer  # noqa: E402
 from lolacli.errors import SdoAbortError  # noqa: E402
 from lolacli.files import load_eni  # noqa: E402
+from lolacli.od import ObjectCode  # noqa: E402
 from lolacli.wire.mailbox import MailboxType, encode_mailbox, make_mailbox  # noqa: E402
 from lolacli.wire.sdo import download_request, upload_request  # noqa: E402
 
@@ -147,7 +147,7 @@ def main() -> int:
             lambda: node.set_data(0x6041, 0, status.encode_raw(0x0237)),
         )
     )
-    print(f"{'hot path':<42} {'devices/od.py':>14} {'canopen OD':>12} {'ratio':>7}")
+    print(f"{'hot path':<42} {'lolacli.od':>14} {'canopen OD':>12} {'ratio':>7}")
     for name, a, b in rows:
         ns_a, ns_b = per_call_ns(a, args.calls), per_call_ns(b, args.calls)
         print(f"{name:<42} {ns_a / 1000:11.2f} us {ns_b / 1000:9.2f} us {ns_b / ns_a:6.2f}x")

@@ -653,6 +653,7 @@ class _Pass:
         _slave_count_finding(findings, eni, st[S.S_BRD_MAX])
         al = last_al_status(self._observations(S.KIND_AL_STATUS))
         _al_findings(findings, al, self.layout)
+        self.sdo.describe(eni)  # each transaction's entry named, typed, its value decoded
         for t in self.sdo.aborts():
             findings.add("sdo-abort", WARNING,
                          f"SDO abort 0x{t.abort_code or 0:08X} ({t.to_dict()['abort_text']}) "

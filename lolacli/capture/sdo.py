@@ -16,16 +16,29 @@ mailbox header. Here each is decoded with :mod:`lolacli.wire.mailbox`,
 
 A mailbox read that repeats the previous message of the same slave (same non-zero
 counter, same bytes) is a mailbox repeat and is counted once.
+
+What each entry is comes from the one dictionary model and the one type lookup of the
+``sdo`` commands (:mod:`lolacli.od.lookup`): :meth:`SdoTracker.describe` types every
+completed transaction's bytes by the slave's PDO entries in the ENI (when one is given),
+then the SDO Information answers the capture itself holds (Get Object/Entry Description
+responses, kept per slave as a :class:`~lolacli.od.Dictionary`), then the CiA 301
+objects, else a guess from the bytes — and gives its name, data type, where the type
+came from and the value as ``sdo read`` would (``lolacli.sdo/1``'s ``value``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import WireError
+from lolacli.od import Dictionary, ObjectCode, OdEntry, OdObject, info_entry, object_code
+from lolacli.od.lookup import TypeLookup, decode, format_value, json_value
 from lolacli.wire.coe import CoeService, decode_coe_header
 from lolacli.wire.mailbox import MailboxHeader, MailboxType, decode_mailbox
 from lolacli.wire.sdo import (
+    EntryDescriptionResponse,
+    ObjectDescriptionResponse,
     SdoAbort,
     SdoDownloadRequest,
     SdoDownloadResponse,
@@ -37,6 +50,9 @@ from lolacli.wire.sdo import (
     abort_text,
     decode_sdo,
 )
+
+if TYPE_CHECKING:
+    from lolacli.eni.model import Eni
 
 WRITE_COMMANDS = (2, 5)  # APWR, FPWR
 #: Decoded mailbox messages kept by their bytes (polling repeats the same requests).
@@ -62,6 +78,13 @@ class SdoTransaction:
     end_frame: int | None = None
     end_ns: int | None = None
     data: bytearray = field(default_factory=bytearray)
+    #: set by :meth:`SdoTracker.describe`: name ("" if none), data type name ("" if not
+    #: typed), type source, value typed, value as printed
+    name: str = ""
+    data_type: str = ""
+    type_source: str = ""
+    value: Any = None
+    value_text: str = ""
 
     def to_dict(self) -> dict[str, object]:
         return {
@@ -83,7 +106,24 @@ class SdoTransaction:
             if self.end_ns is None
             else (self.end_ns - self.start_ns) / 1000.0,
             "data_hex": bytes(self.data[:64]).hex(),
+            "name": self.name or None,
+            "data_type": self.data_type or None,
+            "type_source": self.type_source or None,
+            "value": json_value(self.value),
+            "value_text": self.value_text or None,
         }
+
+    @property
+    def raw(self) -> bytes | None:
+        """The entry's bytes when the transaction carried them whole, else None."""
+        if self.status != "ok" or self.kind not in ("upload", "download"):
+            return None
+        data = bytes(self.data)
+        if self.transfer != "expedited" and self.size_bytes:
+            if len(data) < self.size_bytes:
+                return None
+            data = data[: self.size_bytes]
+        return data if data else None
 
 
 @dataclass(slots=True)
@@ -106,6 +146,9 @@ class SdoTracker:
         self._open: dict[int, SdoTransaction] = {}
         self._last_in: dict[int, tuple[int, bytes]] = {}
         self._cache: dict[bytes, tuple[MailboxHeader | None, int | None, object]] = {}
+        #: SDO Information the slaves answered in the capture: entries, object names/codes
+        self._info_entries: dict[int, dict[tuple[int, int], OdEntry]] = {}
+        self._info_objects: dict[int, dict[int, tuple[str, ObjectCode]]] = {}
 
     def feed(self, frame: int, ts_ns: int, cmd: int, address: int, data: bytes) -> None:
         slave = address & 0xFFFF
@@ -144,6 +187,7 @@ class SdoTracker:
             self.stats.emergencies += 1
         elif service == CoeService.SDO_INFO:
             self.stats.sdo_info_messages += 1
+            self._info(slave, message)
         elif service in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
             if message is None:
                 self.stats.undecodable += 1
@@ -226,6 +270,67 @@ class SdoTracker:
     def aborts(self) -> list[SdoTransaction]:
         return [t for t in self.transactions if t.status == "abort"]
 
+    def _info(self, slave: int, message: object) -> None:
+        """Keep what an SDO Information answer says of an object or entry (answers in
+        fragments are not joined here: an entry's description fits one mailbox)."""
+        if isinstance(message, EntryDescriptionResponse) and not message.incomplete:
+            name = message.description().decode("utf-8", "replace")
+            entry = info_entry(
+                message.index,
+                message.subindex,
+                name,
+                message.data_type,
+                message.bit_length,
+                message.object_access,
+            )
+            self._info_entries.setdefault(slave, {})[(entry.index, entry.subindex)] = entry
+        elif isinstance(message, ObjectDescriptionResponse) and not message.incomplete:
+            code = object_code(message.object_code)
+            self._info_objects.setdefault(slave, {})[message.index] = (message.name_text, code)
+
+    def info_dictionary(self, slave: int) -> Dictionary | None:
+        """What the capture's SDO Information answers describe of ``slave``'s objects."""
+        entries = self._info_entries.get(slave)
+        if not entries:
+            return None
+        names = self._info_objects.get(slave, {})
+        by_index: dict[int, list[OdEntry]] = {}
+        for (index, _sub), entry in entries.items():
+            by_index.setdefault(index, []).append(entry)
+        objects = []
+        for index, found in by_index.items():
+            name, code = names.get(index, ("", ObjectCode.VAR))
+            objects.append(OdObject.of(index, name, code, found))
+        return Dictionary(objects, "sdo-info")
+
+    def describe(self, eni: Eni | None = None) -> None:
+        """Name and type every completed transaction's entry and decode its bytes (see
+        the module docstring); complete-access transfers stay bytes."""
+        lookups: dict[int, TypeLookup] = {}
+        for t in self.transactions:
+            raw = t.raw
+            if raw is None or t.complete_access:
+                continue
+            lookup = lookups.get(t.slave)
+            if lookup is None:
+                lookup = lookups[t.slave] = self._lookup(t.slave, eni)
+            typed = lookup.entry_type(t.index, t.subindex, raw=raw)
+            value, code, _note = decode(raw, typed)
+            t.name, t.type_source, t.value = typed.name, typed.source, value
+            t.data_type = typed.type_label if code == typed.data_type else "OCTET_STRING"
+            t.value_text = format_value(value, code)
+
+    def _lookup(self, slave: int, eni: Eni | None) -> TypeLookup:
+        from lolacli.eni.dictionary import from_eni
+
+        dictionaries = []
+        found = next((s for s in eni.slaves if s.station_address == slave), None) if eni else None
+        if found is not None and eni is not None:
+            described = from_eni(found, eni.source or "")
+            if described is not None:
+                dictionaries.append(described)
+        return TypeLookup(tuple(dictionaries), self.info_dictionary(slave))
+
 
 def _type_name(mailbox_type: int) -> str:
     if isinstance(mailbox_type, MailboxType):
@@ -246,7 +351,7 @@ def _decode(data: bytes) -> tuple[MailboxHeader | None, int | None, object]:
         service = decode_coe_header(mailbox.payload).service
     except WireError:
         return mailbox.header, None, None
-    if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE):
+    if service not in (CoeService.SDO_REQUEST, CoeService.SDO_RESPONSE, CoeService.SDO_INFO):
         return mailbox.header, service, None
     try:
         return mailbox.header, service, decode_sdo(mailbox.payload)

@@ -7,7 +7,7 @@ runs, so ``lolacli --help`` stays fast.
 Human output fits the terminal (``$COLUMNS``; 80 columns when piped): a line longer than
 that is wrapped between words, its continuation indented. Every command says an entry
 the same way — ``Device type  UNSIGNED32 = 131474 (0x00020192)``: name, type, value by
-:func:`lolacli.sdo.entry_type.format_value` — and notes (a guessed type, a --type that
+:func:`lolacli.od.lookup.format_value` — and notes (a guessed type, a --type that
 overrides the dictionary) go to stderr, once.
 """
 
@@ -217,7 +217,7 @@ def _note(text: str) -> None:
 
 
 def _render_value(result: Any) -> None:
-    from lolacli.sdo.entry_type import describe, format_value
+    from lolacli.od.lookup import describe, format_value
     from lolacli.wire.datatypes import data_type_from_name
 
     where = f"{result.slave} 0x{result.index:04X}:{result.subindex:02X}"
@@ -439,7 +439,7 @@ def _cell(text: str, width: int) -> str:
 
 def _list_default(entry: dict[str, Any]) -> str:
     """An entry's default as read/write/check print values (JSON has octets as hex)."""
-    from lolacli.sdo.entry_type import format_value
+    from lolacli.od.lookup import format_value
     from lolacli.wire.datatypes import data_type_from_name
 
     default = entry["default"]
@@ -521,7 +521,7 @@ def check_cmd(
 def _check_lines(r: Any) -> list[str]:
     """One result: status, kind, slave, object, and the entry as read and write say it;
     why it failed (or the abort's text) on the next line."""
-    from lolacli.sdo.entry_type import describe
+    from lolacli.od.lookup import describe
 
     item = r.item
     status = "ok  " if r.ok else "FAIL"

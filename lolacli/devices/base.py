@@ -1,18 +1,22 @@
 """The device behind an ESC: object dictionary, PDO mapping, one step per cycle.
 
-A device owns an :class:`ObjectDictionary` with the communication objects of CiA 301 /
-ETG.1000.6 (0x1000 device type, 0x1008 name, 0x1018 identity, 0x1C00 SM types,
-0x1C12/0x1C13 PDO assignment, 0x16xx/0x1Axx PDO mappings) built from the ENI slave's
-PDOs. Every cycle it unpacks the outputs through the RxPDO mapping into the dictionary,
-runs :meth:`Device.step`, and packs the inputs through the TxPDO mapping.
+A device owns a :class:`~lolacli.od.Dictionary` (the one model, holding the values) with
+the communication objects of CiA 301 / ETG.1000.6 (0x1000 device type, 0x1008 name,
+0x1018 identity, 0x1C00 SM types, 0x1C12/0x1C13 PDO assignment, 0x16xx/0x1Axx PDO
+mappings) built from what the ENI says of the slave — its PDOs and CoE InitCmds, read by
+:func:`lolacli.eni.dictionary.from_eni` and typed as the ``sdo`` commands type them.
+Every cycle it unpacks the outputs through the RxPDO mapping into the dictionary, runs
+:meth:`Device.step`, and packs the inputs through the TxPDO mapping.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from lolacli.devices.od import DataType, Entry, ObjectCode, ObjectDictionary, data_type_for
+from lolacli.eni.dictionary import from_eni
 from lolacli.eni.model import Direction, Pdo, Slave
+from lolacli.od import ARRAY, Dictionary, OdEntry
+from lolacli.wire.datatypes import DataType
 
 MAPPING_RX = 0x1600
 MAPPING_TX = 0x1A00
@@ -38,6 +42,18 @@ _UNSIGNED_BY_LENGTH = {
 }
 
 
+def device_type_of(entry: OdEntry) -> int:
+    """The type a device gives an entry the ENI describes: the ENI's, else unsigned by
+    its size (BOOLEAN for one bit), else an octet string."""
+    if entry.data_type is not None:
+        return entry.data_type
+    if entry.bits == 1:
+        return DataType.BOOLEAN
+    if entry.bits % 8 == 0 and entry.bits // 8 in _UNSIGNED_BY_LENGTH:
+        return _UNSIGNED_BY_LENGTH[entry.bits // 8]
+    return DataType.OCTET_STRING if entry.bits > 8 else DataType.UNSIGNED8
+
+
 class Device:
     """A generic device: its process data are plain object-dictionary entries."""
 
@@ -45,13 +61,14 @@ class Device:
 
     def __init__(self, slave: Slave) -> None:
         self.slave = slave
-        self.od = ObjectDictionary()
+        self.od = Dictionary()
+        self._eni = from_eni(slave, init_cmds=True) or Dictionary(source="eni")
         self.state = 1
         self.t_ns = 0
         self._layouts: dict[Direction, tuple[tuple[Direction, int], list[Any]]] = {}
         self._sizes: tuple[int, tuple[int, int]] | None = None
         self._byte_layouts: dict[
-            Direction, tuple[tuple[Direction, int], list[tuple[Entry | None, int, int]] | None]
+            Direction, tuple[tuple[Direction, int], list[tuple[OdEntry | None, int, int]] | None]
         ] = {}
         # (outputs, od.writes, inputs) after a step that changed nothing: the same outputs
         # with the dictionary untouched give the same inputs without stepping
@@ -104,7 +121,7 @@ class Device:
                 ("SM2", DataType.UNSIGNED8, 3, "ro"),
                 ("SM3", DataType.UNSIGNED8, 4, "ro"),
             ],
-            code=ObjectCode.ARRAY,
+            code=ARRAY,
         )
 
     def _pdo_objects(self, pdos: tuple[Pdo, ...]) -> None:
@@ -117,10 +134,12 @@ class Device:
             for e in pdo.entries:
                 value = (e.index << 16) | (e.subindex << 8) | e.bit_size
                 subs.append((e.name or "Mapped object", DataType.UNSIGNED32, value, "rw"))
-                if e.index:  # inputs are the device's to write: read-only over SDO
+                described = self._eni.entry(e.index, e.subindex) if e.index else None
+                if described is not None:  # inputs are the device's to write: read-only
                     access = "ro" if pdo.direction == Direction.INPUT else "rw"
+                    kind = device_type_of(described)
                     self.od.ensure_entry(
-                        e.index, e.subindex, e.name, data_type_for(e.data_type, e.bit_size), access
+                        e.index, e.subindex, described.name, kind, access, described.bits
                     )
             used = len(subs)
             subs += [("Mapped object", DataType.UNSIGNED32, 0, "rw")] * (MAX_ENTRIES - used)
@@ -133,7 +152,7 @@ class Device:
             used = len(subs)
             subs += [("PDO", DataType.UNSIGNED16, 0, "rw")] * max(0, MAX_PDOS - used)
             self.od.add_record(
-                index, "PDO assignment", subs, code=ObjectCode.ARRAY, writable_count=True
+                index, "PDO assignment", subs, code=ARRAY, writable_count=True
             )
             self.od.set(index, 0, used)
 
@@ -143,31 +162,26 @@ class Device:
         ESI, so the real device has them. Each becomes a read-write entry of the written
         length (unsigned for 1/2/4/8 bytes, else an octet string). Complete-access writes
         are left alone: the sub-indexes' sizes are not in the ENI."""
-        mailbox = self.slave.mailbox
-        if mailbox is None:
-            return
-        for cmd in mailbox.coe_init_cmds:
-            if cmd.ccs != 1 or cmd.complete_access or not cmd.data:
-                continue
-            if (cmd.index, cmd.subindex) in self.od:
-                continue
-            data_type = _UNSIGNED_BY_LENGTH.get(len(cmd.data), DataType.OCTET_STRING)
-            name = cmd.comment or f"Object 0x{cmd.index:04X}:{cmd.subindex:02X}"
-            entry = self.od.ensure_entry(cmd.index, cmd.subindex, name, data_type)
-            entry.value = bytes(len(cmd.data))
+        for e in self._eni.entries():
+            if not e.value or (e.index, e.subindex) in self.od:
+                continue  # not an InitCmd's, or an object the model has
+            data_type = _UNSIGNED_BY_LENGTH.get(len(e.value), DataType.OCTET_STRING)
+            name = e.name or f"Object 0x{e.index:04X}:{e.subindex:02X}"
+            entry = self.od.ensure_entry(e.index, e.subindex, name, data_type)
+            entry.value = bytes(len(e.value))
 
     # ------------------------------------------------------------- mapping
     def mapping(self, direction: Direction) -> list[tuple[int, int, int]]:
         """(index, subindex, bits) in process-image order, from 0x1C12/0x1C13."""
         return [(index, sub, bits) for index, sub, bits, _ in self._layout(direction)]
 
-    def _layout(self, direction: Direction) -> list[tuple[int, int, int, Entry | None]]:
+    def _layout(self, direction: Direction) -> list[tuple[int, int, int, OdEntry | None]]:
         key = (direction, self.od.version)
         cached = self._layouts.get(direction)
         if cached is not None and cached[0] == key:
             return cached[1]
         assign = ASSIGN_RX if direction == Direction.OUTPUT else ASSIGN_TX
-        out: list[tuple[int, int, int, Entry | None]] = []
+        out: list[tuple[int, int, int, OdEntry | None]] = []
         for n in range(1, self.od.get_int(assign, 0) + 1):
             pdo = self.od.get_int(assign, n)
             if pdo not in self.od.objects:
@@ -175,7 +189,7 @@ class Device:
             for k in range(1, self.od.get_int(pdo, 0) + 1):
                 word = self.od.get_int(pdo, k)
                 index, sub, bits = word >> 16, (word >> 8) & 0xFF, word & 0xFF
-                entry = self.od.entry(index, sub) if index and (index, sub) in self.od else None
+                entry = self.od.entry(index, sub) if index else None
                 out.append((index, sub, bits, entry))
         self._layouts[direction] = (key, out)
         return out
@@ -188,14 +202,14 @@ class Device:
             self._sizes = (version, ((outputs + 7) // 8, (inputs + 7) // 8))
         return self._sizes[1]
 
-    def _byte_layout(self, direction: Direction) -> list[tuple[Entry | None, int, int]] | None:
+    def _byte_layout(self, direction: Direction) -> list[tuple[OdEntry | None, int, int]] | None:
         """(entry, byte offset, bytes) when every mapped entry is whole bytes, else None."""
         key = (direction, self.od.version)
         cached = self._byte_layouts.get(direction)
         if cached is not None and cached[0] == key:
             return cached[1]
         layout = self._layout(direction)
-        out: list[tuple[Entry | None, int, int]] | None = []
+        out: list[tuple[OdEntry | None, int, int]] | None = []
         bit = 0
         for _index, _sub, bits, entry in layout:
             if bits % 8 or out is None:

@@ -12,7 +12,8 @@ import struct
 from enum import IntEnum
 
 from lolacli.devices.base import Device
-from lolacli.devices.od import DataType, Entry
+from lolacli.od import OdEntry
+from lolacli.wire.datatypes import DataType
 
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
@@ -140,7 +141,7 @@ class Cia402Drive(Device):
             (ERROR_CODE, "Error code", DataType.UNSIGNED16, "ro"),
         ):
             if (index, 0) in od:
-                entry = od.entry(index, 0)
+                entry = od.require(index, 0)
                 entry.access, entry.data_type, entry.name = access, dtype, name
             else:
                 od.add_var(index, name, dtype, 0, access=access, pdo=True)
@@ -157,7 +158,7 @@ class Cia402Drive(Device):
         od.set(MODES, 0, MODE_CSP)
         self.power = Cia402State.NOT_READY_TO_SWITCH_ON
         self._previous_cw = 0
-        self._cyclic: dict[int, Entry] | None = None
+        self._cyclic: dict[int, OdEntry] | None = None
         self._update_status()
 
     def fault(self, error_code: int = 0x5530) -> None:
@@ -166,11 +167,11 @@ class Cia402Drive(Device):
         self.power = Cia402State.FAULT_REACTION_ACTIVE
         self._update_status()
 
-    def _entries(self) -> dict[int, Entry]:
+    def _entries(self) -> dict[int, OdEntry]:
         """The cyclic objects' entries, looked up once (the hot path reads their bytes)."""
         if self._cyclic is None:
             self._cyclic = {
-                index: self.od.entry(index, 0)
+                index: self.od.require(index, 0)
                 for index in (
                     CONTROLWORD,
                     STATUSWORD,
@@ -215,7 +216,7 @@ class Cia402Drive(Device):
             return e[TARGET_VELOCITY].value == _ZERO4
         return e[POSITION_ACTUAL].value == e[TARGET_POSITION].value
 
-    def _move(self, e: dict[int, Entry], mode: int, dt_ns: int) -> None:
+    def _move(self, e: dict[int, OdEntry], mode: int, dt_ns: int) -> None:
         if self.power != S.OPERATION_ENABLED:
             e[VELOCITY_ACTUAL].value = _ZERO4
             return
@@ -233,7 +234,7 @@ class Cia402Drive(Device):
         e[POSITION_ACTUAL].value = _I32.pack(_int32(new))
         e[VELOCITY_ACTUAL].value = _I32.pack(_int32(velocity))
 
-    def _update_status(self, e: dict[int, Entry] | None = None) -> None:
+    def _update_status(self, e: dict[int, OdEntry] | None = None) -> None:
         e = e or self._entries()
         power = self.power
         status = _STATUS_BITS[power]

@@ -30,9 +30,10 @@ from dataclasses import dataclass
 from lolacli.devices.base import Device
 from lolacli.devices.cia402 import Cia402Drive, Cia402State
 from lolacli.devices.io import _FLOAT_PACK, AnalogInput, DigitalIo
-from lolacli.devices.od import DataType, Entry
 from lolacli.eni.model import Direction
 from lolacli.errors import LolaError
+from lolacli.od import OdEntry
+from lolacli.wire.datatypes import DataType
 
 KIND_GENERIC = 2
 KIND_CIA402 = 3
@@ -91,7 +92,7 @@ class FlatDevice:
     device: Device
     kind: int
     version: int  # the od.version the tables were made for
-    slots: tuple[tuple[Entry, int, int], ...]  # entry, offset in vals, bytes
+    slots: tuple[tuple[OdEntry, int, int], ...]  # entry, offset in vals, bytes
     vals: bytearray
     out_map: array[int]  # rows of 4
     in_map: array[int]
@@ -177,10 +178,10 @@ class _Builder:
     def __init__(self, device: Device, kind: int) -> None:
         self.device = device
         self.kind = kind
-        self.slots: dict[int, tuple[Entry, int, int]] = {}
+        self.slots: dict[int, tuple[OdEntry, int, int]] = {}
         self.size = 0
 
-    def slot(self, entry: Entry, size: int | None = None) -> int:
+    def slot(self, entry: OdEntry, size: int | None = None) -> int:
         """The entry's offset in vals (one slot per entry); ``size``: the length the
         cycle writes, which must be the value's."""
         if type(entry.value) not in (bytes, bytearray):

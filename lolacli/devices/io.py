@@ -15,16 +15,17 @@ import struct
 from collections.abc import Callable
 
 from lolacli.devices.base import Device
-from lolacli.devices.od import DataType, Entry, decode_value
 from lolacli.eni.model import Direction
+from lolacli.od import OdEntry
+from lolacli.wire.datatypes import DataType, Value
 
 
 def _inputs(device: Device) -> list[tuple[int, int, int]]:
     return [m for m in device.mapping(Direction.INPUT) if m[0]]
 
 
-_Echo = tuple[int, Entry, Entry | None, int]
-_Channel = tuple[Entry, float, Callable[[float], bytes] | None, int, int, int, int]
+_Echo = tuple[int, OdEntry, OdEntry | None, int]
+_Channel = tuple[OdEntry, float, Callable[[float], bytes] | None, int, int, int, int]
 
 
 class DigitalIo(Device):
@@ -53,8 +54,8 @@ class DigitalIo(Device):
         outputs = [m for m in self.mapping(Direction.OUTPUT) if m[0]]
         out = []
         for i, (index, sub, bits) in enumerate(_inputs(self)):
-            source = self.od.entry(*outputs[i][:2]) if i < len(outputs) else None
-            out.append((i, self.od.entry(index, sub), source, bits))
+            source = self.od.require(*outputs[i][:2]) if i < len(outputs) else None
+            out.append((i, self.od.require(index, sub), source, bits))
         self._channel_cache = (key, out)
         return out
 
@@ -92,8 +93,8 @@ class AnalogInput(Device):
             return cached[1]
         out = []
         for i, (index, sub, bits) in enumerate(_inputs(self)):
-            entry = self.od.entry(index, sub)
-            dtype = entry.data_type
+            entry = self.od.require(index, sub)
+            dtype = entry.data_type or 0
             pack = _FLOAT_PACK.get(dtype)
             full = (1 << (bits - 1)) - 1 if bits > 1 else 1
             offset = full if dtype in _UNSIGNED else 0
@@ -116,9 +117,8 @@ class CanGateway(AnalogInput):
 
     scale = 100.0
 
-    def values(self) -> dict[str, float | int | str | bytes]:
+    def values(self) -> dict[str, Value]:
         return {
-            e.name: decode_value(e.data_type, e.value)
+            self.od.require(index, sub).name: self.od.get(index, sub)
             for index, sub, _ in _inputs(self)
-            for e in [self.od.entry(index, sub)]
         }

@@ -17,8 +17,8 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from lolacli.devices.od import ObjectDictionary, access_flags
 from lolacli.errors import SdoAbortError
+from lolacli.od import Dictionary, access_word
 from lolacli.wire.sdo import SdoAbortCode
 
 _MBX = struct.Struct("<HHBB")
@@ -60,7 +60,7 @@ class _Transfer:
 class SdoServer:
     """Serves one object dictionary over CoE; ``mailbox_bytes`` is the mailbox-in size."""
 
-    def __init__(self, od: ObjectDictionary, mailbox_bytes: int = 128) -> None:
+    def __init__(self, od: Dictionary, mailbox_bytes: int = 128) -> None:
         self.od = od
         self.mailbox_bytes = mailbox_bytes
         self._counter = 0
@@ -145,7 +145,7 @@ class SdoServer:
             if len(data) >= size:
                 self._store(index, subindex, data, complete)
             else:
-                self.od.entry(index, subindex)  # exists? (abort early otherwise)
+                self.od.require(index, subindex)  # exists? (abort early otherwise)
                 self._download = _Transfer(index, subindex, bytearray(data), 0, size, complete)
         response = _SDO.pack(0x60 | (0x10 if complete else 0), index, subindex) + bytes(4)
         return self._coe(SERVICE_SDO_RESPONSE, response)
@@ -172,8 +172,8 @@ class SdoServer:
             count, pos = data[0], 2
         writes = []
         for sub in range(1, count + 1):
-            entry = self.od.entry(index, sub)
-            size = max(1, (entry.bit_size + 7) // 8)
+            entry = self.od.require(index, sub)
+            size = max(1, (entry.bits + 7) // 8)
             if pos + size > len(data):
                 raise SdoAbortError(index, sub, SdoAbortCode.LENGTH_MISMATCH)
             writes.append((sub, data[pos : pos + size]))
@@ -236,7 +236,7 @@ class SdoServer:
             raise SdoAbortError(index, subindex, SdoAbortCode.NO_OBJECT)
         if subindex > 1:
             raise SdoAbortError(index, subindex, SdoAbortCode.UNSUPPORTED_ACCESS)
-        count = obj.entries[0].value[0] if 0 in obj.entries else 0
+        count = obj.entries[0].value[0] if 0 in obj.entries and obj.entries[0].value else 0
         out = bytearray()
         if subindex == 0:
             out += bytes([count, 0])
@@ -306,14 +306,13 @@ class SdoServer:
         if obj is None:
             raise SdoAbortError(index, 0, SdoAbortCode.NO_OBJECT)
         first = obj.entries.get(1 if obj.max_subindex else 0)
-        dtype = first.data_type if first else 0
+        dtype = (first.data_type or 0) if first else 0
         payload = struct.pack("<HHBB", index, dtype, obj.max_subindex, obj.object_code)
         return self._info_reply(INFO_OBJECT_DESCRIPTION_RESPONSE, payload + obj.name.encode())
 
     def _entry_description(self, index: int, subindex: int, info: int) -> list[bytes]:
-        entry = self.od.entry(index, subindex)
-        access = access_flags(entry)
+        entry = self.od.require(index, subindex)
         payload = struct.pack(
-            "<HBBHHH", index, subindex, info, entry.data_type, entry.bit_size, access
+            "<HBBHHH", index, subindex, info, entry.data_type or 0, entry.bits, access_word(entry)
         )
         return self._info_reply(INFO_ENTRY_DESCRIPTION_RESPONSE, payload + entry.name.encode())

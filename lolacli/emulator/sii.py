@@ -16,6 +16,7 @@ from lolacli.devices.base import assigned_pdos
 from lolacli.eni.esi import EsiDevice
 from lolacli.eni.model import ConfiguredSyncManager, Direction, Pdo, Slave
 from lolacli.errors import WireError
+from lolacli.wire.datatypes import data_type_from_name
 from lolacli.wire.registers import (
     SM_CONTROL_INPUTS,
     SM_CONTROL_MAILBOX_IN,
@@ -54,33 +55,6 @@ from lolacli.wire.sii import (  # the one definition of every layout and code
 )
 
 _U16 = struct.Struct("<H")
-
-#: CoE data type codes of ENI/ESI type names (ETG.1000.6 Table 64).
-DATA_TYPE_CODES = {
-    "BOOL": 0x01,
-    "BIT": 0x01,
-    "SINT": 0x02,
-    "INT": 0x03,
-    "DINT": 0x04,
-    "USINT": 0x05,
-    "UINT": 0x06,
-    "UDINT": 0x07,
-    "REAL": 0x08,
-    "STRING": 0x09,
-    "LREAL": 0x11,
-    "LINT": 0x15,
-    "ULINT": 0x1B,
-    "BYTE": 0x05,
-    "WORD": 0x06,
-    "DWORD": 0x07,
-    "BIT2": 0x31,
-    "BIT3": 0x32,
-    "BIT4": 0x33,
-    "BIT5": 0x34,
-    "BIT6": 0x35,
-    "BIT7": 0x36,
-    "BIT8": 0x37,
-}
 
 _PROTOCOL_NAMES = {name: int(bit) for bit, name in PROTOCOL_NAMES}  # "CoE" -> 0x04
 
@@ -154,6 +128,14 @@ class SiiSpec:
     config_data: bytes = b""  # ESI <ConfigData>: header words 0..6 (PDI control, ...)
 
 
+def _type_code(name: str) -> int:
+    """The CoE data type code (ETG.1000.6 Table 64) of an ENI/ESI type name, as every
+    reader of one types it (:func:`lolacli.wire.datatypes.data_type_from_name`); 0 when
+    it names none."""
+    found = data_type_from_name(name) if name else None
+    return 0 if found is None else int(found)
+
+
 def _sii_pdos(pdos: list[Pdo], sm_of: dict[int, int]) -> list[SiiPdo]:
     """The PDOs as SII states them: a PDO that no sync manager takes by default has SM
     0xFF, so a master that maps from the SII leaves it out."""
@@ -164,9 +146,7 @@ def _sii_pdos(pdos: list[Pdo], sm_of: dict[int, int]) -> list[SiiPdo]:
             if pdo.sync_manager is not None
             else sm_of.get(pdo.index, PDO_NOT_ASSIGNED),
             tuple(
-                SiiPdoEntry(
-                    e.index, e.subindex, e.bit_size, DATA_TYPE_CODES.get(e.data_type.upper(), 0)
-                )
+                SiiPdoEntry(e.index, e.subindex, e.bit_size, _type_code(e.data_type))
                 for e in pdo.entries
             ),
             flags=(0x0001 if pdo.mandatory else 0) | (0x0010 if pdo.fixed else 0),

@@ -20,10 +20,11 @@ import shlex
 from dataclasses import dataclass
 from typing import Any
 
-from lolacli.eni.esi_dictionary import EsiDictionary, read_dictionary
+from lolacli.eni.esi_dictionary import read_dictionary
 from lolacli.eni.model import Direction, Identity, Pdo, PdoEntry
 from lolacli.eni.parser import ENI_ROOTS, parse_number, safe_tree
 from lolacli.errors import EniError
+from lolacli.od.model import Dictionary
 
 _El = Any  # an lxml element (lxml ships no type information)
 
@@ -89,7 +90,7 @@ class EsiDevice:
     dc_op_modes: tuple[EsiDcOpMode, ...] = ()
     eeprom: EsiEeprom | None = None
     line: int | None = None
-    dictionary: EsiDictionary | None = None
+    dictionary: Dictionary | None = None
 
     def sync_manager(self, kind: str) -> EsiSyncManager | None:
         """The first SM of ``kind`` (case-insensitive), or None."""

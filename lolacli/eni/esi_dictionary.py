@@ -1,6 +1,7 @@
 """The object dictionary of an ESI device: ``<Profile>/<Dictionary>`` (ETG.2000 §5.4.3).
 
-Pure: lxml elements in, frozen dataclasses out. A dictionary has ``<DataTypes>`` (base
+Pure: lxml elements in, the one dictionary model out (:class:`lolacli.od.Dictionary`,
+source ``esi``; its entries' values are the defaults). A dictionary has ``<DataTypes>`` (base
 types by IEC name, records with ``<SubItem>``s, arrays with ``<ArrayInfo>``, enums with a
 ``<BaseType>``) and ``<Objects>``; each object names its type, and this module expands it
 into the entries an SDO client addresses: one for a variable, sub 0 plus one per
@@ -18,54 +19,16 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from lolacli.errors import EniError
+from lolacli.od.model import ARRAY, RECORD, VAR, Dictionary, OdEntry, OdObject
 from lolacli.wire.datatypes import DataType, data_type_from_name
 
 _El = Any  # an lxml element
-
-VAR = "VAR"
-ARRAY = "ARRAY"
-RECORD = "RECORD"
 
 
 class _Reader(Protocol):
     def number(self, el: _El, text: str | None, what: str, default: int | None = None) -> int: ...
 
     def error(self, el: _El | None, message: str) -> EniError: ...
-
-
-@dataclass(frozen=True, slots=True)
-class EsiEntry:
-    """One addressable entry. ``data_type`` is None where the ESI's type is not a basic
-    type this codec knows (a nested record); ``type_name`` keeps the ESI's own name."""
-
-    subindex: int
-    name: str
-    type_name: str
-    data_type: int | None
-    bit_size: int
-    access: str = "ro"  # ro, rw, wo
-    pdo_mapping: str = ""  # "R", "T", "RT" or ""
-    default: bytes | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class EsiObject:
-    index: int
-    name: str
-    type_name: str
-    object_code: str  # VAR, ARRAY, RECORD
-    entries: tuple[EsiEntry, ...]
-
-    def entry(self, subindex: int) -> EsiEntry | None:
-        return next((e for e in self.entries if e.subindex == subindex), None)
-
-
-@dataclass(frozen=True, slots=True)
-class EsiDictionary:
-    objects: tuple[EsiObject, ...]
-
-    def object(self, index: int) -> EsiObject | None:
-        return next((o for o in self.objects if o.index == index), None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,7 +49,7 @@ class _Type:
     items: tuple[_SubItem, ...]
 
 
-def read_dictionary(el: _El | None, reader: _Reader) -> EsiDictionary | None:
+def read_dictionary(el: _El | None, reader: _Reader) -> Dictionary | None:
     """The dictionary under ``<Dictionary>``, or None when the device has none."""
     if el is None:
         return None
@@ -94,8 +57,8 @@ def read_dictionary(el: _El | None, reader: _Reader) -> EsiDictionary | None:
     for t in el.iterfind("DataTypes/DataType"):
         parsed = _data_type(t, reader)
         types.setdefault(parsed.name, parsed)
-    objects = tuple(_object(o, types, reader) for o in el.iterfind("Objects/Object"))
-    return EsiDictionary(objects)
+    objects = [_object(o, types, reader) for o in el.iterfind("Objects/Object")]
+    return Dictionary(objects, "esi")
 
 
 def _text(el: _El | None, name: str) -> str:
@@ -159,23 +122,23 @@ def _basic(type_name: str, types: dict[str, _Type]) -> int | None:
     return None
 
 
-def _object(el: _El, types: dict[str, _Type], reader: _Reader) -> EsiObject:
+def _object(el: _El, types: dict[str, _Type], reader: _Reader) -> OdObject:
     index = reader.number(el, _text(el, "Index"), "<Index>")
     name = _text(el, "Name")
     type_name = _text(el, "Type")
     access = _access(el) or "ro"
-    pdo = _text(el, "Flags/PdoMapping").upper()
+    pdo = bool(_text(el, "Flags/PdoMapping"))
     t = types.get(type_name)
     info = el.find("Info")
     if t is None or not t.items:
         bits = reader.number(el, _text(el, "BitSize"), "<BitSize>", 0)
         data_type = _basic(type_name, types)
         default = _default(info, data_type, bits, reader)
-        entry = EsiEntry(0, name, type_name, data_type, bits, access, pdo, default)
-        return EsiObject(index, name, type_name, VAR, (entry,))
-    entries = _expand(t, types, access)
+        entry = OdEntry(index, 0, name, data_type, access, bits, default or b"", pdo)
+        return OdObject.of(index, name, VAR, [entry])
+    entries = _expand(index, t, types, access)
     code = ARRAY if any(_is_array(i, types) for i in t.items) else RECORD
-    return EsiObject(index, name, type_name, code, _with_defaults(entries, info, reader))
+    return OdObject.of(index, name, code, _with_defaults(entries, info, reader))
 
 
 def _is_array(item: _SubItem, types: dict[str, _Type]) -> bool:
@@ -183,8 +146,8 @@ def _is_array(item: _SubItem, types: dict[str, _Type]) -> bool:
     return item.subindex is None and t is not None and t.array is not None and not t.items
 
 
-def _expand(t: _Type, types: dict[str, _Type], access: str) -> list[EsiEntry]:
-    entries: list[EsiEntry] = []
+def _expand(index: int, t: _Type, types: dict[str, _Type], access: str) -> list[OdEntry]:
+    entries: list[OdEntry] = []
     next_sub = 0
     for item in t.items:
         item_access = item.access or access
@@ -200,25 +163,24 @@ def _expand(t: _Type, types: dict[str, _Type], access: str) -> list[EsiEntry]:
             for k in range(count):
                 sub = start + k
                 entries.append(
-                    EsiEntry(sub, f"{item.name} {k + 1}", base, data_type, bits, item_access)
+                    OdEntry(index, sub, f"{item.name} {k + 1}", data_type, item_access, bits)
                 )
             next_sub = start + count
             continue
         sub = item.subindex if item.subindex is not None else next_sub
         data_type = _basic(item.type_name, types)
         entries.append(
-            EsiEntry(sub, item.name, item.type_name, data_type, item.bit_size, item_access)
+            OdEntry(index, sub, item.name, data_type, item_access, item.bit_size)
         )
         next_sub = sub + 1
     return entries
 
 
-def _with_defaults(
-    entries: list[EsiEntry], info: _El | None, reader: _Reader
-) -> tuple[EsiEntry, ...]:
+def _with_defaults(entries: list[OdEntry], info: _El | None, reader: _Reader) -> list[OdEntry]:
+    """Names and defaults of ``<Info>/<SubItem>``s, onto the entries (in place)."""
     if info is None:
-        return tuple(entries)
-    out = list(entries)
+        return entries
+    out = entries
     used: set[int] = set()
     cursor = 0
     for sub_info in info.iterfind("SubItem"):
@@ -228,20 +190,14 @@ def _with_defaults(
             k = next((i for i in range(cursor, len(out)) if i not in used), None)
             if k is None:
                 continue
-            out[k] = _replace(out[k], name=name or out[k].name)
+            out[k].name = name or out[k].name
         used.add(k)
         cursor = k + 1
         e = out[k]
-        default = _default(sub_info.find("Info"), e.data_type, e.bit_size, reader)
+        default = _default(sub_info.find("Info"), e.data_type, e.bits, reader)
         if default is not None:
-            out[k] = _replace(e, default=default)
-    return tuple(out)
-
-
-def _replace(e: EsiEntry, **changes: Any) -> EsiEntry:
-    from dataclasses import replace
-
-    return replace(e, **changes)
+            e.value = default
+    return out
 
 
 def _default(info: _El | None, data_type: int | None, bits: int, reader: _Reader) -> bytes | None:
@@ -271,4 +227,4 @@ def _default(info: _El | None, data_type: int | None, bits: int, reader: _Reader
     return None
 
 
-__all__ = ["ARRAY", "RECORD", "VAR", "EsiDictionary", "EsiEntry", "EsiObject", "read_dictionary"]
+__all__ = ["read_dictionary"]

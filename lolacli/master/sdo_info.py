@@ -9,15 +9,15 @@ later fragments continues the first's (ETG.1000.6 Table 48). An SDO Info Error a
 raised as :class:`~lolacli.errors.SdoAbortError` with its abort code.
 
 The codecs are :mod:`lolacli.wire.sdo`'s; this module only runs the conversation through
-a :class:`~lolacli.master.mailbox.MailboxClient`.
+a :class:`~lolacli.master.mailbox.MailboxClient`; what it reads is the one dictionary model
+(:func:`lolacli.od.from_sdo_info`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from lolacli.errors import SdoAbortError, WireError
 from lolacli.master.mailbox import MailboxClient
+from lolacli.od import Dictionary, from_sdo_info
 from lolacli.wire.coe import COE_HEADER_BYTES, CoeService, decode_coe_header
 from lolacli.wire.mailbox import MailboxType
 from lolacli.wire.sdo import (
@@ -38,30 +38,6 @@ from lolacli.wire.sdo import (
 #: CoE header + SDO Information header (opcode, reserved, fragments left)
 _INFO_PREFIX_BYTES = COE_HEADER_BYTES + 4
 _INCOMPLETE = 0x80
-#: object codes (ETG.1000.6 Table 52)
-OBJECT_CODE_VAR = 7
-#: the access word's bits (ETG.1000.6 Table 54): read in PREOP/SAFEOP/OP, write in them
-ACCESS_READ = 0x07
-ACCESS_WRITE = 0x38
-
-
-@dataclass(frozen=True, slots=True)
-class EntryInfo:
-    subindex: int
-    name: str
-    data_type: int
-    bit_length: int
-    access: int  # the access word as sent
-
-
-@dataclass(frozen=True, slots=True)
-class ObjectInfo:
-    index: int
-    name: str
-    object_code: int
-    data_type: int
-    max_subindex: int
-    entries: tuple[EntryInfo, ...]
 
 
 def _ask(mailbox: MailboxClient, request: object, index: int, subindex: int) -> object:
@@ -117,9 +93,7 @@ def entry_description(
     return reply
 
 
-def read_dictionary(
-    mailbox: MailboxClient, indexes: tuple[int, ...] | None = None
-) -> list[ObjectInfo]:
+def read_dictionary(mailbox: MailboxClient, indexes: tuple[int, ...] | None = None) -> Dictionary:
     """Every object of the slave (or those of ``indexes``, as :func:`od_list` gave them)
     with every entry from sub 0 to its highest subindex (a record's missing entries,
     answered with an error, are left out)."""
@@ -133,26 +107,12 @@ def read_dictionary(
             except SdoAbortError:
                 continue
             name = e.description().decode("utf-8", "replace")
-            entries.append(EntryInfo(sub, name, e.data_type, e.bit_length, e.object_access))
-        out.append(
-            ObjectInfo(
-                index,
-                obj.name_text,
-                obj.object_code,
-                obj.data_type,
-                obj.max_subindex,
-                tuple(entries),
-            )
-        )
-    return out
+            entries.append((sub, name, e.data_type, e.bit_length, e.object_access))
+        out.append((index, obj.name_text, obj.object_code, obj.data_type, 0, entries))
+    return from_sdo_info(out)
 
 
 __all__ = [
-    "ACCESS_READ",
-    "ACCESS_WRITE",
-    "OBJECT_CODE_VAR",
-    "EntryInfo",
-    "ObjectInfo",
     "entry_description",
     "object_description",
     "od_list",

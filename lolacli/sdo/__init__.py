@@ -1,7 +1,8 @@
 """SDO access to slaves: one client API over interchangeable transports.
 
 * :mod:`lolacli.sdo.client` — the :class:`SdoClient` seam, typed :func:`read`/:func:`write`;
-* :mod:`lolacli.sdo.dictionary` — object descriptions from EDS, ESI or SDO Information;
+* :mod:`lolacli.od` (not here: a lower layer) — the one dictionary model, from EDS, ESI,
+  ENI or SDO Information;
 * :mod:`lolacli.sdo.canopen_client` — CANopen (canopen + python-can);
 * :mod:`lolacli.sdo.soem_client` — EtherCAT through pysoem;
 * :mod:`lolacli.sdo.session` — transport selection and SLAVE resolution;

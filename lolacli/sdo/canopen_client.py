@@ -13,8 +13,8 @@ import logging
 from typing import Any
 
 from lolacli.errors import TransportError, UsageError
+from lolacli.od import Dictionary
 from lolacli.sdo.client import abort_error
-from lolacli.sdo.dictionary import Dictionary
 from lolacli.text import number
 
 #: The group python-can's udp_multicast uses for IPv4 (its default is an IPv6 group).

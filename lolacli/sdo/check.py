@@ -16,7 +16,7 @@ first problem in one line (file, line, item, key): an :class:`InputError`, exit 
 value or expected value that does not fit the item's ``type:`` is such a problem too.
 
 :func:`run_check` types each item as ``sdo read``/``write`` do (the target's
-:class:`~lolacli.sdo.entry_type.TypeLookup`), and adds each result to the report as
+:class:`~lolacli.od.lookup.TypeLookup`), and adds each result to the report as
 it is made, so that a stop (Ctrl-C) leaves the results so far.
 """
 
@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lolacli.errors import InputError, SdoAbortError, UsageError
+from lolacli.od.lookup import EntryType, format_value
 from lolacli.sdo.address import ObjectAddress, parse_object
 from lolacli.sdo.client import decode, encode_text, json_value
-from lolacli.sdo.entry_type import EntryType, format_value
 from lolacli.sdo.session import Session, Target
 from lolacli.wire.datatypes import (
     DataType,

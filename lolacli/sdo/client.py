@@ -7,7 +7,7 @@ own object dictionary where it has the SDO Information service. Backends raise
 :class:`~lolacli.errors.TransportError` when the slave does not answer (exit 4).
 
 :func:`read` and :func:`write` add the value types and names, decided by
-:meth:`lolacli.sdo.entry_type.TypeLookup.entry_type` (the one lookup of every ``sdo``
+:meth:`lolacli.od.lookup.TypeLookup.entry_type` (the one lookup of every ``sdo``
 command: ``--type``, the device's dictionary, SDO Information, CiA 301, a stated guess).
 """
 
@@ -16,13 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from lolacli.errors import SdoAbortError, UsageError, WireError
-from lolacli.sdo.dictionary import Dictionary
-from lolacli.sdo.entry_type import (
+from lolacli.errors import SdoAbortError, UsageError
+from lolacli.od import Dictionary
+from lolacli.od.lookup import (
     Describes,
     EntryType,
     TypeLookup,
+    decode,
     format_value,
+    json_value,
 )
 from lolacli.wire.datatypes import (
     DataType,
@@ -81,7 +83,7 @@ class SdoValue:
 
     ``data_type`` is the type's name (``UNSIGNED32``; the object code, ``RECORD``, for
     complete access), ``type_code`` its number, ``type_source`` one of
-    :data:`lolacli.sdo.entry_type.TYPE_SOURCES`; ``note`` is for stderr (a guess, an
+    :data:`lolacli.od.lookup.TYPE_SOURCES`; ``note`` is for stderr (a guess, an
     override, bytes that do not fit the type)."""
 
     slave: str
@@ -115,30 +117,6 @@ class SdoValue:
             "type_source": self.type_source,
             "complete_access": self.complete_access,
         }
-
-
-def json_value(value: Any) -> Any:
-    """Bytes as hex text; lists of complete-access items recursively; the rest as is."""
-    if isinstance(value, bytes | bytearray):
-        return bytes(value).hex()
-    if isinstance(value, list):
-        return [{k: json_value(v) for k, v in item.items()} for item in value]
-    if isinstance(value, float) and value != value:  # NaN is not JSON
-        return None
-    return value
-
-
-def decode(raw: bytes, typed: EntryType) -> tuple[Value, int | None, str]:
-    """(value, type it was decoded as, note) of bytes read as ``typed``: bytes that do not
-    fit the type are kept as octets, and the note says so."""
-    note = typed.note
-    if typed.data_type is None:
-        return bytes(raw), None, note
-    try:
-        return decode_value(typed.data_type, raw), typed.data_type, note
-    except WireError as exc:
-        why = f"{typed.address}: {exc}; shown as octets"
-        return bytes(raw), DataType.OCTET_STRING, f"{note}; {why}" if note else why
 
 
 def lookup_for(client: SdoClient, dictionary: Dictionary | None = None) -> TypeLookup:
@@ -260,7 +238,7 @@ def complete_value(
     if subindex == 0 and raw:
         items.append(_item(lookup, index, 0, raw[0]))
         pos = 2
-    subs = [e.subindex for e in obj.entries if e.subindex > 0]
+    subs = [e.subindex for e in obj if e.subindex > 0]
     if count is not None:
         subs = [s for s in subs if s <= count]
     note = ""
@@ -288,7 +266,7 @@ def complete_value(
         )
         pos += size
     return SdoValue(
-        slave, index, subindex, raw, items, obj.object_code, source, obj.name, True, note
+        slave, index, subindex, raw, items, obj.object_code.name, source, obj.name, True, note
     )
 
 

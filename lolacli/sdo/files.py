@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError
 from lolacli.files import MAX_ENI_BYTES
-from lolacli.sdo.dictionary import Dictionary, from_canopen, from_esi
+from lolacli.od import Dictionary
+from lolacli.od.eds import from_canopen
 
 if TYPE_CHECKING:  # the ESI modules load only where an ESI is read (start-up time)
     from lolacli.eni.esi import EsiDevice, EsiFile
@@ -89,7 +90,7 @@ def esi_dictionary(files: list[EsiFile], identity: Identity | None) -> Dictionar
     if device is None or device.dictionary is None:
         return None
     source = next((f.source for f in files if device in f.devices), "")
-    return from_esi(device.dictionary, source)
+    return device.dictionary.relabeled("esi", source)
 
 
 __all__ = ["esi_device", "esi_dictionary", "load_eds", "load_eds_od", "read_text_file"]

@@ -6,7 +6,7 @@ matching the slave's identity. With no transport, the file alone (``--esi`` with
 ``--eni`` to pick the device by SLAVE's identity).
 
 Each entry's type and name come from the one lookup of every ``sdo`` command
-(:meth:`lolacli.sdo.entry_type.TypeLookup.entry_type`), the listed dictionary taking the
+(:meth:`lolacli.od.lookup.TypeLookup.entry_type`), the listed dictionary taking the
 place of its source in it, so that ``sdo list`` and ``sdo read`` say the same of an entry.
 """
 
@@ -15,9 +15,9 @@ from __future__ import annotations
 from typing import Any
 
 from lolacli.errors import UsageError
+from lolacli.od import Dictionary, OdEntry
+from lolacli.od.lookup import EntryType, TypeLookup
 from lolacli.sdo.client import json_value
-from lolacli.sdo.dictionary import Dictionary, OdEntry
-from lolacli.sdo.entry_type import EntryType, TypeLookup
 from lolacli.sdo.session import TransportOptions, open_session
 from lolacli.text import plural
 
@@ -39,8 +39,8 @@ def dictionary_report(
                 "index": o.index,
                 "object": f"0x{o.index:04X}",
                 "name": o.name,
-                "object_code": o.object_code,
-                "entries": [_entry(e, lookup.entry_type(e.index, e.subindex)) for e in o.entries],
+                "object_code": o.object_code.name,
+                "entries": [_entry(e, lookup.entry_type(e.index, e.subindex)) for e in o],
             }
             for o in dictionary
         ],
@@ -95,10 +95,10 @@ def _offline_esi(
     ENI slave's device when ``--eni`` names the slave (and the ENI's PDO entries of it,
     the next source of types), else the ESI's only device with a dictionary (SLAVE is
     not on any bus then: the label says which device it is)."""
+    from lolacli.eni.dictionary import from_eni
     from lolacli.errors import InputError
     from lolacli.files import load_eni, load_esi
     from lolacli.sdo.address import resolve_slave
-    from lolacli.sdo.dictionary import from_eni
     from lolacli.sdo.files import esi_dictionary
 
     files = [load_esi(p) for p in options.esi]

@@ -25,17 +25,8 @@ from lolacli.errors import (
     UsageError,
     WireError,
 )
+from lolacli.od import Dictionary, OdEntry, OdObject, info_entry, object_code
 from lolacli.sdo.address import SlaveRef, slave_refs
-from lolacli.sdo.dictionary import (
-    ARRAY,
-    RECORD,
-    VAR,
-    Dictionary,
-    OdEntry,
-    OdObject,
-    access_text,
-    from_sdo_info,
-)
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni, Slave
@@ -141,7 +132,7 @@ class LolaClient:
 
     def sdo_info(self) -> SdoInfoEntries:
         """The slave's SDO Information service as a source of entry types and names,
-        asked entry by entry (:mod:`lolacli.sdo.entry_type`)."""
+        asked entry by entry (:mod:`lolacli.od.lookup`)."""
         if self._info is None:
             self._info = SdoInfoEntries(self)
         return self._info
@@ -158,20 +149,9 @@ class LolaClient:
         except TransportError as exc:
             raise TransportError(f"{self.description}: SDO Information: {exc}") from None
         try:
-            objects = read_dictionary(self.mailbox, indexes)
+            return read_dictionary(self.mailbox, indexes)
         except (TransportError, WireError) as exc:
             raise TransportError(f"{self.description}: SDO Information: {exc}") from None
-        return from_sdo_info(
-            (
-                o.index,
-                o.name,
-                o.object_code,
-                o.data_type,
-                0,
-                ((e.subindex, e.name, e.data_type, e.bit_length, e.access) for e in o.entries),
-            )
-            for o in objects
-        )
 
     def close(self) -> None:
         """Nothing of its own: the session closes the bus."""
@@ -217,16 +197,8 @@ class SdoInfoEntries:
         except (WireError, TransportError):
             self.available = False
             return None
-        return OdEntry(
-            index,
-            subindex,
-            e.description().decode("utf-8", "replace"),
-            e.data_type or None,
-            access_text(e.object_access),
-            e.bit_length or None,
-            None,
-            bool(e.object_access & 0xC0),
-        )
+        name = e.description().decode("utf-8", "replace")
+        return info_entry(index, subindex, name, e.data_type, e.bit_length, e.object_access)
 
     def _ask_object(self, index: int) -> OdObject | None:
         from lolacli.master.sdo_info import object_description
@@ -241,13 +213,8 @@ class SdoInfoEntries:
             self.available = False
             return None
         entries = [self.entry(index, sub) for sub in range(o.max_subindex + 1)]
-        codes = {7: VAR, 8: ARRAY, 9: RECORD}
-        return OdObject(
-            index,
-            o.name_text,
-            codes.get(o.object_code, VAR),
-            tuple(e for e in entries if e is not None),
-        )
+        found = [e for e in entries if e is not None]
+        return OdObject.of(index, o.name_text, object_code(o.object_code), found)
 
 
 __all__ = ["LolaBus", "LolaClient", "SdoInfoEntries"]

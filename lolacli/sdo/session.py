@@ -19,7 +19,7 @@ Our master brings only the slaves asked for to PREOP, each when first asked for
 (:class:`lolacli.master.preop.PreopBus`).
 
 Each target carries the sources of its value types and names, in the one order of
-:mod:`lolacli.sdo.entry_type`: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device whose
+:mod:`lolacli.od.lookup`: ``--eds`` (CANopen), ``--esi`` (EtherCAT: the device whose
 identity the slave reports) and the slave's PDO entries in the ENI, then the slave's SDO
 Information (our master), then the CiA 301 objects.
 """
@@ -31,10 +31,10 @@ from pathlib import Path
 from typing import Any
 
 from lolacli.errors import UsageError
+from lolacli.od import Dictionary
+from lolacli.od.lookup import TypeLookup
 from lolacli.sdo.address import parse_node_id, resolve_ref, slave_refs
 from lolacli.sdo.client import SdoClient
-from lolacli.sdo.dictionary import Dictionary
-from lolacli.sdo.entry_type import TypeLookup
 
 BACKENDS = ("lolacli", "soem")
 
@@ -140,7 +140,7 @@ class SoemSession(Session):
         self.bus = SoemBus(options.iface, timeout_s=options.timeout_s)
 
     def target(self, spec: str | int) -> Target:
-        from lolacli.sdo.dictionary import from_eni
+        from lolacli.eni.dictionary import from_eni
         from lolacli.sdo.files import esi_dictionary
 
         on_bus = self.bus.slaves()
@@ -192,7 +192,7 @@ class LolaSession(Session):
             )
 
     def target(self, spec: str | int) -> Target:
-        from lolacli.sdo.dictionary import from_eni
+        from lolacli.eni.dictionary import from_eni
 
         ref = resolve_ref(spec, self.bus.slaves(), source=self.source)
         client = self.bus.client(ref)

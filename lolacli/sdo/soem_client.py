@@ -15,9 +15,9 @@ from __future__ import annotations
 from typing import Any
 
 from lolacli.errors import TransportError, UsageError
+from lolacli.od import Dictionary, from_sdo_info
 from lolacli.sdo.address import SlaveRef, resolve_ref
 from lolacli.sdo.client import abort_error
-from lolacli.sdo.dictionary import Dictionary, from_sdo_info
 
 FRAME_TIMEOUT_US = 20_000
 #: SOEM's wait for the broadcast that counts the slaves (its default: 20 ms).

@@ -263,6 +263,7 @@ def decode_value(data_type: int, raw: bytes) -> Value:
 #: Names a user or a device description may give a type: IEC 61131 (ESI), short forms.
 _ALIASES: dict[str, DataType] = {
     "BOOL": DataType.BOOLEAN,
+    "BIT": DataType.BOOLEAN,
     "SINT": DataType.INTEGER8,
     "INT": DataType.INTEGER16,
     "INT24": DataType.INTEGER24,

@@ -107,6 +107,13 @@ def test_segmented_upload_is_reported(corpus):
     assert txn["size_bytes"] == 6
     assert bytes.fromhex(txn["data_hex"]) == b"EK1914"
     assert (txn["start_frame"], txn["end_frame"]) == (956, 964)
+    # named, typed and printed as `sdo read` does (CiA 301 knows 0x1008)
+    assert (txn["name"], txn["data_type"], txn["type_source"]) == (
+        "Manufacturer device name",
+        "VISIBLE_STRING",
+        "cia301",
+    )
+    assert (txn["value"], txn["value_text"]) == ("EK1914", '"EK1914"')
 
 
 def test_no_slaves_gives_zero_pairs(corpus):

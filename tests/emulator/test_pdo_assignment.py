@@ -187,14 +187,14 @@ def test_pdo_configuration_is_writable_in_preop_only() -> None:
 
 
 def test_entry_description_states_the_access_rights_by_state() -> None:
-    from lolacli.devices.od import access_flags
     from lolacli.emulator.slave import device_of
+    from lolacli.od import access_word
 
     bus, _eni, _mbx = _drive_bus()
     device = device_of(bus.chain.slaves[0])
     assert device is not None
     od = device.od
-    assert access_flags(od.entry(0x6041, 0)) & 0x3F == 0x07  # read in every state
-    assert access_flags(od.entry(0x6040, 0)) & 0x3F == 0x3F  # read and write in every state
-    assert access_flags(od.entry(0x1C12, 1)) & 0x3F == 0x0F  # written in PREOP only
+    assert access_word(od.require(0x6041, 0)) & 0x3F == 0x07  # read in every state
+    assert access_word(od.require(0x6040, 0)) & 0x3F == 0x3F  # read and write in every state
+    assert access_word(od.require(0x1C12, 1)) & 0x3F == 0x0F  # written in PREOP only
     assert struct.unpack("<B", od.entry(0x1C12, 0).value)[0] >= 1

@@ -23,7 +23,7 @@ def _device(name: str, index: int = -1):
 @pytest.mark.parametrize("path", ESI, ids=corpus_ids(ESI))
 def test_every_corpus_esi_dictionary_matches_element_tree(path, corpus) -> None:
     """Per device, as many objects as its <Dictionary>/<Objects>/<Object> elements; every
-    object has entries, every entry a subindex in 0..255."""
+    object has entries, every entry its object's index and a subindex in 0..255."""
     esi = load_esi(path)
     root = ET.parse(path).getroot()
     expected = []
@@ -35,53 +35,53 @@ def test_every_corpus_esi_dictionary_matches_element_tree(path, corpus) -> None:
     got = [None if d.dictionary is None else len(d.dictionary.objects) for d in esi.devices]
     assert got == expected
     for device in esi.devices:
-        for obj in device.dictionary.objects if device.dictionary else ():
+        for obj in device.dictionary or ():
             assert obj.entries, hex(obj.index)
-            assert all(0 <= e.subindex <= 255 for e in obj.entries)
-            subs = [e.subindex for e in obj.entries]
-            assert len(set(subs)) == len(subs), (hex(obj.index), subs)
+            assert all(0 <= e.subindex <= 255 for e in obj)
+            assert all((e.index, e.subindex) == (obj.index, sub) for sub, e in obj.entries.items())
 
 
 def test_elmo_device_type_and_name(corpus) -> None:
     od = _device("elmo_ethercat_sdk").dictionary
     device_type = od.object(0x1000).entries[0]
     assert device_type.data_type == DataType.UNSIGNED32 and device_type.access == "ro"
-    assert decode_value(DataType.UNSIGNED32, device_type.default) == 0x00020192
+    assert decode_value(DataType.UNSIGNED32, device_type.value) == 0x00020192
+    assert device_type.default == 0x00020192
     name = od.object(0x1008).entries[0]
     assert name.data_type == DataType.VISIBLE_STRING
-    assert name.default == b"Elmo Motion Control"
+    assert name.value == b"Elmo Motion Control" and name.default == "Elmo Motion Control"
     # the boot firmware's DT1400: <Info> names only some sub items; matched by name
     # (sub 2, not sub 1)
     pdo = _device("elmo_ethercat_sdk", 0).dictionary.object(0x1400)
-    assert pdo.object_code == "RECORD"
-    assert pdo.entry(0).default == b"\x04"
-    assert pdo.entry(2).name == "Transmission Type" and pdo.entry(2).default == b"\xff"
+    assert pdo.object_code.name == "RECORD"
+    assert pdo.entry(0).value == b"\x04"
+    assert pdo.entry(2).name == "Transmission Type" and pdo.entry(2).value == b"\xff"
     assert pdo.entry(1).default is None
     controlword = od.object(0x6040).entries[0]
     assert (controlword.data_type, controlword.access, controlword.pdo_mapping) == (
         DataType.UNSIGNED16,
         "rw",
-        "R",
+        True,
     )
 
 
 def test_ingenia_array_elements_take_info_names(corpus) -> None:
     od = _device("kickcat__ingenia").dictionary
     assign = od.object(0x1C12)
-    assert assign.object_code == "ARRAY"
-    assert [e.subindex for e in assign.entries] == [0, 1, 2, 3]
-    assert [e.data_type for e in assign.entries[1:]] == [DataType.UNSIGNED16] * 3
+    assert assign.object_code.name == "ARRAY"
+    assert [e.subindex for e in assign] == [0, 1, 2, 3]
+    assert [e.data_type for e in assign][1:] == [DataType.UNSIGNED16] * 3
     assert assign.entries[1].name == "RxPDO assign Element 1"
-    assert assign.entries[1].default == b"\x00\x00"
+    assert assign.entries[1].value == b"\x00\x00"
     assert assign.entries[0].access == "rw"
 
 
 def test_soes_default_value_and_string(corpus) -> None:
     od = _device("soes__rtl_xmc4").dictionary
-    assert od.object(0x1000).entries[0].default == (0x1389).to_bytes(4, "little")
-    assert od.object(0x1008).entries[0].default == b"xmc48relax"
+    assert od.object(0x1000).entries[0].value == (0x1389).to_bytes(4, "little")
+    assert od.object(0x1008).entries[0].value == b"xmc48relax"
     identity = od.object(0x1018)
-    assert identity.entry(1).default == (0x1337).to_bytes(4, "little")
+    assert identity.entry(1).value == (0x1337).to_bytes(4, "little")
     assert identity.entry(0).data_type == DataType.UNSIGNED8
 
 
@@ -125,5 +125,5 @@ def test_unknown_types_and_enums(tmp_path) -> None:
     )
     od = load_esi(path).devices[0].dictionary
     enum = od.object(0x2000).entries[0]
-    assert (enum.data_type, enum.default, enum.access) == (DataType.UNSIGNED16, b"\x07\x00", "rw")
+    assert (enum.data_type, enum.value, enum.access) == (DataType.UNSIGNED16, b"\x07\x00", "rw")
     assert od.object(0x2001).entries[0].data_type is None

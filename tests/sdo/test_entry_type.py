@@ -1,5 +1,5 @@
 """The one lookup of an entry's type and name, and the one way a value is printed
-(lolacli/sdo/entry_type.py), on real dictionaries: the LOLA ENI's PDO entries of drive 5,
+(lolacli/od/lookup.py), on real dictionaries: the LOLA ENI's PDO entries of drive 5,
 the Elmo ESI that describes that drive, the gateway IMU's EDS."""
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lolacli.sdo.dictionary import Dictionary, OdEntry, OdObject, from_eni
-from lolacli.sdo.entry_type import TypeLookup, format_real, format_value
+from lolacli.eni.dictionary import from_eni
+from lolacli.od import RECORD, Dictionary, OdEntry, OdObject
+from lolacli.od.lookup import TypeLookup, format_real, format_value
 from lolacli.sdo.files import esi_dictionary, load_eds
 from lolacli.sdo.node import example_eds
 from lolacli.wire.datatypes import DataType
@@ -79,8 +80,7 @@ def test_a_name_from_a_later_source_when_the_first_has_none() -> None:
     """The type and the name are looked up apart: an entry a dictionary types but does
     not name takes its name from the next source that has one (here CiA 301)."""
     nameless = Dictionary(
-        (OdObject(0x1018, "", "RECORD", (OdEntry(0x1018, 1, "", DataType.UNSIGNED32),)),),
-        "eds",
+        [OdObject.of(0x1018, "", RECORD, [OdEntry(0x1018, 1, "", DataType.UNSIGNED32)])], "eds"
     )
     typed = TypeLookup((nameless,)).entry_type(0x1018, 1)
     assert (typed.source, typed.name) == ("eds", "Vendor ID")

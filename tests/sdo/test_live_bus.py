@@ -3,7 +3,7 @@
 ``lolacli bus emulate`` at the other end of a veth pair, each in its own process (the
 pair in a network namespace of its own: tests/live.py).
 
-The emulator answers from the device models' dictionaries (devices/od.py, cia402.py); the
+The emulator answers from the device models' dictionaries (lolacli/od, devices/cia402.py); the
 values asserted are the ones those models define (0x1000 = 0x00020192, the ENI's vendor
 in 0x1018:01, the long name in 0x1008 that needs a segmented upload). Every test runs
 with both masters, and one compares what the two print for the same commands.

@@ -1,11 +1,13 @@
 """One way to type and print a value: ``sdo read``, ``sdo write``, ``sdo check`` and ``sdo
-list`` say the same data type, name and value of an entry (lolacli/sdo/entry_type.py).
+list`` say the same data type, name and value of an entry (lolacli/od/lookup.py).
 
 The same objects go through all four commands, in process: on the emulated LOLA chain
 (identity, a PDO mapping entry, the drive's INTEGER8 mode and INTEGER32 target position,
 a segmented VISIBLE_STRING, the gateway's REAL32), and on python-can's virtual bus
 against canopen LocalNodes serving the gateway IMU's EDS and, for a BOOLEAN, the corpus's
-python-canopen sample EDS. Each command's JSON gives the same ``data_type`` and ``name``;
+python-canopen sample EDS; and on a drive whose ENI types an INTEGER24, a non-ASCII
+VISIBLE_STRING, a REAL32 and a BOOLEAN, also against the drive's own SDO Information.
+Each command's JSON gives the same ``data_type`` and ``name``;
 each human line says ``NAME  TYPE = VALUE`` in the same words, and ``sdo list`` gives the
 value the node starts with as its default in the same form.
 """
@@ -216,3 +218,88 @@ def test_a_type_given_wins_and_a_disagreement_is_said(can_nodes) -> None:
     assert code == 0 and (doc["data_type"], doc["type_source"]) == ("INTEGER16", "--type")
     assert doc["name"] == "Sample rate"  # the name still from the EDS
     assert "0x2000:00 is UNSIGNED16 by eds; taken as INTEGER16 as --type says" in err
+
+
+#: an RxPDO the ENI lists but assigns to no sync manager: objects of the drive typed by it
+#: (INTEGER24, VISIBLE_STRING, REAL32, BOOLEAN), the process image unchanged
+_TYPED_PDO = """
+				<RxPdo Fixed="false" Mandatory="false">
+					<Index>#x1601</Index>
+					<Name>Typed samples</Name>
+					<Entry><Index>#x2000</Index><SubIndex>1</SubIndex><BitLen>24</BitLen>
+						<Name>Offset 24</Name><DataType>INT24</DataType></Entry>
+					<Entry><Index>#x2000</Index><SubIndex>2</SubIndex><BitLen>48</BitLen>
+						<Name>Label</Name><DataType>STRING(6)</DataType></Entry>
+					<Entry><Index>#x2000</Index><SubIndex>3</SubIndex><BitLen>32</BitLen>
+						<Name>Gain</Name><DataType>REAL</DataType></Entry>
+					<Entry><Index>#x2000</Index><SubIndex>4</SubIndex><BitLen>1</BitLen>
+						<Name>Enable</Name><DataType>BOOL</DataType></Entry>
+				</RxPdo>"""
+#: object, value written, type, value as printed, bytes on the wire
+_TYPED = [
+    ("0x2000:01", "-70000", "INTEGER24", "-70000", (-70000).to_bytes(3, "little", signed=True)),
+    ("0x2000:02", "Maß 1°", "VISIBLE_STRING", '"Maß 1°"', "Maß 1°".encode("latin-1")),
+    ("0x2000:03", "0.1", "REAL32", "0.1", bytes.fromhex("cdcccc3d")),
+    ("0x2000:04", "true", "BOOLEAN", "true", b"\x01"),
+]
+
+
+def _typed_eni(tmp: Path) -> Path:
+    from tests.live import EXAMPLES
+
+    text = (EXAMPLES / "single_drive.xml").read_text()
+    end = text.index("</RxPdo>") + len("</RxPdo>")
+    path = tmp / "typed.xml"
+    path.write_text(text[:end] + _TYPED_PDO + text[end:])
+    return path
+
+
+def test_one_entry_typed_alike_by_every_command_and_the_drives_sdo_information(tmp_path) -> None:
+    """An INTEGER24, a VISIBLE_STRING with non-ASCII characters (latin-1 bytes on the wire),
+    a REAL32 and a BOOLEAN of the emulated drive: sdo read, write, check and list say the
+    same type, name and printed value; the drive's own SDO Information describes each with
+    the same type, and a value typed by it alone prints the same."""
+    from lolacli.od import access_text
+    from lolacli.od.lookup import TypeLookup, describe
+    from lolacli.sdo.client import read, write
+    from lolacli.sdo.session import TransportOptions, open_session
+    from lolacli.wire.datatypes import DataType
+
+    eni = _typed_eni(tmp_path)
+    bus = Bus(["--eni", str(eni)])
+    objects = [obj for obj, *_ in _TYPED]
+    _same_everywhere(bus, tmp_path, "1", objects, {obj: value for obj, value, *_ in _TYPED})
+    for obj, value, kind, printed, _raw in _TYPED:
+        code, out, err = _run("sdo", "check", _check_file(tmp_path, obj, value), "--eni", eni)
+        assert code == 0, (err, out)
+        assert f"{obj}  " in out and f"{kind} = {printed}" in out, out
+    with open_session(TransportOptions(eni=eni)) as session:
+        target = session.target("1")
+        info = target.client.dictionary()  # the drive's SDO Information, read whole
+        assert info is not None and info.source == "sdo-info"
+        only_info = TypeLookup((info,))
+        for obj, value, kind, printed, raw in _TYPED:
+            index, sub = (int(part, 16) for part in obj.split(":"))
+            described = info.entry(index, sub)
+            assert described is not None and described.data_type == DataType[kind], obj
+            assert access_text(0x3F) == described.access  # an output: rw in every state
+            written = write(target.client, index, sub, value, lookup=target.lookup)
+            assert written.raw == raw, obj
+            by_info = read(target.client, index, sub, lookup=only_info)
+            by_all = read(target.client, index, sub, lookup=target.lookup)
+            assert (by_info.type_source, by_all.type_source) == ("sdo-info", "eni")
+            assert by_info.data_type == by_all.data_type == kind, obj
+            assert by_info.text == by_all.text == printed, obj
+            said = describe(by_info.name, kind, by_info.text)
+            assert said == f"{by_all.name}  {kind} = {printed}", obj
+
+
+def _check_file(tmp: Path, obj: str, value: str) -> str:
+    path = tmp / f"one{next(_channels)}.json"
+    checks = {
+        "slave": "1",
+        "writes": [{"object": obj, "value": value}],
+        "reads": [{"object": obj, "expect": value}],
+    }
+    path.write_text(json.dumps(checks, ensure_ascii=False), encoding="utf-8")
+    return str(path)

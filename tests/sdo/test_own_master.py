@@ -100,10 +100,10 @@ def test_sdo_information_in_fragments() -> None:
     b = cut.client(cut.slaves()[4])
     assert od_list(a.mailbox) == od_list(b.mailbox)
     assert len(od_list(a.mailbox)) > 10
-    assert read_dictionary(a.mailbox) == read_dictionary(b.mailbox)
+    assert list(read_dictionary(a.mailbox)) == list(read_dictionary(b.mailbox))
     objects = {o.index: o for o in read_dictionary(b.mailbox)}
     assert objects[0x1008].name == "Manufacturer device name"
-    assert [e.name for e in objects[0x1018].entries][1:] == [
+    assert [e.name for e in objects[0x1018]][1:] == [
         "Vendor ID",
         "Product code",
         "Revision",

@@ -23,7 +23,7 @@ import pytest
     ],
 )
 def test_standard_names_of_the_communication_objects(index: int, sub: int, name: str) -> None:
-    from lolacli.sdo.dictionary import standard_name
+    from lolacli.od.cia301 import standard_name
 
     assert standard_name(index, sub) == name
 
@@ -40,7 +40,7 @@ def test_standard_names_of_the_communication_objects(index: int, sub: int, name:
     ],
 )
 def test_standard_objects_are_named(index: int, name: str) -> None:
-    from lolacli.sdo.dictionary import standard_object
+    from lolacli.od.cia301 import standard_object
 
     obj = standard_object(index, 2)
     assert obj is not None and obj.name == name

@@ -1,5 +1,6 @@
 """What an object entry is — its data type and its name — decided one way for ``sdo read``,
-``sdo write``, ``sdo check`` and ``sdo list``, and the one way its value is printed.
+``sdo write``, ``sdo check``, ``sdo list`` and the SDO transactions of a capture
+(:mod:`lolacli.capture.sdo`), and the one way its value is printed.
 
 :meth:`TypeLookup.entry_type` is the one function. It asks its sources in this order, the
 type and the name each from the first source that knows it (a source that knows only
@@ -47,14 +48,18 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from lolacli.sdo.dictionary import (
-    OdEntry,
-    OdObject,
-    standard_name,
-    standard_object,
-    standard_type,
+from lolacli.errors import WireError
+from lolacli.od import OdEntry, OdObject
+from lolacli.od.cia301 import standard_name, standard_object, standard_type
+from lolacli.wire.datatypes import (
+    DataType,
+    Value,
+    bit_size,
+    decode_value,
+    int_range,
+    size_bytes,
+    type_name,
 )
-from lolacli.wire.datatypes import DataType, bit_size, int_range, size_bytes, type_name
 
 EDS, ESI, ENI, SDO_INFO, CIA301, OPTION, GUESS = (
     "eds",
@@ -70,7 +75,7 @@ TYPE_SOURCES = (OPTION, EDS, ESI, ENI, SDO_INFO, CIA301, GUESS)
 
 
 class Describes(Protocol):
-    """A source of object descriptions: a :class:`~lolacli.sdo.dictionary.Dictionary`
+    """A source of object descriptions: a :class:`~lolacli.od.Dictionary`
     (EDS, ESI, ENI, SDO Information read whole) or the slave's SDO Information service
     asked entry by entry. ``source`` is its ``type_source``."""
 
@@ -257,6 +262,31 @@ def format_real(value: float, data_type: int | None = None) -> str:
     return repr(value)
 
 
+def decode(raw: bytes, typed: EntryType) -> tuple[Value, int | None, str]:
+    """(value, type it was decoded as, note) of bytes read as ``typed``: bytes that do not
+    fit the type are kept as octets, and the note says so."""
+    note = typed.note
+    if typed.data_type is None:
+        return bytes(raw), None, note
+    try:
+        return decode_value(typed.data_type, raw), typed.data_type, note
+    except WireError as exc:
+        why = f"{typed.address}: {exc}; shown as octets"
+        return bytes(raw), DataType.OCTET_STRING, f"{note}; {why}" if note else why
+
+
+def json_value(value: Any) -> Any:
+    """A value in JSON: bytes as hex text, lists of complete-access items recursively,
+    NaN as null (not JSON), the rest as is."""
+    if isinstance(value, bytes | bytearray):
+        return bytes(value).hex()
+    if isinstance(value, list):
+        return [{k: json_value(v) for k, v in item.items()} for item in value]
+    if isinstance(value, float) and value != value:
+        return None
+    return value
+
+
 def describe(name: str, type_label: str, value_text: str | None = None) -> str:
     """``Device type  UNSIGNED32 = 131474 (0x00020192)``: the name (if known), the type
     (if known) and the value (if given) — the same words in read, write and check."""
@@ -280,9 +310,11 @@ __all__ = [
     "Describes",
     "EntryType",
     "TypeLookup",
+    "decode",
     "describe",
     "format_real",
     "format_value",
     "guess_note",
     "guess_type",
+    "json_value",
 ]
