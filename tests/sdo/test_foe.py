@@ -143,22 +143,33 @@ def test_bad_usage_and_input(cli, tmp_path: Path, args: list[str], code: int) ->
 
 
 def test_ctrl_c_is_exit_130(tmp_path: Path) -> None:
-    """SIGINT while the command runs (the transfer of 15 MiB takes seconds here; on a
-    fast host the signal may come before it starts): one line, exit 130."""
+    """SIGINT in the middle of a transfer (60 MiB, about 6 s here; the signal comes once
+    the process has used 0.8 s of CPU, past its start-up): one line, exit 130."""
+    import os
     import signal
     import subprocess
     import sys
     import time
 
     big = tmp_path / "big.bin"
-    big.write_bytes(random.Random(3).randbytes(15 * MIB))
+    big.write_bytes(random.Random(3).randbytes(60 * MIB))
     root = Path(__file__).resolve().parents[2]
     proc = subprocess.Popen(
         [sys.executable, "-m", "lolacli", "foe", "write", "2", str(big)],
         cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
-    time.sleep(2.0)
+    tick = os.sysconf("SC_CLK_TCK")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        with open(f"/proc/{proc.pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        if (int(fields[11]) + int(fields[12])) / tick >= 0.8:  # utime + stime
+            break
+        time.sleep(0.02)
+    assert proc.poll() is None, proc.communicate()
+    start = time.monotonic()
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
+    assert time.monotonic() - start < 1.0
     assert out == "" and err.strip().splitlines() == ["lolacli: stopped by SIGINT"]
