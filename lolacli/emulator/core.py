@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import os
 from array import array
 from collections.abc import Callable, Iterable
 from functools import lru_cache, partial
@@ -40,6 +41,7 @@ from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
 from lolacli.emulator.plan import FramePlan, Pieces, _Brd, _DcDistribution, _Logical, finish
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
+from lolacli.errors import UsageError
 
 if TYPE_CHECKING:
     from lolacli.devices.base import Device
@@ -223,6 +225,27 @@ def core_available() -> bool:
     """Whether the C kernel was built (``pip install`` with a C compiler) and fits this
     module (a stale build from an older checkout does not)."""
     return _library() is not None
+
+
+ENGINES = ("c", "python")
+ENGINE_VARIABLE = "LOLACLI_CHAIN_ENGINE"
+
+
+def chain_engine(engine: str | None = None) -> str:
+    """The engine a chain runs its cyclic work with: ``engine``, else the environment's
+    ``LOLACLI_CHAIN_ENGINE``, else ``c`` when the C core is built and ``python`` when not.
+    UsageError for an unknown name or ``c`` without the C core."""
+    chosen = engine or os.environ.get(ENGINE_VARIABLE) or ""
+    if not chosen:
+        return "c" if core_available() else "python"
+    if chosen not in ENGINES:
+        raise UsageError(f"chain engine {chosen!r}: expected one of {', '.join(ENGINES)}")
+    if chosen == "c" and not core_available():
+        raise UsageError(
+            "chain engine 'c': the C core (lolacli.emulator._ccore) is not built; "
+            "reinstall with a C compiler, or use 'python'"
+        )
+    return chosen
 
 
 def _signed64(value: int) -> int:
@@ -954,4 +977,11 @@ class CompiledPlan:
         return record
 
 
-__all__ = ["ChainCore", "CompiledPlan", "core_available"]
+__all__ = [
+    "ENGINES",
+    "ENGINE_VARIABLE",
+    "ChainCore",
+    "CompiledPlan",
+    "chain_engine",
+    "core_available",
+]

@@ -127,7 +127,7 @@ class Twin:
         assert replies[0] == replies[1], f"frame {self.frames}: {frame.hex()}"
         self._note_held()
         key = layout_key(frame)
-        plan = self.c._plans.get(key) if key is not None else None
+        plan = self.c.planner.plans.get(key) if key is not None else None
         if plan is not None and isinstance(plan.compiled, CompiledPlan):
             self.compiled_frames += 1
         if defer:  # as the raw-socket server: firmware a piece at a time, then the cycle
@@ -895,10 +895,10 @@ def test_a_slave_that_starts_waiting_for_op_invalidates_the_plans() -> None:
     chain.run_firmware()  # a checked request is entered by a piece of firmware of its own
     esc.request_state(AlState.SAFEOP)
     chain.run_firmware()
-    epoch = chain._epoch[0]
+    epoch = chain.planner.epoch
     esc.request_state(AlState.OP)
     assert esc.pending_op and esc.al_state == AlState.SAFEOP
-    assert chain._epoch[0] != epoch
+    assert chain.planner.epoch != epoch
 
 
 def test_engine_choice() -> None:
@@ -929,7 +929,7 @@ def _lola_plan() -> tuple[Chain, CompiledPlan]:
     bus.bring_up(eni)
     for _ in range(3):
         bus.cycle(eni)
-    plans = [p for p in chain._plans.values() if p is not None and p.logical]
+    plans = [p for p in chain.planner.plans.values() if p is not None and p.logical]
     compiled = plans[0].compiled
     assert isinstance(compiled, CompiledPlan)
     return chain, compiled
