@@ -87,8 +87,8 @@ def test_polled_code_sees_the_first_signal_and_a_second_one_raises(own_handlers)
 def test_nested_blocks_restore_each_other(own_handlers) -> None:
     with stop_signals() as outer:
         with stop_signals() as inner:
-            assert signal.getsignal(signal.SIGINT) == inner._handle
-        assert signal.getsignal(signal.SIGINT) == outer._handle
+            assert signal.getsignal(signal.SIGINT) == inner.handle
+        assert signal.getsignal(signal.SIGINT) == outer.handle
     assert _handlers() == (_mine, _mine)
 
 

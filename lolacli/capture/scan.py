@@ -210,7 +210,7 @@ def _adp_incremented(cmd: Any) -> Any:
     return cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9
 
 
-def _addr_key(cmd: Any, addr: Any) -> Any:
+def addr_key(cmd: Any, addr: Any) -> Any:
     if _adp_incremented(cmd):
         return addr & 0xFFFF0000
     return addr
@@ -428,7 +428,7 @@ def _ecat(
         q = dg[j]
         cmd = _byte(buf, q)
         addr = _u32(buf, q + 2, False)
-        akey = _addr_key(cmd, addr)
+        akey = addr_key(cmd, addr)
         cmd_counts[cmd] += 1
         hp = _mix(_mix(hp, (cmd << 8) | _byte(buf, q + 1)), akey)
         hs = _mix(_mix(hs, cmd), akey)
@@ -524,7 +524,7 @@ def _ecat(
             st[S_BRD_MAX] = wkc
         if cyc:
             st[S_WKC_OBS] += 1
-            _observe(wk, wn, wv, st, KIND_WKC, cmd, _addr_key(cmd, _u32(buf, q + 2, False)),
+            _observe(wk, wn, wv, st, KIND_WKC, cmd, addr_key(cmd, _u32(buf, q + 2, False)),
                      ln, wkc, 0, frame)
         _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, wk, wn, wv, o_dc, o_mbx)
     return True
@@ -781,13 +781,13 @@ def finish(st: Any, o_burst: Any) -> Any:
 #: ``_slot`` and ``_observe``: inlined (numba 0.60-0.61), the table lookups gave wrong
 #: results (the engine-equivalence tests caught it).
 INLINE = frozenset({
-    "_byte", "_u16", "_u32", "_mix", "_key", "_adp_incremented", "_addr_key", "_ts_ns",
+    "_byte", "_u16", "_u32", "_mix", "_key", "_adp_incremented", "addr_key", "_ts_ns",
     "_push", "_bad", "_count_stream", "_returned_extras", "_config_write", "_drift", "_ecat",
     "_packet", "_full", "_pcapng_record",
 })
 
 KERNELS = (
-    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_adp_incremented", "_addr_key",
+    "_byte", "_u16", "_u32", "_mix", "_key", "_slot", "_adp_incremented", "addr_key",
     "_ts_ns", "_push", "_bad", "_count_stream", "_observe", "_returned_extras", "_config_write",
     "_drift", "_ecat", "_packet", "_full", "scan", "_pcapng_record", "rehash", "finish",
 )

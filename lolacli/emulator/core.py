@@ -39,7 +39,7 @@ from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
 from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
-from lolacli.emulator.plan import FramePlan, Pieces, _Brd, _DcDistribution, _Logical, finish
+from lolacli.emulator.plan import BrdOp, DcOp, FramePlan, LogicalOp, Pieces, finish
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
 from lolacli.errors import UsageError
 
@@ -283,7 +283,7 @@ class ChainCore:
             raise RuntimeError("the chain's C core (lolacli.emulator._ccore) is not built")
         if any(len(esc.mem) != MEMORY_BYTES for esc in escs):
             raise RuntimeError("an ESC memory is not 64 KiB")
-        self._lib = lib
+        self.lib = lib
         self.escs = escs
         n = len(escs)
         self._words = array("q", bytes(ctypes.sizeof(SlaveTable) * max(1, n)))
@@ -300,7 +300,7 @@ class ChainCore:
         self.released: set[int] = set(range(n))  # ESC scalars the Esc objects hold
         self.devices_released: set[int] = set(range(n))  # devices the objects hold
         self._pieces: dict[int, list[tuple[int, int, Esc | None]]] = {}
-        self._index = {id(esc): i for i, esc in enumerate(escs)}
+        self.index = {id(esc): i for i, esc in enumerate(escs)}
         for i, esc in enumerate(escs):
             app = esc.app
             device = _device_of(app)
@@ -365,7 +365,7 @@ class ChainCore:
             groups=_address(self._groups, keep),
             groups_len=len(self._groups),
         )
-        if self._lib.lolacli_core_check_registers(ctypes.addressof(table)):
+        if self.lib.lolacli_core_check_registers(ctypes.addressof(table)):
             self._regs = None
             return False
         self._line, self._regs, self._regs_keep = line, table, keep
@@ -492,7 +492,7 @@ class ChainCore:
     def release_owner(self, work: object) -> None:
         """Give back the ESC scalars of the slave whose firmware ``work`` (a bound method
         of its Esc) is about to run; of every slave when it is not one of theirs."""
-        i = self._index.get(id(getattr(work, "__self__", None)))
+        i = self.index.get(id(getattr(work, "__self__", None)))
         if i is None:
             self.release()
         elif i not in self.released:
@@ -506,7 +506,7 @@ class ChainCore:
         needs it, which may run in a frame's answer path (25 LOLA devices: 1.5 ms in
         KickCAT's first LWR, whose LRD's cycle waited for it). Only the first ``active``
         slaves (those the frames reach) run cycles."""
-        i = self._index.get(id(getattr(work, "__self__", None)))
+        i = self.index.get(id(getattr(work, "__self__", None)))
         if i is None or i >= active or i not in self.devices_released:
             return None
         if self.escs[i].al_state not in (AlState.SAFEOP, AlState.OP):
@@ -652,7 +652,7 @@ class ChainCore:
             loaded.previous_cw,
         )
         w[b + F_LAST_SAMPLE], w[b + F_HAS_LAST] = loaded.last_sample, int(loaded.has_last)
-        if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+        if self.lib.lolacli_core_check_slave(self.address + 8 * b):
             self._device_pins[i] = (None, [])
             return False
         w[b + F_DEV_OWNED] = 1
@@ -687,7 +687,7 @@ class ChainCore:
             except (IndexError, AttributeError):
                 self.release_device(i)
                 continue
-            if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+            if self.lib.lolacli_core_check_slave(self.address + 8 * b):
                 self.release_device(i)
 
     def held_devices(self) -> list[int]:
@@ -728,7 +728,7 @@ class ChainCore:
                 continue
             if esc is None:
                 lo = max(lo, start)
-                self._lib.lolacli_core_cycles(self.address + 8 * WORDS * lo, hi - lo, t_ns)
+                self.lib.lolacli_core_cycles(self.address + 8 * WORDS * lo, hi - lo, t_ns)
             else:
                 esc.cycle(t_ns)
             if should_yield is not None and hi < n and should_yield():
@@ -761,7 +761,7 @@ class ChainCore:
         if (
             t_ns.__class__ is int
             and -VALUE_LIMIT < t_ns < VALUE_LIMIT
-            and self._lib.lolacli_core_watchdog(self.address, n, t_ns) < 0
+            and self.lib.lolacli_core_watchdog(self.address, n, t_ns) < 0
         ):
             for i in sorted(self.released):
                 if i < n:
@@ -781,7 +781,7 @@ class ChainCore:
         :func:`~lolacli.emulator.plan.plan_pieces`; it returns what :meth:`compile` does."""
         compiled = CompiledPlan.__new__(CompiledPlan)
         try:
-            yield from compiled._pieces(self, plan)
+            yield from compiled.make_pieces(self, plan)
         except _NotCompiled:
             return None
         return compiled
@@ -804,12 +804,12 @@ class CompiledPlan:
     """One FramePlan as a kernel program with its buffers."""
 
     def __init__(self, core: ChainCore, plan: FramePlan) -> None:
-        finish(self._pieces(core, plan))
+        finish(self.make_pieces(core, plan))
 
-    def _pieces(self, core: ChainCore, plan: FramePlan) -> Pieces:
+    def make_pieces(self, core: ChainCore, plan: FramePlan) -> Pieces:
         self.core = core
         self.plan = plan
-        self._lib = core._lib
+        self.lib = core.lib
         self._snap_len = 0
         self._pend_len = PEND_FIRST_SLOT
         self._slots: list[tuple[int, list[int]]] = []  # per op: snapshot offset, DC slots
@@ -831,10 +831,10 @@ class CompiledPlan:
             pend_len=len(self.pend),
         )
         self.address = ctypes.addressof(self.table)
-        if self._lib.lolacli_core_check_plan(self.address):
+        if self.lib.lolacli_core_check_plan(self.address):
             raise _NotCompiled
         self.item = (self.finish, ())
-        self._answer = self._lib.lolacli_core_answer
+        self._answer = self.lib.lolacli_core_answer
 
     # ------------------------------------------------------------- running
     def answer(self, frame: bytes, t_ns: int, deferred: list[Any]) -> tuple[bytes, bool] | None:
@@ -864,7 +864,7 @@ class CompiledPlan:
         if not self.pend[0]:
             return
         if not self.core.released or self.core.acquire():
-            self._lib.lolacli_core_finish(self.address)
+            self.lib.lolacli_core_finish(self.address)
         else:
             self._finish_in_python()
 
@@ -875,10 +875,10 @@ class CompiledPlan:
         if plan.deferred is not None:
             plan.count()
         for op, (snap_at, slots) in zip(plan.ops, self._slots, strict=True):
-            if isinstance(op, _Logical) and op.deferred is not None:
+            if isinstance(op, LogicalOp) and op.deferred is not None:
                 op.snapshot[:] = self.snap[snap_at : snap_at + len(op.snapshot)]
                 op.write_later(t_ns)
-            elif isinstance(op, _DcDistribution) and op.deferred is not None:
+            elif isinstance(op, DcOp) and op.deferred is not None:
                 for (_reference, _port0, others), slot in zip(op.segments, slots, strict=True):
                     if others:
                         value = self.pend[slot] & _MASK64
@@ -886,7 +886,7 @@ class CompiledPlan:
 
     # ------------------------------------------------------------- compiling
     def _program(self, plan: FramePlan) -> Pieces:
-        index = self.core._index
+        index = self.core.index
         prog = array("q", bytes(8 * H_WORDS))
         prog[H_MAGIC] = MAGIC
         prog[H_FRAME_LEN] = len(plan.buf)
@@ -904,21 +904,21 @@ class CompiledPlan:
         prog[H_OPS], prog[H_N_OPS] = len(prog), len(plan.ops)
         for op in plan.ops:
             yield
-            if isinstance(op, _Logical):
+            if isinstance(op, LogicalOp):
                 record = yield from self._logical(op)
-            elif isinstance(op, _Brd):
+            elif isinstance(op, BrdOp):
                 record = self._brd(op, counted)
-            elif isinstance(op, _DcDistribution):
+            elif isinstance(op, DcOp):
                 record = self._dc(op)
             else:
                 raise _NotCompiled
             prog.extend(record)
         return prog
 
-    def _logical(self, op: _Logical) -> Pieces:
+    def _logical(self, op: LogicalOp) -> Pieces:
         if op.ordered or any(esc.pending_op for esc, _, _ in op.events):
             raise _NotCompiled  # slave-major order, or an outputs event that enters OP
-        index = self.core._index
+        index = self.core.index
         writes: list[int] = []
         reads: list[int] = []
         for step in op.steps:
@@ -941,7 +941,7 @@ class CompiledPlan:
         record[1] = len(record)
         return record
 
-    def _brd(self, op: _Brd, slaves: list[int]) -> list[int]:
+    def _brd(self, op: BrdOp, slaves: list[int]) -> list[int]:
         cache_at, self._snap_len = self._snap_len, self._snap_len + op.length
         flag = 0
         if op.epoch_cell is not None:
@@ -952,8 +952,8 @@ class CompiledPlan:
         record[1] = len(record)
         return record
 
-    def _dc(self, op: _DcDistribution) -> list[int]:
-        index = self.core._index
+    def _dc(self, op: DcOp) -> list[int]:
+        index = self.core.index
         by_mem = {id(esc.mem): i for i, esc in enumerate(self.core.escs)}
         segments: list[int] = []
         others: list[int] = []

@@ -220,7 +220,7 @@ class Master:
     def now_ns(self) -> int:
         return self.transport.now_ns()
 
-    def _new_index(self) -> int:
+    def new_index(self) -> int:
         self._index = index = (self._index + 1) & 0xFF
         if self._overdue:
             # a frame still not back when its index is used again stays lost: an answer
@@ -244,7 +244,7 @@ class Master:
         self.run_due_cycles()
         tries = self.options.frame_retries if retries is None else retries
         for _ in range(tries + 1):
-            index = self._new_index()
+            index = self.new_index()
             frame = encode_frame(
                 make_frame(
                     [replace(d, index=index) for d in datagrams],
@@ -256,7 +256,7 @@ class Master:
             self.last_sent_ns = self.transport.send(frame)
             self.stats.frames_sent += 1
             self.stats.acyclic_frames += 1
-            got = self._await(index, self.options.frame_timeout_ns, self.last_sent_ns, frame)
+            got = self.await_frame(index, self.options.frame_timeout_ns, self.last_sent_ns, frame)
             if got is not None:
                 return decode_frame(got.frame).datagrams
             self.stats.frames_lost += 1
@@ -284,7 +284,7 @@ class Master:
             out += self.exchange(batch)
         return out
 
-    def _await(
+    def await_frame(
         self, index: int, timeout_ns: int, sent_ns: int = 0, like: bytes | bytearray | None = None
     ) -> Received | None:
         """The returned frame with ``index`` within ``timeout_ns``; other returned frames
@@ -762,7 +762,7 @@ class Master:
         with self.image.lock:
             outputs = self.image.outputs
             for plan in self._frame_plans():
-                index = self._new_index()
+                index = self.new_index()
                 out.append((plan, index, plan.build(index, outputs, now)))
         self.stats.cyclic_frames += len(out)
         self.stats.frames_sent += len(out)
@@ -787,7 +787,7 @@ class Master:
             until = sent + self.cycle_time_ns
             if realtime and until > self._next_cycle_ns:
                 until = self._next_cycle_ns
-            got = self._await(index, max(0, until - now), sent, plan.template)
+            got = self.await_frame(index, max(0, until - now), sent, plan.template)
             if got is None:
                 stats.cyclic_lost += 1
                 stats.frames_lost += 1
@@ -825,7 +825,7 @@ class Master:
         reads = self._dc_check_datagrams()
         if not reads or sum(d.wire_bytes for d in reads) > MAX_FRAME_DATAGRAM_BYTES:
             return
-        index = self._new_index()
+        index = self.new_index()
         frame = encode_frame(
             make_frame(
                 [replace(d, index=index) for d in reads],
@@ -849,7 +849,7 @@ class Master:
             # the diagnosis is no reason to hold the cycle: at most until it was due
             wait = 0 if realtime else max(0, min(sent + self.cycle_time_ns,
                                                  self._next_cycle_ns) - now)
-            got = self._await(index, wait, sent)
+            got = self.await_frame(index, wait, sent)
             if got is None:
                 if realtime and now - sent < self.options.frame_timeout_ns:
                     self._pending_dc.append((index, sent))

@@ -44,12 +44,12 @@ class SinglePort:
         stats = master.stats
         options = master.options
         for _ in range(options.frame_retries + 1):
-            index = master._new_index()
+            index = master.new_index()
             frame = encode_single(self._head, datagram.cmd, index, datagram.address, datagram.data)
             master.last_sent_ns = self.transport.send(frame)
             stats.frames_sent += 1
             stats.acyclic_frames += 1
-            got = master._await(index, options.frame_timeout_ns, master.last_sent_ns)
+            got = master.await_frame(index, options.frame_timeout_ns, master.last_sent_ns)
             if got is None:
                 stats.frames_lost += 1
                 continue

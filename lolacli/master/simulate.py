@@ -633,7 +633,7 @@ def _parse_value(variable: BusVariable, text: str) -> Any:
         raise LinkError(
             variable.name, f"{text!r} is not a value of type {type(variable).__name__}"
         ) from None
-    variable._check(value)
+    variable.check(value)
     return value
 
 

@@ -220,7 +220,7 @@ def assert_same_slave(a: Esc, b: Esc, where: str) -> None:
     if values_a != values_b:
         differ = [(x, y) for x, y in zip(values_a, values_b, strict=True) if x != y]
         raise AssertionError(f"{where}: object dictionaries differ: {differ[:4]}")
-    for name in ("t_ns", "state", "power", "_previous_cw", "_last_sample"):
+    for name in ("t_ns", "state", "power", "previous_cw", "last_sample"):
         assert getattr(da, name, None) == getattr(db, name, None), f"{where}: {name}"
     assert da.od.version == db.od.version and da.od.writes == db.od.writes, where
     assert da.od.al_state == db.od.al_state, where
@@ -939,7 +939,7 @@ def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
     """Every single-word change of a valid program is either refused by the check or
     still within bounds; those that pass run (under a sanitizer build: without a fault)."""
     chain, compiled = _lola_plan()
-    lib = compiled._lib
+    lib = compiled.lib
     program = ctypes.cast(compiled.table.prog, ctypes.POINTER(ctypes.c_int64))
     words = compiled.table.prog_len
     rng = random.Random(5)
@@ -968,7 +968,7 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None
-    lib = core._lib
+    lib = core.lib
     row = SlaveTable.from_address(core.address)  # the first drive's table
     assert lib.lolacli_core_check_slave(core.address) == 0
     for name, bad in [
@@ -995,7 +995,7 @@ def test_kernel_refuses_register_tables_out_of_bounds() -> None:
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None and core._regs is not None
-    lib, table = core._lib, core._regs
+    lib, table = core.lib, core._regs
     address = ctypes.addressof(table)
     assert lib.lolacli_core_check_registers(address) == 0
     for name, bad in [
