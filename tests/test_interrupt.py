@@ -54,7 +54,7 @@ def test_importing_lolacli_installs_no_handler() -> None:
     probe = (
         "import signal\n"
         "before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]\n"
-        "import lolacli.cli.main, lolacli.master.simulate, lolacli.emulator.run\n"
+        "import lolacli.cli.main, lolacli.simulate, lolacli.emulator.run\n"
         "import lolacli.capture.analyze, lolacli.sdo.session\n"
         "assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == before\n"
     )

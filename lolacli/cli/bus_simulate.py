@@ -10,128 +10,142 @@ import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json
-from lolacli.errors import UsageError
+
+Eni = Annotated[
+    Path | None, typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain.")
+]
+Rate = Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")]
+Duration = Annotated[
+    str | None, typer.Option("--duration", help="Simulated time: 10s, 500ms, … (default 10s).")
+]
+Cycles = Annotated[
+    int | None,
+    typer.Option(
+        "--cycles",
+        min=0,
+        help="Number of cycles (instead of --duration): slots of the schedule; one a "
+        "late cycle ran past is skipped, not made up for.",
+    ),
+]
+Pcap = Annotated[
+    Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")
+]
+Mcap = Annotated[
+    Path | None,
+    typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
+]
+DropP = Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")]
+StuckSafeop = Annotated[
+    list[int] | None,
+    typer.Option("--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."),
+]
+LinkDown = Annotated[
+    str | None,
+    typer.Option(
+        "--link-down",
+        metavar="K[@T]",
+        help="Cut the cable after slave K (0: at the master), from the start or T "
+        "into the cyclic run (seconds, or 500ms).",
+    ),
+]
+DriftPpb = Annotated[
+    int, typer.Option("--drift-ppb", help="Clock drift step along the line (ppb).")
+]
+Seed = Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")]
+Shm = Annotated[
+    str | None,
+    typer.Option(
+        "--shm",
+        metavar="NAME",
+        help="Publish inputs and take outputs through shared memory NAME "
+        "(lolacli.master.shm.ShmClient).",
+    ),
+]
+Pace = Annotated[bool, typer.Option("--pace", help="Run no faster than real time (with --shm).")]
+Watch = Annotated[
+    list[str] | None,
+    typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
+]
+SetValue = Annotated[
+    list[str] | None,
+    typer.Option("--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."),
+]
+NoMiddleware = Annotated[
+    bool,
+    typer.Option(
+        "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
+    ),
+]
+Iface = Annotated[
+    str | None,
+    typer.Option(
+        "--iface",
+        "-i",
+        help="Run in real time on this interface (a live bus: `bus emulate` or hardware) "
+        "instead of the emulated chain in virtual time.",
+    ),
+]
+BusyWait = Annotated[
+    float | None,
+    typer.Option(
+        "--busy-wait-us",
+        help="With --iface: busy-wait this last part of every cycle (default 200 µs, at most "
+        "40% of a cycle).",
+    ),
+]
+RealtimePriority = Annotated[
+    int,
+    typer.Option(
+        "--realtime-priority",
+        min=0,
+        max=99,
+        help="With --iface: ask for SCHED_FIFO at this priority (0: do not ask); the "
+        "report says what the OS granted.",
+    ),
+]
+MaxLost = Annotated[
+    int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
+]
+MaxWkc = Annotated[
+    int, typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1.")
+]
+MaxOverruns = Annotated[
+    int,
+    typer.Option(
+        "--max-overruns",
+        min=0,
+        help="Cycles not kept (slots skipped, or sent over half a cycle late) allowed "
+        "before exit 1.",
+    ),
+]
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
 @app.command("simulate")
 def simulate_cmd(
-    eni: Annotated[
-        Path | None,
-        typer.Option("--eni", help="ENI of the chain. Default: the embedded LOLA chain."),
-    ] = None,
-    rate: Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")] = 2000.0,
-    duration: Annotated[
-        str | None,
-        typer.Option("--duration", help="Simulated time: 10s, 500ms, … (default 10s)."),
-    ] = None,
-    cycles: Annotated[
-        int | None,
-        typer.Option(
-            "--cycles",
-            min=0,
-            help="Number of cycles (instead of --duration): slots of the schedule; one a "
-            "late cycle ran past is skipped, not made up for.",
-        ),
-    ] = None,
-    pcap: Annotated[
-        Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")
-    ] = None,
-    mcap: Annotated[
-        Path | None,
-        typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
-    ] = None,
-    drop_p: Annotated[float, typer.Option("--drop-p", help="Probability to lose a frame.")] = 0.0,
-    stuck_safeop: Annotated[
-        list[int] | None,
-        typer.Option(
-            "--stuck-safeop", help="Slave position (1-based) that refuses OP; repeatable."
-        ),
-    ] = None,
-    link_down: Annotated[
-        str | None,
-        typer.Option(
-            "--link-down",
-            metavar="K[@T]",
-            help="Cut the cable after slave K (0: at the master), from the start or T "
-            "into the cyclic run (seconds, or 500ms).",
-        ),
-    ] = None,
-    drift_ppb: Annotated[
-        int, typer.Option("--drift-ppb", help="Clock drift step along the line (ppb).")
-    ] = 0,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")] = 0,
-    shm: Annotated[
-        str | None,
-        typer.Option(
-            "--shm",
-            metavar="NAME",
-            help="Publish inputs and take outputs through shared memory NAME "
-            "(lolacli.master.shm.ShmClient).",
-        ),
-    ] = None,
-    pace: Annotated[
-        bool, typer.Option("--pace", help="Run no faster than real time (with --shm).")
-    ] = False,
-    watch: Annotated[
-        list[str] | None,
-        typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
-    ] = None,
-    set_value: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."
-        ),
-    ] = None,
-    no_middleware: Annotated[
-        bool,
-        typer.Option(
-            "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
-        ),
-    ] = False,
-    iface: Annotated[
-        str | None,
-        typer.Option(
-            "--iface",
-            "-i",
-            help="Run in real time on this interface (a live bus: `bus emulate` or hardware) "
-            "instead of the emulated chain in virtual time.",
-        ),
-    ] = None,
-    busy_wait_us: Annotated[
-        float | None,
-        typer.Option(
-            "--busy-wait-us",
-            help="With --iface: busy-wait this last part of every cycle (default 200 µs, at most "
-            "40% of a cycle)."
-        ),
-    ] = None,
-    realtime_priority: Annotated[
-        int,
-        typer.Option(
-            "--realtime-priority",
-            min=0,
-            max=99,
-            help="With --iface: ask for SCHED_FIFO at this priority (0: do not ask); the "
-            "report says what the OS granted.",
-        ),
-    ] = 80,
-    max_lost: Annotated[
-        int, typer.Option("--max-lost", min=0, help="Lost frames allowed before exit 1.")
-    ] = 0,
-    max_wkc: Annotated[
-        int,
-        typer.Option("--max-wkc-mismatches", min=0, help="WKC mismatches allowed before exit 1."),
-    ] = 0,
-    max_overruns: Annotated[
-        int,
-        typer.Option(
-            "--max-overruns",
-            min=0,
-            help="Cycles not kept (slots skipped, or sent over half a cycle late) allowed "
-            "before exit 1.",
-        ),
-    ] = 0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    eni: Eni = None,
+    rate: Rate = 2000.0,
+    duration: Duration = None,
+    cycles: Cycles = None,
+    pcap: Pcap = None,
+    mcap: Mcap = None,
+    drop_p: DropP = 0.0,
+    stuck_safeop: StuckSafeop = None,
+    link_down: LinkDown = None,
+    drift_ppb: DriftPpb = 0,
+    seed: Seed = 0,
+    shm: Shm = None,
+    pace: Pace = False,
+    watch: Watch = None,
+    set_value: SetValue = None,
+    no_middleware: NoMiddleware = False,
+    iface: Iface = None,
+    busy_wait_us: BusyWait = None,
+    realtime_priority: RealtimePriority = 80,
+    max_lost: MaxLost = 0,
+    max_wkc: MaxWkc = 0,
+    max_overruns: MaxOverruns = 0,
+    quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
@@ -146,9 +160,16 @@ def simulate_cmd(
     used; 130 when interrupted (recordings are kept up to the last cycle)."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
-    from lolacli.master.simulate import simulate
+    from lolacli.simulate import options_from_cli, simulate
 
-    options = _options(locals())
+    options = options_from_cli(
+        rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down,
+        set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
+        pcap=pcap, mcap=mcap, drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
+        middleware=not no_middleware, shm=shm, pace=pace, iface=iface,
+        busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
+        max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
+    )  # fmt: skip
     model = load_eni(eni if eni is not None else default_eni())
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
@@ -164,55 +185,6 @@ def simulate_cmd(
         raise typer.Exit(stop.exit_code)
     if result.failed:
         raise typer.Exit(1)
-
-
-def _options(given: dict[str, Any]) -> Any:
-    """The library's SimulateOptions from the command's parameters."""
-    from lolacli.emulator.run import parse_link_down
-    from lolacli.master.simulate import SimulateOptions
-    from lolacli.timing.model import parse_duration_ns
-
-    duration, cycles, rate = given["duration"], given["cycles"], given["rate"]
-    if duration is not None and cycles is not None:
-        raise UsageError("--duration and --cycles contradict each other; give one")
-    n_cycles = cycles
-    if n_cycles is None:
-        ns = (
-            parse_duration_ns(duration, "s", what="--duration")
-            if duration is not None
-            else 10_000_000_000
-        )
-        n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
-    link_down = given["link_down"]
-    cut = parse_link_down(link_down) if link_down is not None else None
-    pairs = []
-    for item in given["set_value"] or ():
-        name, eq, value = item.rpartition("=")
-        if not eq or not name:
-            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
-        pairs.append((name, value))
-    return SimulateOptions(
-        rate_hz=rate,
-        cycles=n_cycles,
-        pcap=given["pcap"],
-        mcap=given["mcap"],
-        drop_probability=given["drop_p"],
-        stuck_safeop=tuple(given["stuck_safeop"] or ()),
-        link_down=cut,
-        drift_ppb=given["drift_ppb"],
-        seed=given["seed"],
-        middleware=not given["no_middleware"],
-        shm=given["shm"],
-        pace=given["pace"],
-        watch=tuple(given["watch"] or ()),
-        set_values=tuple(pairs),
-        iface=given["iface"],
-        busy_wait_us=given["busy_wait_us"],
-        realtime_priority=given["realtime_priority"],
-        max_lost=given["max_lost"],
-        max_wkc_mismatches=given["max_wkc"],
-        max_overruns=given["max_overruns"],
-    )
 
 
 class _progress:
