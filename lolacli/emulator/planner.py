@@ -93,6 +93,9 @@ class Planner:
         self._cyclic: dict[Key, tuple[FramePlan, bool]] = {}
         self._replanned: set[Key] = set()  # ... those of them planned again in the epoch
         self._replanned_epoch = -1  # ... it is
+        # the epoch in which work found nothing to do, until a plan or a request comes
+        # (the cyclic frame's every answer asks: this spares it the search)
+        self._idle_epoch = -1
 
     # ------------------------------------------------------------------ the line
     def set_line(self, slaves: list[Esc], offsets: list[PortTimes]) -> None:
@@ -144,6 +147,7 @@ class Planner:
             return None
         if defer:
             self._later[key] = None  # KickCAT's LRD and LWR come back to back
+            self._idle_epoch = -1
             return None
         return finish(self._pieces(key, asked=True))  # type: ignore[no-any-return]
 
@@ -164,6 +168,8 @@ class Planner:
     def pending(self) -> bool:
         """Whether plans are to be made (:meth:`work`): asked for by a frame, begun, or
         of cyclic layouts whose plans' epoch has ended."""
+        if self._idle_epoch == self._epoch[0]:
+            return False
         return self._job is not None or bool(self._later) or self._replan_due()
 
     def work(self, should_yield: Callable[[], bool] | None = None) -> bool:
@@ -176,10 +182,13 @@ class Planner:
         an epoch that has ended meanwhile is dropped (the slaves it read may have
         changed), and a cyclic layout's is begun again for the new epoch. True when
         nothing is left to do."""
+        if self._idle_epoch == self._epoch[0]:
+            return True
         while True:
             if self._job is None:
                 nxt = self._next_key()
                 if nxt is None:
+                    self._idle_epoch = self._epoch[0]
                     return True
                 key, asked = nxt
                 if key in self._plans and self._plans_epoch == self._epoch[0]:
@@ -259,6 +268,7 @@ class Planner:
         if len(self._plans) >= PLAN_CACHE_SIZE:
             self._plans.clear()
         self._plans[key] = self._last = plan
+        self._idle_epoch = -1
         cyclic = self._cyclic
         if plan is not None and plan.logical and (asked or key in cyclic):
             if asked:

@@ -95,6 +95,12 @@ class BusVariable:
     def linked(self) -> bool:
         return self._image is not None
 
+    @property
+    def byte_offset(self) -> int | None:
+        """Where a linked variable of whole bytes (its own struct format) starts in its
+        image; ``None`` for a bit-packed one."""
+        return self._byte if self._bit == 0 and self._struct is not None else None
+
     # -- values
     def read(self, data: bytes | bytearray) -> Any:
         """This variable's value in an image ``data``."""

@@ -4,14 +4,118 @@ minimum-jerk back-and-forth (:mod:`lolacli.motion`), sensors read, ``--set`` and
 
 from __future__ import annotations
 
+import struct
+from operator import itemgetter
 from typing import Any
 
+from lolacli.devices.cia402 import Cia402State
 from lolacli.errors import LinkError
 from lolacli.master.core import Master
-from lolacli.master.slaves import Cia402Drive, ForceTorqueSensor, Imu, has_field
-from lolacli.master.variables import BusVariable, variable_for
+from lolacli.master.slaves import BusSlave, Cia402Drive, ForceTorqueSensor, Imu, has_field
+from lolacli.master.variables import BusVariable, ProcessImage, variable_for
 from lolacli.motion.profile import back_and_forth
 from lolacli.simulate.options import SimulateOptions
+
+_ENABLED = Cia402State.OPERATION_ENABLED
+
+
+class Drives(BusSlave):
+    """The application's CiA 402 drives as one device of the master (its procData).
+
+    Each drive's state machine (:meth:`Cia402Drive.process`) runs only in a cycle whose
+    statuswords differ from the last cycle's (or, while a drive is not yet enabled or not
+    asked to be, whose statuswords or actual positions do): with the same inputs its
+    process changes nothing (the same state, controlword and, while not enabled, target).
+    So that this holds, the drives are enabled and disabled through :meth:`enable`.
+    :meth:`move` sends every enabled drive its set-point with one pack each."""
+
+    def __init__(self, image: ProcessImage, drives: list[Cia402Drive]) -> None:
+        self.slave = "drives"
+        self.image = image
+        self.drives = drives
+        self.steady = False  # every drive enabled and asked to be, as of the last process
+        self._last: tuple[int, ...] | None = None
+        self._words = _byte_getter([d.statusword for d in drives])
+        # ... and while not steady the positions the targets follow
+        self._inputs = _byte_getter([v for d in drives for v in (d.statusword, d.position_actual)])
+        self._last_inputs: tuple[int, ...] | None = None
+        self._offset: int | None = None  # the offset move sent last with the rows
+        self._rows: list[tuple[Any, int, int, int]] | None = None  # pack, at, home, sign
+        self._packs: list[tuple[Any, int, int]] = []  # (pack_into, offset, sign) per drive
+        for i, drive in enumerate(drives):
+            target = drive.target
+            at = target.byte_offset if target is not None else None
+            if at is None or target is None:
+                self._packs = []
+                break
+            self._packs.append((struct.Struct("<" + target.fmt).pack_into, at, -1 if i % 2 else 1))
+
+    def enable(self, on: bool = True) -> None:
+        for drive in self.drives:
+            if on:
+                drive.enable()
+            else:
+                drive.disable()
+        self._last = None
+
+    def process(self) -> None:
+        data = self.image.snapshot.data
+        words = self._words(data) if self._words is not None else None
+        if words is not None and words == self._last:
+            if self.steady:
+                return
+            inputs = self._inputs(data) if self._inputs is not None else None
+            if inputs is not None and inputs == self._last_inputs:
+                return  # the same statuswords and positions: the same state, cw, target
+        for drive in self.drives:
+            drive.process()
+        self._last = words
+        self._last_inputs = self._inputs(data) if self._inputs is not None else None
+        self.steady = all(d.want_enabled and d.state is _ENABLED for d in self.drives)
+
+    def move(self, offset: int, homes: dict[int, int]) -> None:
+        """Every enabled drive to its home plus ``offset`` (even positions) or minus it
+        (odd positions); a drive's home is its position when it is first moved."""
+        rows = self._rows
+        if rows is None and self.steady and self._packs and len(homes) == len(self.drives):
+            rows = self._rows = [
+                (pack, at, homes[i], sign) for i, (pack, at, sign) in enumerate(self._packs)
+            ]
+        if rows is not None and self.steady:
+            outputs = self.image.outputs
+            try:
+                for pack, at, home, sign in rows:
+                    pack(outputs, at, home + sign * offset)
+            except struct.error:
+                pass  # out of range: the drive's own setter says so
+            else:
+                self._offset = offset
+                return
+        self._offset = None
+        for i, drive in enumerate(self.drives):
+            if not drive.enabled:
+                continue
+            if i not in homes:
+                homes[i] = drive.actual_position
+            drive.target_position = homes[i] + (offset if i % 2 == 0 else -offset)
+
+    def target_positions(self) -> list[int]:
+        """The set-points the drives were sent last."""
+        if self._offset is None or self._rows is None or not self.steady:
+            return [d.target_position for d in self.drives]
+        return [home + sign * self._offset for _, _, home, sign in self._rows]
+
+
+def _byte_getter(variables: list[Any]) -> Any:
+    """One call that takes the bytes of ``variables`` from an image (``None`` when one is
+    bit-packed)."""
+    places: list[int] = []
+    for v in variables:
+        at = v.byte_offset
+        if at is None:
+            return None
+        places += range(at, at + v.bit_size // 8)
+    return itemgetter(*places) if len(places) > 1 else None
 
 
 class Application:
@@ -22,6 +126,7 @@ class Application:
         self.master = master
         self.options = options
         self.drives: list[Cia402Drive] = []
+        self.group: Drives | None = None
         self.sensors: list[Any] = []
         self.watch: dict[str, BusVariable] = {}
         self.fixed: list[tuple[BusVariable, Any]] = []
@@ -50,7 +155,7 @@ class Application:
             if has_field(master.image, slave.name, Cia402Drive.statusword) and has_field(
                 master.image, slave.name, Cia402Drive.target
             ):
-                self.drives.append(Cia402Drive(master, slave.name))
+                self.drives.append(Cia402Drive(master.image, slave.name))
             elif has_field(master.image, slave.name, Imu.rate_x):
                 self.sensors.append(Imu(master, slave.name))
                 for side in ("left", "right"):
@@ -62,6 +167,9 @@ class Application:
     def install(self, mcap: Any) -> None:
         self.mcap = mcap
         master = self.master
+        if self.drives:
+            self.group = Drives(master.image, self.drives)
+            master.devices.append(self.group)
         if self.shm is not None:
             master.control.append(self._publish)
         if self.drives:
@@ -92,8 +200,8 @@ class Application:
         return [c - self.first_cycle for c in cycles if c >= self.first_cycle]
 
     def enable(self) -> None:
-        for drive in self.drives:
-            drive.enable()
+        if self.group is not None:
+            self.group.enable()
         self.t_enable_ns = self.master.transport.now_ns()
 
     def _publish(self, master: Master) -> None:
@@ -110,16 +218,9 @@ class Application:
     def _move(self, master: Master) -> None:
         t = master.transport.now_ns() - self.t_enable_ns
         period = round(self.options.period_s * 1e9)
-        amplitude = self.options.amplitude_counts
-        homes = self.homes
-        for i, drive in enumerate(self.drives):
-            if not drive.enabled:
-                continue
-            home = homes.get(i)
-            if home is None:
-                home = homes[i] = drive.actual_position
-            sign = 1 if i % 2 == 0 else -1
-            drive.target_position = home + round(sign * back_and_forth(t, period, amplitude))
+        offset = round(back_and_forth(t, period, self.options.amplitude_counts))
+        assert self.group is not None
+        self.group.move(offset, self.homes)
 
     def _record(self, master: Master) -> None:
         stats = master.stats
@@ -145,7 +246,7 @@ class Application:
                 {
                     "cycle": stats.cycles,
                     "names": [d.slave for d in self.drives],
-                    "target": [d.target_position for d in self.drives],
+                    "target": self.group.target_positions() if self.group else [],
                     "actual": [d.actual_position for d in self.drives],
                 },
             )
