@@ -11,6 +11,8 @@ the rest (the master), and the ratio of simulated time to wall time:
     pcap         the defaults + every frame written to a pcapng (>= 10x)
     master-only  frames-only against a loopback that answers each frame with the WKCs the
                  ENI expects (no chain): the master's own cost
+    engines      the defaults with the chain's C core and with its Python reference
+                 (``c_over_python``: what the C twin is worth on this figure)
 
 The real-time factor is the report's (simulated time over the wall time of bring-up, run
 and report, as ``bus simulate`` prints it), and the same over CPU time. Since the host is
@@ -114,12 +116,41 @@ def best(runs: list[dict[str, float]]) -> dict[str, float]:
     return max(runs, key=lambda r: r["realtime_factor"])
 
 
+def engines(eni, args: argparse.Namespace) -> dict[str, object]:  # type: ignore[no-untyped-def]
+    """The defaults on the chain's C core against its Python reference (the twin that
+    must earn its place: at least 2x on this figure), ``--engine-cycles`` cycles each,
+    interleaved, the best of ``--repeat``."""
+    import os
+
+    runs: dict[str, list[dict[str, float]]] = {"c": [], "python": []}
+    before = os.environ.get("LOLACLI_CHAIN_ENGINE")
+    try:
+        for _ in range(args.repeat):
+            for engine in runs:
+                os.environ["LOLACLI_CHAIN_ENGINE"] = engine
+                runs[engine].append(run(eni, SimulateOptions(args.rate, args.engine_cycles)))
+    finally:
+        if before is None:
+            os.environ.pop("LOLACLI_CHAIN_ENGINE", None)
+        else:
+            os.environ["LOLACLI_CHAIN_ENGINE"] = before
+    c, python = best(runs["c"]), best(runs["python"])
+    return {
+        "cycles": args.engine_cycles,
+        "c": c,
+        "python": python,
+        "c_over_python": round(c["realtime_factor"] / python["realtime_factor"], 2),
+        "c_over_python_cpu": round(c["cpu_realtime_factor"] / python["cpu_realtime_factor"], 2),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
     parser.add_argument("--cycles", type=int, default=20_000)
     parser.add_argument("--rate", type=float, default=2000.0)
     parser.add_argument("--repeat", type=int, default=3, help="runs of each; the best counts")
+    parser.add_argument("--engine-cycles", type=int, default=2000)
     args = parser.parse_args()
     eni = load_eni(args.eni)
     budget_us = 1e6 / args.rate
@@ -138,6 +169,7 @@ def main() -> None:
                 runs[name].append(run(eni, options))
         for name in configs:
             out[name] = best(runs[name])
+    out["engines"] = engines(eni, args)
     alone = master_only(eni, args.cycles)
     out["master-only"] = {
         "us_per_cycle": round(alone, 1),

@@ -30,6 +30,7 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import os
+import warnings
 from array import array
 from collections.abc import Callable, Iterable
 from functools import lru_cache, partial
@@ -237,7 +238,10 @@ def chain_engine(engine: str | None = None) -> str:
     UsageError for an unknown name or ``c`` without the C core."""
     chosen = engine or os.environ.get(ENGINE_VARIABLE) or ""
     if not chosen:
-        return "c" if core_available() else "python"
+        if core_available():
+            return "c"
+        _say_fallback()
+        return "python"
     if chosen not in ENGINES:
         raise UsageError(f"chain engine {chosen!r}: expected one of {', '.join(ENGINES)}")
     if chosen == "c" and not core_available():
@@ -246,6 +250,26 @@ def chain_engine(engine: str | None = None) -> str:
             "reinstall with a C compiler, or use 'python'"
         )
     return chosen
+
+
+class SlowFallbackWarning(RuntimeWarning):
+    """A fast kernel is not built and its Python reference runs instead."""
+
+
+FALLBACK = (
+    "the emulator's C core (lolacli.emulator._ccore) is not built: the emulated chain runs "
+    "its Python reference, about 5x slower (bus simulate at its defaults); reinstall with "
+    "a C compiler (pip install -e .)"
+)
+_fallback_said = False
+
+
+def _say_fallback() -> None:
+    """Say once a process (stderr, as a warning) that the Python reference runs."""
+    global _fallback_said
+    if not _fallback_said:
+        _fallback_said = True
+        warnings.warn(FALLBACK, SlowFallbackWarning, stacklevel=3)
 
 
 def _signed64(value: int) -> int:

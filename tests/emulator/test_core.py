@@ -27,6 +27,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -59,6 +60,7 @@ from tests.emulator.test_general_path import (
 from tests.emulator.test_general_path import _random_frame as _register_frame
 from tests.emulator.test_plan import _random_frame
 
+ROOT = Path(__file__).resolve().parents[2]
 CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
 CORPUS_ENIS = sorted((CORPUS / "eni").glob("*.xml")) if (CORPUS / "eni").is_dir() else []
 PERIOD_NS = 500_000
@@ -1141,3 +1143,26 @@ def test_kernel_under_address_and_undefined_behaviour_sanitizers() -> None:
         )
     assert run.returncode == 0, (run.stdout + run.stderr)[-3000:]
     assert " passed" in run.stdout
+
+
+def test_without_the_c_core_the_fallback_is_said_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No C core built: the default engine is the Python reference, and the first chain
+    says so on stderr (a SlowFallbackWarning), the next ones do not."""
+    monkeypatch.delenv("LOLACLI_CHAIN_ENGINE", raising=False)
+    monkeypatch.setattr(core_module, "core_available", lambda: False)
+    monkeypatch.setattr(core_module, "_fallback_said", False)
+    with pytest.warns(core_module.SlowFallbackWarning, match="Python reference"):
+        assert chain_engine() == "python"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert chain_engine() == "python"
+    script = (
+        "import lolacli.emulator.core as c\n"
+        "c.core_available = lambda: False\n"
+        "c.chain_engine(); c.chain_engine()\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "LOLACLI_CHAIN_ENGINE"}
+    env["PYTHONPATH"] = str(ROOT)
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
+    assert done.returncode == 0
+    assert done.stderr.count("is not built") == 1
