@@ -192,10 +192,13 @@ class Chain:
         that to :meth:`run_deferred_cycles`, so a real-time transport can answer first.
         """
         self.stats.frames += 1
-        self._due_link_loss(t_ns)
+        if self._link_loss is not None:
+            self._due_link_loss(t_ns)
         if self._pdi and not defer_cycles:
             self._run_pdi()  # in-process: the firmware has kept up
-        damaged = self.faults.corrupt(len(self._active))  # a damaged frame never takes a plan
+        faults = self.faults
+        # a damaged frame never takes a plan
+        damaged = faults.corrupt(len(self._active)) if faults.corrupt_probability > 0 else None
         plan = self.planner.lookup(frame, defer_cycles) if damaged is None else None
         if plan is not None:
             if self._held is not None and not plan.defers_writes:
@@ -307,7 +310,7 @@ class Chain:
     def _run_plan(
         self, plan: FramePlan, frame: bytes, t_ns: int, defer_cycles: bool
     ) -> tuple[bytes | None, int]:
-        if self.faults.drop():
+        if self.faults.drop_probability > 0 and self.faults.drop():
             self._lost_on_cable()
             return None, 0
         plan.used = True

@@ -42,13 +42,15 @@ class Drives(BusSlave):
         self._offset: int | None = None  # the offset move sent last with the rows
         self._rows: list[tuple[Any, int, int, int]] | None = None  # pack, at, home, sign
         self._packs: list[tuple[Any, int, int]] = []  # (pack_into, offset, sign) per drive
+        packs: dict[str, Any] = {}  # one pack_into per format
         for i, drive in enumerate(drives):
             target = drive.target
             at = target.byte_offset if target is not None else None
             if at is None or target is None:
                 self._packs = []
                 break
-            self._packs.append((struct.Struct("<" + target.fmt).pack_into, at, -1 if i % 2 else 1))
+            pack = packs.setdefault(target.fmt, struct.Struct("<" + target.fmt).pack_into)
+            self._packs.append((pack, at, -1 if i % 2 else 1))
 
     def enable(self, on: bool = True) -> None:
         for drive in self.drives:
