@@ -129,6 +129,7 @@ class Application:
         self.options = options
         self.drives: list[Cia402Drive] = []
         self.group: Drives | None = None
+        self._period_ns = round(options.period_s * 1e9)
         self.sensors: list[Any] = []
         self.watch: dict[str, BusVariable] = {}
         self.fixed: list[tuple[BusVariable, Any]] = []
@@ -159,10 +160,11 @@ class Application:
             ):
                 self.drives.append(Cia402Drive(master.image, slave.name))
             elif has_field(master.image, slave.name, Imu.rate_x):
-                self.sensors.append(Imu(master, slave.name))
+                # on the image, not the master: they have no procData to run each cycle
+                self.sensors.append(Imu(master.image, slave.name))
                 for side in ("left", "right"):
                     try:
-                        self.sensors.append(ForceTorqueSensor(master, slave.name, side))
+                        self.sensors.append(ForceTorqueSensor(master.image, slave.name, side))
                     except LinkError:
                         pass
 
@@ -219,10 +221,8 @@ class Application:
 
     def _move(self, master: Master) -> None:
         t = master.transport.now_ns() - self.t_enable_ns
-        period = round(self.options.period_s * 1e9)
-        offset = round(back_and_forth(t, period, self.options.amplitude_counts))
-        assert self.group is not None
-        self.group.move(offset, self.homes)
+        offset = round(back_and_forth(t, self._period_ns, self.options.amplitude_counts))
+        self.group.move(offset, self.homes)  # type: ignore[union-attr]
 
     def _record(self, master: Master) -> None:
         stats = master.stats
