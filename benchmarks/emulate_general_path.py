@@ -96,7 +96,24 @@ def kind_of(frame: bytes) -> str:
             name = f"0x{d.cmd:02X}"
         if name not in names:
             names.append(name)
-    return "+".join(names)
+    n = len(decode_frame(frame).datagrams)
+    return "+".join(names) + (f" x{n}" if n > 1 and len(names) == 1 else "")
+
+
+def line_frames(eni_path: Path, after_ns: int, count: int) -> list[tuple[int, bytes]]:
+    """Register frames of one datagram per slave, as KickCAT and SOEM send at start-up
+    (KickCAT's AL status polls and SM/FMMU writes): ``count`` FPRD frames of AL status and
+    ``count`` FPWR frames of the DC cyclic unit control (0), 100 µs apart."""
+    from lolacli.files import load_eni
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    slaves = load_eni(eni_path).slaves
+    frames = []
+    for cmd, ado, data in ((Command.FPRD, 0x0130, 2), (Command.FPWR, 0x0980, b"\0\0")):
+        ds = [Datagram.physical(cmd, s.station_address, ado, data) for s in slaves]
+        frames.append(encode_frame(make_frame(ds, src=b"\x02" * 6), pad=True))
+    return [(after_ns + 100_000 * i, frames[i % 2]) for i in range(2 * count)]
 
 
 def run(engine: str, eni_path: Path, frames: list[tuple[int, bytes]]) -> dict[str, object]:
@@ -150,12 +167,20 @@ def main() -> None:
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
     parser.add_argument("--capture", type=Path, help="a capture of the master's side")
     parser.add_argument("--cycles", type=int, default=2000, help="without --capture")
+    parser.add_argument(
+        "--line-frames",
+        type=int,
+        default=500,
+        help="then this many FPRD and FPWR frames of one datagram per slave (0: none)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.capture:
         frames = master_frames(args.capture)
     else:
         frames = test_master_frames(args.eni, args.cycles)
+    if args.line_frames:
+        frames += line_frames(args.eni, frames[-1][0] + 1_000_000, args.line_frames)
     results = {engine: run(engine, args.eni, frames) for engine in ("python", "c")}
     same = results["python"]["replies_blake2b"] == results["c"]["replies_blake2b"]
     source = args.capture.name if args.capture else "tests/emulator/bus.py master"

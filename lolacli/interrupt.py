@@ -65,7 +65,7 @@ class Stop:
         finally:
             self._polling -= 1
 
-    def _handle(self, signum: int, _frame: FrameType | None) -> None:
+    def handle(self, signum: int, _frame: FrameType | None) -> None:
         first = self.signum is None
         if first:
             self.signum = signum
@@ -89,7 +89,7 @@ def stop_signals() -> Iterator[Stop]:
     previous = {s: signal.getsignal(s) for s in SIGNALS}
     try:
         for s in SIGNALS:
-            signal.signal(s, stop._handle)
+            signal.signal(s, stop.handle)
         yield stop
     finally:
         for s, handler in previous.items():

@@ -54,7 +54,7 @@ def test_importing_lolacli_installs_no_handler() -> None:
     probe = (
         "import signal\n"
         "before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]\n"
-        "import lolacli.cli.main, lolacli.master.simulate, lolacli.emulator.run\n"
+        "import lolacli.cli.main, lolacli.simulate, lolacli.emulator.run\n"
         "import lolacli.capture.analyze, lolacli.sdo.session\n"
         "assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == before\n"
     )
@@ -87,8 +87,8 @@ def test_polled_code_sees_the_first_signal_and_a_second_one_raises(own_handlers)
 def test_nested_blocks_restore_each_other(own_handlers) -> None:
     with stop_signals() as outer:
         with stop_signals() as inner:
-            assert signal.getsignal(signal.SIGINT) == inner._handle
-        assert signal.getsignal(signal.SIGINT) == outer._handle
+            assert signal.getsignal(signal.SIGINT) == inner.handle
+        assert signal.getsignal(signal.SIGINT) == outer.handle
     assert _handlers() == (_mine, _mine)
 
 

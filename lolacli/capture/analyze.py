@@ -760,7 +760,7 @@ def _wkc_findings(out: Findings, wkc: WkcVerdict, max_wkc: int, eni: Eni | None,
                   layout: MasterLayout) -> None:
     total = wkc.mismatches
     for d in wkc.datagrams:
-        counted = wkc._counts(d)
+        counted = wkc.datagram_counts(d)
         if counted and d.mismatches:
             values = ", ".join(f"{o.wkc} ×{o.count}" for o in d.observed if o.wkc != d.expected)
             out.add("wkc-mismatch", FAILURE if total > max_wkc else WARNING,

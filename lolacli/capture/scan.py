@@ -209,7 +209,7 @@ def _adp_incremented(cmd: Any) -> Any:
     return cmd == 1 or cmd == 2 or cmd == 3 or cmd == 13 or cmd == 7 or cmd == 8 or cmd == 9
 
 
-def _addr_key(cmd: Any, addr: Any) -> Any:
+def addr_key(cmd: Any, addr: Any) -> Any:
     if _adp_incremented(cmd):
         return addr & 0xFFFF0000
     return addr
@@ -427,7 +427,7 @@ def _ecat(
         q = dg[j]
         cmd = _byte(buf, q)
         addr = _u32(buf, q + 2, False)
-        akey = _addr_key(cmd, addr)
+        akey = addr_key(cmd, addr)
         cmd_counts[cmd] += 1
         hp = _mix(_mix(hp, (cmd << 8) | _byte(buf, q + 1)), akey)
         hs = _mix(_mix(hs, cmd), akey)
@@ -523,7 +523,7 @@ def _ecat(
             st[S_BRD_MAX] = wkc
         if cyc:
             st[S_WKC_OBS] += 1
-            _observe(wk, wn, wv, st, KIND_WKC, cmd, _addr_key(cmd, _u32(buf, q + 2, False)),
+            _observe(wk, wn, wv, st, KIND_WKC, cmd, addr_key(cmd, _u32(buf, q + 2, False)),
                      ln, wkc, 0, frame)
         _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, wk, wn, wv, o_dc, o_mbx)
     return True

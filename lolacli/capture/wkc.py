@@ -133,13 +133,13 @@ class WkcVerdict:
     def checked(self) -> int:
         """Returns of cyclic datagrams verified against a reference (with an ENI: one
         that came from the ENI)."""
-        return sum(d.returns for d in self.datagrams if self._counts(d))
+        return sum(d.returns for d in self.datagrams if self.datagram_counts(d))
 
     @property
     def mismatches(self) -> int:
-        return sum(d.mismatches for d in self.datagrams if self._counts(d))
+        return sum(d.mismatches for d in self.datagrams if self.datagram_counts(d))
 
-    def _counts(self, d: DatagramVerdict) -> bool:
+    def datagram_counts(self, d: DatagramVerdict) -> bool:
         if d.expected is None:
             return False
         return d.basis in ENI_BASES if self.reference == "eni" else True
@@ -147,7 +147,7 @@ class WkcVerdict:
     def first_mismatches(self, limit: int = 20) -> list[dict[str, Any]]:
         rows: list[dict[str, Any]] = []
         for d in self.datagrams:
-            if not self._counts(d):
+            if not self.datagram_counts(d):
                 continue
             for o in d.observed:
                 if o.wkc == d.expected or not set(o.frames) & set(d.mismatch_frames):
@@ -235,7 +235,7 @@ def _eni_command(d: DatagramVerdict, eni: Eni) -> tuple[int, str] | None:
     system time (0x0910) by ARMW or FRMW is one job: a master may pick either (SOEM sends
     FRMW from the reference clock's station where the ENI has ARMW); both count the slaves
     that read or write it, so the ENI's count holds for the other command as well."""
-    from lolacli.capture.scan import _addr_key
+    from lolacli.capture.scan import addr_key
 
     for task in eni.cyclic:
         for frame in task.frames:
@@ -253,7 +253,7 @@ def _eni_command(d: DatagramVerdict, eni: Eni) -> tuple[int, str] | None:
                     address = c.logical_address
                 else:
                     address = ((c.ado or 0) << 16) | (c.adp or 0)
-                key = _addr_key(c.cmd, address & 0xFFFFFFFF)
+                key = addr_key(c.cmd, address & 0xFFFFFFFF)
                 if key == d.address and c.expected_wkc is not None:
                     return c.expected_wkc, "the ENI's <Cnt> for this cyclic command"
     return None

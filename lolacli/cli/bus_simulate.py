@@ -19,135 +19,149 @@ from lolacli.cli.options import (
     SeedOption,
     StuckSafeopOption,
 )
-from lolacli.errors import UsageError
+
+Rate = Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")]
+Duration = Annotated[
+    str | None, typer.Option("--duration", help="Simulated time: 10s, 500ms, … (default 10s).")
+]
+Cycles = Annotated[
+    int | None,
+    typer.Option(
+        "--cycles",
+        min=0,
+        help="Number of cycles (instead of --duration): slots of the schedule; one a "
+        "late cycle ran past is skipped, not made up for.",
+    ),
+]
+Pcap = Annotated[
+    Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")
+]
+Mcap = Annotated[
+    Path | None,
+    typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
+]
+LinkDown = Annotated[
+    str | None,
+    typer.Option(
+        "--link-down",
+        metavar="K[@T]",
+        help="Cut the cable after slave K (0: at the master), from the start or T "
+        "into the cyclic run (seconds, or 500ms).",
+    ),
+]
+Shm = Annotated[
+    str | None,
+    typer.Option(
+        "--shm",
+        metavar="NAME",
+        help="Publish inputs and take outputs through shared memory NAME "
+        "(lolacli.master.shm.ShmClient).",
+    ),
+]
+Pace = Annotated[bool, typer.Option("--pace", help="Run no faster than real time (with --shm).")]
+Watch = Annotated[
+    list[str] | None,
+    typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
+]
+SetValue = Annotated[
+    list[str] | None,
+    typer.Option("--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."),
+]
+NoMiddleware = Annotated[
+    bool,
+    typer.Option(
+        "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
+    ),
+]
+Iface = Annotated[
+    str | None,
+    typer.Option(
+        "--iface",
+        "-i",
+        help="Run in real time on this interface (a live bus: `bus emulate` or hardware) "
+        "instead of the emulated chain in virtual time.",
+    ),
+]
+BusyWait = Annotated[
+    float | None,
+    typer.Option(
+        "--busy-wait-us",
+        help="With --iface: busy-wait this last part of every cycle (default 200 µs, at most "
+        "40% of a cycle).",
+    ),
+]
+RealtimePriority = Annotated[
+    int,
+    typer.Option(
+        "--realtime-priority",
+        min=0,
+        max=99,
+        help="With --iface: ask for SCHED_FIFO at this priority (0: do not ask); the "
+        "report says what the OS granted.",
+    ),
+]
+MaxOverruns = Annotated[
+    int,
+    typer.Option(
+        "--max-overruns",
+        min=0,
+        help="Cycles not kept (slots skipped, or sent over half a cycle late) allowed "
+        "before exit 1.",
+    ),
+]
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
 @app.command("simulate")
 def simulate_cmd(
     eni: EniOption = None,
-    rate: Annotated[float, typer.Option("--rate", help="Cycle rate in Hz.")] = 2000.0,
-    duration: Annotated[
-        str | None,
-        typer.Option("--duration", help="Simulated time: 10s, 500ms, … (default 10s)."),
-    ] = None,
-    cycles: Annotated[
-        int | None,
-        typer.Option(
-            "--cycles",
-            min=0,
-            help="Number of cycles (instead of --duration): slots of the schedule; one a "
-            "late cycle ran past is skipped, not made up for.",
-        ),
-    ] = None,
-    pcap: Annotated[
-        Path | None, typer.Option("--pcap", help="Write every frame, both directions, as pcapng.")
-    ] = None,
-    mcap: Annotated[
-        Path | None,
-        typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
-    ] = None,
+    rate: Rate = 2000.0,
+    duration: Duration = None,
+    cycles: Cycles = None,
+    pcap: Pcap = None,
+    mcap: Mcap = None,
     drop_p: DropOption = 0.0,
     stuck_safeop: StuckSafeopOption = None,
-    link_down: Annotated[
-        str | None,
-        typer.Option(
-            "--link-down",
-            metavar="K[@T]",
-            help="Cut the cable after slave K (0: at the master), from the start or T "
-            "into the cyclic run (seconds, or 500ms).",
-        ),
-    ] = None,
+    link_down: LinkDown = None,
     drift_ppb: DriftOption = 0,
     seed: SeedOption = 0,
-    shm: Annotated[
-        str | None,
-        typer.Option(
-            "--shm",
-            metavar="NAME",
-            help="Publish inputs and take outputs through shared memory NAME "
-            "(lolacli.master.shm.ShmClient).",
-        ),
-    ] = None,
-    pace: Annotated[
-        bool, typer.Option("--pace", help="Run no faster than real time (with --shm).")
-    ] = False,
-    watch: Annotated[
-        list[str] | None,
-        typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
-    ] = None,
-    set_value: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."
-        ),
-    ] = None,
-    no_middleware: Annotated[
-        bool,
-        typer.Option(
-            "--no-middleware", help="Only the frames: no Bus Variables, drives stay disabled."
-        ),
-    ] = False,
-    iface: Annotated[
-        str | None,
-        typer.Option(
-            "--iface",
-            "-i",
-            help="Run in real time on this interface (a live bus: `bus emulate` or hardware) "
-            "instead of the emulated chain in virtual time.",
-        ),
-    ] = None,
-    busy_wait_us: Annotated[
-        float | None,
-        typer.Option(
-            "--busy-wait-us",
-            help="With --iface: busy-wait this last part of every cycle (default 200 µs, at most "
-            "40% of a cycle)."
-        ),
-    ] = None,
-    realtime_priority: Annotated[
-        int,
-        typer.Option(
-            "--realtime-priority",
-            min=0,
-            max=99,
-            help="With --iface: ask for SCHED_FIFO at this priority (0: do not ask); the "
-            "report says what the OS granted.",
-        ),
-    ] = 80,
+    shm: Shm = None,
+    pace: Pace = False,
+    watch: Watch = None,
+    set_value: SetValue = None,
+    no_middleware: NoMiddleware = False,
+    iface: Iface = None,
+    busy_wait_us: BusyWait = None,
+    realtime_priority: RealtimePriority = 80,
     max_lost: MaxLostOption = 0,
     max_wkc: MaxWkcOption = 0,
-    max_overruns: Annotated[
-        int,
-        typer.Option(
-            "--max-overruns",
-            min=0,
-            help="Cycles not kept (slots skipped, or sent over half a cycle late) allowed "
-            "before exit 1.",
-        ),
-    ] = 0,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    max_overruns: MaxOverruns = 0,
+    quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
-    virtual time, enable the drives, move every joint on a minimum-jerk back-and-forth,
-    and report round trip, WKC, lost frames, DC error and the per-cycle software sections
-    (lolacli.simulate/1). With --iface the same runs in real time on a live bus, and the
-    report adds the achieved cycle period and jitter, late and lost frames, the
-    scheduling granted and the host's load. Exit 1 on WKC mismatches or lost frames (more
-    than --max-wkc-mismatches/--max-lost) or refused transitions; 2 for bad options,
-    unknown variables, values of the wrong type or an unwritable output; 3 for an ENI that
-    cannot be read or simulated; 4 when no slave answers or the interface cannot be
-    used; 130 when interrupted (recordings are kept up to the last cycle)."""
+    virtual time, enable the drives, move every joint, and report round trip, WKC, lost
+    frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
+    verdict. --iface runs the same in real time on a live bus and adds the cycle period
+    and jitter achieved and the scheduling granted. Exit 1 when the verdict fails, 2 for
+    bad options or variables, 3 for an ENI that cannot be simulated, 4 when no slave
+    answers, 130/143 when stopped (recordings are kept up to the last cycle)."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
-    from lolacli.master.simulate import simulate
+    from lolacli.simulate import options_from_cli, simulate
 
-    options = _options(locals())
-    model = load_eni(eni if eni is not None else default_eni())
+    options = options_from_cli(
+        rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down,
+        set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
+        pcap=pcap, mcap=mcap, drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
+        middleware=not no_middleware, shm=shm, pace=pace, iface=iface,
+        busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
+        max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
+    )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
-            result = simulate(model, options, progress=progress, stop=stop)
+            result = simulate(load_eni(eni or default_eni()), options, progress=progress, stop=stop)
     if fmt is OutputFormat.json:
         emit_json(result.doc)
     else:
@@ -158,55 +172,6 @@ def simulate_cmd(
         raise typer.Exit(stop.exit_code)
     if result.failed:
         raise typer.Exit(1)
-
-
-def _options(given: dict[str, Any]) -> Any:
-    """The library's SimulateOptions from the command's parameters."""
-    from lolacli.emulator.run import parse_link_down
-    from lolacli.master.simulate import SimulateOptions
-    from lolacli.timing.model import parse_duration_ns
-
-    duration, cycles, rate = given["duration"], given["cycles"], given["rate"]
-    if duration is not None and cycles is not None:
-        raise UsageError("--duration and --cycles contradict each other; give one")
-    n_cycles = cycles
-    if n_cycles is None:
-        ns = (
-            parse_duration_ns(duration, "s", what="--duration")
-            if duration is not None
-            else 10_000_000_000
-        )
-        n_cycles = round(ns * rate / 1e9) if rate > 0 else 0
-    link_down = given["link_down"]
-    cut = parse_link_down(link_down) if link_down is not None else None
-    pairs = []
-    for item in given["set_value"] or ():
-        name, eq, value = item.rpartition("=")
-        if not eq or not name:
-            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
-        pairs.append((name, value))
-    return SimulateOptions(
-        rate_hz=rate,
-        cycles=n_cycles,
-        pcap=given["pcap"],
-        mcap=given["mcap"],
-        drop_probability=given["drop_p"],
-        stuck_safeop=tuple(given["stuck_safeop"] or ()),
-        link_down=cut,
-        drift_ppb=given["drift_ppb"],
-        seed=given["seed"],
-        middleware=not given["no_middleware"],
-        shm=given["shm"],
-        pace=given["pace"],
-        watch=tuple(given["watch"] or ()),
-        set_values=tuple(pairs),
-        iface=given["iface"],
-        busy_wait_us=given["busy_wait_us"],
-        realtime_priority=given["realtime_priority"],
-        max_lost=given["max_lost"],
-        max_wkc_mismatches=given["max_wkc"],
-        max_overruns=given["max_overruns"],
-    )
 
 
 class _progress:

@@ -72,7 +72,7 @@ class Device:
         ] = {}
         # (outputs, od.writes, inputs) after a step that changed nothing: the same outputs
         # with the dictionary untouched give the same inputs without stepping
-        self._rest: tuple[bytes, int, bytes] | None = None
+        self.rest_cache: tuple[bytes, int, bytes] | None = None
         self._communication_objects()
         self._pdo_objects(slave.pdos)
         self.define()
@@ -173,9 +173,9 @@ class Device:
     # ------------------------------------------------------------- mapping
     def mapping(self, direction: Direction) -> list[tuple[int, int, int]]:
         """(index, subindex, bits) in process-image order, from 0x1C12/0x1C13."""
-        return [(index, sub, bits) for index, sub, bits, _ in self._layout(direction)]
+        return [(index, sub, bits) for index, sub, bits, _ in self.pdo_layout(direction)]
 
-    def _layout(self, direction: Direction) -> list[tuple[int, int, int, OdEntry | None]]:
+    def pdo_layout(self, direction: Direction) -> list[tuple[int, int, int, OdEntry | None]]:
         key = (direction, self.od.version)
         cached = self._layouts.get(direction)
         if cached is not None and cached[0] == key:
@@ -197,18 +197,18 @@ class Device:
     def process_data_bytes(self) -> tuple[int, int]:
         version = self.od.version
         if self._sizes is None or self._sizes[0] != version:
-            outputs = sum(m[2] for m in self._layout(Direction.OUTPUT))
-            inputs = sum(m[2] for m in self._layout(Direction.INPUT))
+            outputs = sum(m[2] for m in self.pdo_layout(Direction.OUTPUT))
+            inputs = sum(m[2] for m in self.pdo_layout(Direction.INPUT))
             self._sizes = (version, ((outputs + 7) // 8, (inputs + 7) // 8))
         return self._sizes[1]
 
-    def _byte_layout(self, direction: Direction) -> list[tuple[OdEntry | None, int, int]] | None:
+    def byte_layout_of(self, direction: Direction) -> list[tuple[OdEntry | None, int, int]] | None:
         """(entry, byte offset, bytes) when every mapped entry is whole bytes, else None."""
         key = (direction, self.od.version)
         cached = self._byte_layouts.get(direction)
         if cached is not None and cached[0] == key:
             return cached[1]
-        layout = self._layout(direction)
+        layout = self.pdo_layout(direction)
         out: list[tuple[OdEntry | None, int, int]] | None = []
         bit = 0
         for _index, _sub, bits, entry in layout:
@@ -224,7 +224,7 @@ class Device:
         return out
 
     def unpack_outputs(self, outputs: bytes) -> None:
-        fast = self._byte_layout(Direction.OUTPUT)
+        fast = self.byte_layout_of(Direction.OUTPUT)
         if fast is not None:
             for entry, offset, size in fast:
                 if entry is not None:
@@ -232,19 +232,19 @@ class Device:
             return
         image = int.from_bytes(outputs, "little")
         bit = 0
-        for _index, _sub, bits, entry in self._layout(Direction.OUTPUT):
+        for _index, _sub, bits, entry in self.pdo_layout(Direction.OUTPUT):
             if entry is not None:
                 value = (image >> bit) & ((1 << bits) - 1)
                 entry.value = value.to_bytes((bits + 7) // 8 or 1, "little")
             bit += bits
 
     def pack_inputs(self) -> bytes:
-        fast = self._byte_layout(Direction.INPUT)
+        fast = self.byte_layout_of(Direction.INPUT)
         if fast is not None:
             return b"".join(e.value if e is not None else bytes(n) for e, _o, n in fast)
         image = 0
         bit = 0
-        for _index, _sub, bits, entry in self._layout(Direction.INPUT):
+        for _index, _sub, bits, entry in self.pdo_layout(Direction.INPUT):
             if entry is not None:
                 image |= (int.from_bytes(entry.value, "little") & ((1 << bits) - 1)) << bit
             bit += bits
@@ -253,11 +253,11 @@ class Device:
     # ---------------------------------------------------------------- cycle
     def state_changed(self, state: int) -> None:
         self.state = state
-        self._rest = None
+        self.rest_cache = None
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
         """Outputs in (empty in SAFEOP), one step, inputs out."""
-        rest = self._rest
+        rest = self.rest_cache
         if rest is not None and rest[0] == outputs and rest[1] == self.od.writes:
             self.t_ns = t_ns  # at rest: a step would change nothing
             return rest[2]
@@ -266,7 +266,7 @@ class Device:
         self.step(t_ns)
         self.t_ns = t_ns
         inputs = self.pack_inputs()
-        self._rest = (outputs, self.od.writes, inputs) if self.at_rest() else None
+        self.rest_cache = (outputs, self.od.writes, inputs) if self.at_rest() else None
         return inputs
 
     def step(self, t_ns: int) -> None:

@@ -157,7 +157,7 @@ class Cia402Drive(Device):
         od.add_var(0x6502, "Supported drive modes", DataType.UNSIGNED32, 0x0380, access="ro")
         od.set(MODES, 0, MODE_CSP)
         self.power = Cia402State.NOT_READY_TO_SWITCH_ON
-        self._previous_cw = 0
+        self.previous_cw = 0
         self._cyclic: dict[int, OdEntry] | None = None
         self._update_status()
 
@@ -167,7 +167,7 @@ class Cia402Drive(Device):
         self.power = Cia402State.FAULT_REACTION_ACTIVE
         self._update_status()
 
-    def _entries(self) -> dict[int, OdEntry]:
+    def entries(self) -> dict[int, OdEntry]:
         """The cyclic objects' entries, looked up once (the hot path reads their bytes)."""
         if self._cyclic is None:
             self._cyclic = {
@@ -188,10 +188,10 @@ class Cia402Drive(Device):
         return self._cyclic
 
     def step(self, t_ns: int) -> None:
-        e = self._entries()
+        e = self.entries()
         cw = int.from_bytes(e[CONTROLWORD].value, "little")
-        previous = self._previous_cw
-        self._previous_cw = cw
+        previous = self.previous_cw
+        self.previous_cw = cw
         power = self.power = next_state(self.power, decode_controlword(cw, previous))
         if power == S.SWITCH_ON_DISABLED and e[ERROR_CODE].value != _ZERO2:
             e[ERROR_CODE].value = _ZERO2
@@ -202,10 +202,10 @@ class Cia402Drive(Device):
 
     def at_rest(self) -> bool:
         """Standing still in a state the same controlword keeps: nothing would change."""
-        e = self._entries()
+        e = self.entries()
         if self.power in _TRANSIENT:
             return False
-        cw = self._previous_cw
+        cw = self.previous_cw
         if next_state(self.power, decode_controlword(cw, cw)) != self.power:
             return False
         if e[VELOCITY_ACTUAL].value != _ZERO4:
@@ -235,7 +235,7 @@ class Cia402Drive(Device):
         e[VELOCITY_ACTUAL].value = _I32.pack(_int32(velocity))
 
     def _update_status(self, e: dict[int, OdEntry] | None = None) -> None:
-        e = e or self._entries()
+        e = e or self.entries()
         power = self.power
         status = _STATUS_BITS[power]
         if power == S.OPERATION_ENABLED and e[POSITION_ACTUAL].value == e[TARGET_POSITION].value:

@@ -6,7 +6,7 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
 
 * ``vals``: one block of bytes holding the value of every object-dictionary entry the
   cycle reads or writes (its slots);
-* the PDO mappings (``Device._layout``) as rows ``(image bit, bits, value offset, value
+* the PDO mappings (``Device.pdo_layout``) as rows ``(image bit, bits, value offset, value
   bytes)``, outputs and inputs, with the semantics of ``unpack_outputs``/``pack_inputs``
   (an output entry takes ``ceil(bits / 8)`` bytes, at least one; an input contributes its
   value's low ``bits`` bits, zero beyond its bytes);
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from lolacli.devices.base import Device
 from lolacli.devices.cia402 import Cia402Drive, Cia402State
-from lolacli.devices.io import _FLOAT_PACK, AnalogInput, DigitalIo
+from lolacli.devices.io import FLOAT_PACK, AnalogInput, DigitalIo
 from lolacli.eni.model import Direction
 from lolacli.errors import LolaError
 from lolacli.od import OdEntry
@@ -57,13 +57,13 @@ _BASE_METHODS = (
     "pack_inputs",
     "process_data_bytes",
     "mapping",
-    "_layout",
-    "_byte_layout",
+    "pdo_layout",
+    "byte_layout_of",
 )
 _KIND_METHODS = {
-    KIND_CIA402: ("_entries", "_move", "_update_status"),
-    KIND_DIGITAL_IO: ("_channels",),
-    KIND_ANALOG: ("_channels",),
+    KIND_CIA402: ("entries", "_move", "_update_status"),
+    KIND_DIGITAL_IO: ("channels",),
+    KIND_ANALOG: ("channels",),
 }
 _KIND_CLASS: dict[int, type[Device]] = {
     KIND_CIA402: Cia402Drive,
@@ -119,11 +119,11 @@ class FlatDevice:
         scalars = DeviceScalars(t_ns=device.t_ns)
         if isinstance(device, Cia402Drive):
             scalars.power = int(device.power)
-            scalars.previous_cw = device._previous_cw
+            scalars.previous_cw = device.previous_cw
             if scalars.power not in _POWER_STATES or not 0 <= scalars.previous_cw <= 0xFFFF:
                 return None
         elif isinstance(device, AnalogInput):
-            last = getattr(device, "_last_sample", None)
+            last = getattr(device, "last_sample", None)
             if last is not None:
                 scalars.last_sample, scalars.has_last = last, True
         if not all(_bounded(v) for v in (scalars.t_ns, scalars.last_sample)):
@@ -138,12 +138,12 @@ class FlatDevice:
         for entry, offset, size in self.slots:
             entry.value = data[offset : offset + size]
         device.t_ns = scalars.t_ns
-        device._rest = None  # its inputs cache was made before the core's cycles
+        device.rest_cache = None  # its inputs cache was made before the core's cycles
         if isinstance(device, Cia402Drive):
             device.power = Cia402State(scalars.power)
-            device._previous_cw = scalars.previous_cw
+            device.previous_cw = scalars.previous_cw
         elif isinstance(device, AnalogInput) and scalars.has_last:
-            device._last_sample = scalars.last_sample
+            device.last_sample = scalars.last_sample
 
 
 def flatten(device: Device) -> FlatDevice | None:
@@ -205,7 +205,7 @@ class _Builder:
         period_ns, scale = 0, 0.0
         if self.kind == KIND_CIA402:
             assert isinstance(device, Cia402Drive)
-            entries = device._entries()
+            entries = device.entries()
             cyclic = tuple(
                 self.slot(entry, size)
                 for entry, size in zip(entries.values(), CYCLIC_BYTES, strict=True)
@@ -241,14 +241,14 @@ class _Builder:
         """Rows of the mapping; the byte path of base.py is the bit path when every
         entry's value has the mapped length, which is checked here."""
         device = self.device
-        byte_layout = device._byte_layout(direction)
+        byte_layout = device.byte_layout_of(direction)
         if byte_layout is not None:
             for entry, _offset, size in byte_layout:
                 if entry is not None and len(entry.value) != size:
                     raise _NotFlat
         rows = array("q")
         bit = 0
-        for _index, _sub, bits, entry in device._layout(direction):
+        for _index, _sub, bits, entry in device.pdo_layout(direction):
             if entry is not None:
                 written = max(1, (bits + 7) // 8) if writes else None
                 rows.extend((bit, bits, self.slot(entry, written), len(entry.value)))
@@ -257,7 +257,7 @@ class _Builder:
 
     def _digital_channels(self, device: DigitalIo) -> array[int]:
         rows = array("q")
-        for i, entry, source, bits in device._channels():
+        for i, entry, source, bits in device.channels():
             if bits > 64:
                 raise _NotFlat
             size = max(1, (bits + 7) // 8)
@@ -270,8 +270,8 @@ class _Builder:
 
     def _analog_channels(self, device: AnalogInput) -> tuple[array[int], array[float]]:
         rows, phases = array("q"), array("d")
-        f32, f64 = _FLOAT_PACK[DataType.REAL32], _FLOAT_PACK[DataType.REAL64]
-        for entry, phase, pack, full, offset, mask, size in device._channels():
+        f32, f64 = FLOAT_PACK[DataType.REAL32], FLOAT_PACK[DataType.REAL64]
+        for entry, phase, pack, full, offset, mask, size in device.channels():
             if pack is None:
                 kind = 0
                 if mask > _MASK64 or size > 8:

@@ -34,7 +34,7 @@ class DigitalIo(Device):
 
     def step(self, t_ns: int) -> None:
         pattern = 1 << ((t_ns // 10_000_000) % 8)
-        for i, entry, source, bits in self._channels():
+        for i, entry, source, bits in self.channels():
             if source is not None:
                 value = int.from_bytes(source.value, "little")
             else:
@@ -43,9 +43,9 @@ class DigitalIo(Device):
 
     def at_rest(self) -> bool:
         """Inputs that only echo outputs stand still with them; the walking bits do not."""
-        return all(source is not None for _, _, source, _ in self._channels())
+        return all(source is not None for _, _, source, _ in self.channels())
 
-    def _channels(self) -> list[_Echo]:
+    def channels(self) -> list[_Echo]:
         """(position, input entry, output entry it echoes or None, bits), once per mapping."""
         key = self.od.version
         cached = self._channel_cache
@@ -71,12 +71,12 @@ class AnalogInput(Device):
 
     def step(self, t_ns: int) -> None:
         sample = t_ns // self.sample_period_ns
-        if sample == getattr(self, "_last_sample", None):
+        if sample == getattr(self, "last_sample", None):
             return
-        self._last_sample = sample
+        self.last_sample = sample
         angle = 2 * math.pi * (t_ns / 1e9)
         sin = math.sin
-        for entry, phase, pack, full, offset, mask, size in self._channels():
+        for entry, phase, pack, full, offset, mask, size in self.channels():
             s = sin(angle + phase)
             if pack is not None:
                 entry.value = pack(s * self.scale)
@@ -85,7 +85,7 @@ class AnalogInput(Device):
                     size, "little"
                 )
 
-    def _channels(self) -> list[_Channel]:
+    def channels(self) -> list[_Channel]:
         """Per input entry what its sine needs, worked out once per mapping."""
         key = self.od.version
         cached = self._channel_cache
@@ -95,7 +95,7 @@ class AnalogInput(Device):
         for i, (index, sub, bits) in enumerate(_inputs(self)):
             entry = self.od.require(index, sub)
             dtype = entry.data_type or 0
-            pack = _FLOAT_PACK.get(dtype)
+            pack = FLOAT_PACK.get(dtype)
             full = (1 << (bits - 1)) - 1 if bits > 1 else 1
             offset = full if dtype in _UNSIGNED else 0
             out.append(
@@ -105,7 +105,7 @@ class AnalogInput(Device):
         return out
 
 
-_FLOAT_PACK: dict[int, Callable[[float], bytes]] = {
+FLOAT_PACK: dict[int, Callable[[float], bytes]] = {
     DataType.REAL32: struct.Struct("<f").pack,
     DataType.REAL64: struct.Struct("<d").pack,
 }

@@ -51,7 +51,7 @@ typedef __int128 i128;
 /* device kinds (lolacli/devices/flat.py) */
 enum { K_NONE = 0, K_PYTHON = 1, K_GENERIC = 2, K_CIA402 = 3, K_DIGITAL_IO = 4, K_ANALOG = 5 };
 
-/* CiA 402: the cyclic entries (Cia402Drive._entries order) and their sizes */
+/* CiA 402: the cyclic entries (Cia402Drive.entries order) and their sizes */
 enum { E_CW, E_SW, E_MODES, E_MODES_DISPLAY, E_TARGET, E_POSITION, E_VELOCITY,
        E_TARGET_VELOCITY, E_MAX_VELOCITY, E_ERROR, N_CYCLIC };
 static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2};

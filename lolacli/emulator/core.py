@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import os
+import warnings
 from array import array
 from collections.abc import Callable, Iterable
 from functools import lru_cache, partial
@@ -38,8 +40,9 @@ from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
 from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
-from lolacli.emulator.plan import FramePlan, Pieces, _Brd, _DcDistribution, _Logical, finish
+from lolacli.emulator.plan import BrdOp, DcOp, FramePlan, LogicalOp, Pieces, finish
 from lolacli.emulator.registers import AL_STATUS, MEMORY_BYTES, AlState
+from lolacli.errors import UsageError
 
 if TYPE_CHECKING:
     from lolacli.devices.base import Device
@@ -225,6 +228,50 @@ def core_available() -> bool:
     return _library() is not None
 
 
+ENGINES = ("c", "python")
+ENGINE_VARIABLE = "LOLACLI_CHAIN_ENGINE"
+
+
+def chain_engine(engine: str | None = None) -> str:
+    """The engine a chain runs its cyclic work with: ``engine``, else the environment's
+    ``LOLACLI_CHAIN_ENGINE``, else ``c`` when the C core is built and ``python`` when not.
+    UsageError for an unknown name or ``c`` without the C core."""
+    chosen = engine or os.environ.get(ENGINE_VARIABLE) or ""
+    if not chosen:
+        if core_available():
+            return "c"
+        _say_fallback()
+        return "python"
+    if chosen not in ENGINES:
+        raise UsageError(f"chain engine {chosen!r}: expected one of {', '.join(ENGINES)}")
+    if chosen == "c" and not core_available():
+        raise UsageError(
+            "chain engine 'c': the C core (lolacli.emulator._ccore) is not built; "
+            "reinstall with a C compiler, or use 'python'"
+        )
+    return chosen
+
+
+class SlowFallbackWarning(RuntimeWarning):
+    """A fast kernel is not built and its Python reference runs instead."""
+
+
+FALLBACK = (
+    "the emulator's C core (lolacli.emulator._ccore) is not built: the emulated chain runs "
+    "its Python reference, about 5x slower (bus simulate at its defaults); reinstall with "
+    "a C compiler (pip install -e .)"
+)
+_fallback_said = False
+
+
+def _say_fallback() -> None:
+    """Say once a process (stderr, as a warning) that the Python reference runs."""
+    global _fallback_said
+    if not _fallback_said:
+        _fallback_said = True
+        warnings.warn(FALLBACK, SlowFallbackWarning, stacklevel=3)
+
+
 def _signed64(value: int) -> int:
     return ((value + (1 << 63)) & _MASK64) - (1 << 63)
 
@@ -260,7 +307,7 @@ class ChainCore:
             raise RuntimeError("the chain's C core (lolacli.emulator._ccore) is not built")
         if any(len(esc.mem) != MEMORY_BYTES for esc in escs):
             raise RuntimeError("an ESC memory is not 64 KiB")
-        self._lib = lib
+        self.lib = lib
         self.escs = escs
         n = len(escs)
         self._words = array("q", bytes(ctypes.sizeof(SlaveTable) * max(1, n)))
@@ -277,7 +324,7 @@ class ChainCore:
         self.released: set[int] = set(range(n))  # ESC scalars the Esc objects hold
         self.devices_released: set[int] = set(range(n))  # devices the objects hold
         self._pieces: dict[int, list[tuple[int, int, Esc | None]]] = {}
-        self._index = {id(esc): i for i, esc in enumerate(escs)}
+        self.index = {id(esc): i for i, esc in enumerate(escs)}
         for i, esc in enumerate(escs):
             app = esc.app
             device = _device_of(app)
@@ -342,7 +389,7 @@ class ChainCore:
             groups=_address(self._groups, keep),
             groups_len=len(self._groups),
         )
-        if self._lib.lolacli_core_check_registers(ctypes.addressof(table)):
+        if self.lib.lolacli_core_check_registers(ctypes.addressof(table)):
             self._regs = None
             return False
         self._line, self._regs, self._regs_keep = line, table, keep
@@ -469,7 +516,7 @@ class ChainCore:
     def release_owner(self, work: object) -> None:
         """Give back the ESC scalars of the slave whose firmware ``work`` (a bound method
         of its Esc) is about to run; of every slave when it is not one of theirs."""
-        i = self._index.get(id(getattr(work, "__self__", None)))
+        i = self.index.get(id(getattr(work, "__self__", None)))
         if i is None:
             self.release()
         elif i not in self.released:
@@ -483,7 +530,7 @@ class ChainCore:
         needs it, which may run in a frame's answer path (25 LOLA devices: 1.5 ms in
         KickCAT's first LWR, whose LRD's cycle waited for it). Only the first ``active``
         slaves (those the frames reach) run cycles."""
-        i = self._index.get(id(getattr(work, "__self__", None)))
+        i = self.index.get(id(getattr(work, "__self__", None)))
         if i is None or i >= active or i not in self.devices_released:
             return None
         if self.escs[i].al_state not in (AlState.SAFEOP, AlState.OP):
@@ -629,7 +676,7 @@ class ChainCore:
             loaded.previous_cw,
         )
         w[b + F_LAST_SAMPLE], w[b + F_HAS_LAST] = loaded.last_sample, int(loaded.has_last)
-        if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+        if self.lib.lolacli_core_check_slave(self.address + 8 * b):
             self._device_pins[i] = (None, [])
             return False
         w[b + F_DEV_OWNED] = 1
@@ -664,7 +711,7 @@ class ChainCore:
             except (IndexError, AttributeError):
                 self.release_device(i)
                 continue
-            if self._lib.lolacli_core_check_slave(self.address + 8 * b):
+            if self.lib.lolacli_core_check_slave(self.address + 8 * b):
                 self.release_device(i)
 
     def held_devices(self) -> list[int]:
@@ -705,7 +752,7 @@ class ChainCore:
                 continue
             if esc is None:
                 lo = max(lo, start)
-                self._lib.lolacli_core_cycles(self.address + 8 * WORDS * lo, hi - lo, t_ns)
+                self.lib.lolacli_core_cycles(self.address + 8 * WORDS * lo, hi - lo, t_ns)
             else:
                 esc.cycle(t_ns)
             if should_yield is not None and hi < n and should_yield():
@@ -738,7 +785,7 @@ class ChainCore:
         if (
             t_ns.__class__ is int
             and -VALUE_LIMIT < t_ns < VALUE_LIMIT
-            and self._lib.lolacli_core_watchdog(self.address, n, t_ns) < 0
+            and self.lib.lolacli_core_watchdog(self.address, n, t_ns) < 0
         ):
             for i in sorted(self.released):
                 if i < n:
@@ -758,7 +805,7 @@ class ChainCore:
         :func:`~lolacli.emulator.plan.plan_pieces`; it returns what :meth:`compile` does."""
         compiled = CompiledPlan.__new__(CompiledPlan)
         try:
-            yield from compiled._pieces(self, plan)
+            yield from compiled.make_pieces(self, plan)
         except _NotCompiled:
             return None
         return compiled
@@ -781,12 +828,12 @@ class CompiledPlan:
     """One FramePlan as a kernel program with its buffers."""
 
     def __init__(self, core: ChainCore, plan: FramePlan) -> None:
-        finish(self._pieces(core, plan))
+        finish(self.make_pieces(core, plan))
 
-    def _pieces(self, core: ChainCore, plan: FramePlan) -> Pieces:
+    def make_pieces(self, core: ChainCore, plan: FramePlan) -> Pieces:
         self.core = core
         self.plan = plan
-        self._lib = core._lib
+        self.lib = core.lib
         self._snap_len = 0
         self._pend_len = PEND_FIRST_SLOT
         self._slots: list[tuple[int, list[int]]] = []  # per op: snapshot offset, DC slots
@@ -808,10 +855,10 @@ class CompiledPlan:
             pend_len=len(self.pend),
         )
         self.address = ctypes.addressof(self.table)
-        if self._lib.lolacli_core_check_plan(self.address):
+        if self.lib.lolacli_core_check_plan(self.address):
             raise _NotCompiled
         self.item = (self.finish, ())
-        self._answer = self._lib.lolacli_core_answer
+        self._answer = self.lib.lolacli_core_answer
 
     # ------------------------------------------------------------- running
     def answer(self, frame: bytes, t_ns: int, deferred: list[Any]) -> tuple[bytes, bool] | None:
@@ -841,7 +888,7 @@ class CompiledPlan:
         if not self.pend[0]:
             return
         if not self.core.released or self.core.acquire():
-            self._lib.lolacli_core_finish(self.address)
+            self.lib.lolacli_core_finish(self.address)
         else:
             self._finish_in_python()
 
@@ -852,10 +899,10 @@ class CompiledPlan:
         if plan.deferred is not None:
             plan.count()
         for op, (snap_at, slots) in zip(plan.ops, self._slots, strict=True):
-            if isinstance(op, _Logical) and op.deferred is not None:
+            if isinstance(op, LogicalOp) and op.deferred is not None:
                 op.snapshot[:] = self.snap[snap_at : snap_at + len(op.snapshot)]
                 op.write_later(t_ns)
-            elif isinstance(op, _DcDistribution) and op.deferred is not None:
+            elif isinstance(op, DcOp) and op.deferred is not None:
                 for (_reference, _port0, others), slot in zip(op.segments, slots, strict=True):
                     if others:
                         value = self.pend[slot] & _MASK64
@@ -863,7 +910,7 @@ class CompiledPlan:
 
     # ------------------------------------------------------------- compiling
     def _program(self, plan: FramePlan) -> Pieces:
-        index = self.core._index
+        index = self.core.index
         prog = array("q", bytes(8 * H_WORDS))
         prog[H_MAGIC] = MAGIC
         prog[H_FRAME_LEN] = len(plan.buf)
@@ -881,21 +928,21 @@ class CompiledPlan:
         prog[H_OPS], prog[H_N_OPS] = len(prog), len(plan.ops)
         for op in plan.ops:
             yield
-            if isinstance(op, _Logical):
+            if isinstance(op, LogicalOp):
                 record = yield from self._logical(op)
-            elif isinstance(op, _Brd):
+            elif isinstance(op, BrdOp):
                 record = self._brd(op, counted)
-            elif isinstance(op, _DcDistribution):
+            elif isinstance(op, DcOp):
                 record = self._dc(op)
             else:
                 raise _NotCompiled
             prog.extend(record)
         return prog
 
-    def _logical(self, op: _Logical) -> Pieces:
+    def _logical(self, op: LogicalOp) -> Pieces:
         if op.ordered or any(esc.pending_op for esc, _, _ in op.events):
             raise _NotCompiled  # slave-major order, or an outputs event that enters OP
-        index = self.core._index
+        index = self.core.index
         writes: list[int] = []
         reads: list[int] = []
         for step in op.steps:
@@ -918,7 +965,7 @@ class CompiledPlan:
         record[1] = len(record)
         return record
 
-    def _brd(self, op: _Brd, slaves: list[int]) -> list[int]:
+    def _brd(self, op: BrdOp, slaves: list[int]) -> list[int]:
         cache_at, self._snap_len = self._snap_len, self._snap_len + op.length
         flag = 0
         if op.epoch_cell is not None:
@@ -929,8 +976,8 @@ class CompiledPlan:
         record[1] = len(record)
         return record
 
-    def _dc(self, op: _DcDistribution) -> list[int]:
-        index = self.core._index
+    def _dc(self, op: DcOp) -> list[int]:
+        index = self.core.index
         by_mem = {id(esc.mem): i for i, esc in enumerate(self.core.escs)}
         segments: list[int] = []
         others: list[int] = []
@@ -954,4 +1001,11 @@ class CompiledPlan:
         return record
 
 
-__all__ = ["ChainCore", "CompiledPlan", "core_available"]
+__all__ = [
+    "ENGINES",
+    "ENGINE_VARIABLE",
+    "ChainCore",
+    "CompiledPlan",
+    "chain_engine",
+    "core_available",
+]

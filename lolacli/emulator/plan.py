@@ -169,7 +169,7 @@ def plan_pieces(
         return None
     plan = FramePlan.__new__(FramePlan)
     try:
-        yield from plan._pieces(key, slaves, offsets, epoch, delay_ns, deferred)
+        yield from plan.make_pieces(key, slaves, offsets, epoch, delay_ns, deferred)
     except _NotPlannable:
         return None
     return plan
@@ -189,9 +189,9 @@ class FramePlan:
         delay_ns: int,
         deferred: Deferred | None = None,
     ) -> None:
-        finish(self._pieces(key, slaves, offsets, epoch, delay_ns, deferred))
+        finish(self.make_pieces(key, slaves, offsets, epoch, delay_ns, deferred))
 
-    def _pieces(
+    def make_pieces(
         self,
         key: Key,
         slaves: list[Esc],
@@ -212,18 +212,18 @@ class FramePlan:
         datagrams = _datagrams(key)
         self.datagrams_per_slave = len(datagrams)
         self.logical = any(d.cmd in _LOGICAL for d in datagrams)
-        self.ops: list[_Op] = []
+        self.ops: list[Op] = []
         for d in datagrams:
             self.ops.append((yield from _op_pieces(d, view, self.slaves)))
         if deferred is not None:
             for k, op in enumerate(self.ops):
                 later = self.ops[k + 1 :]
-                if isinstance(op, _DcDistribution) and op.references <= 1:
+                if isinstance(op, DcOp) and op.references <= 1:
                     if not any(_reads_dc(o) for o in later):
                         op.deferred = deferred
-                elif isinstance(op, _Logical) and op.writes_deferrable(later):
+                elif isinstance(op, LogicalOp) and op.writes_deferrable(later):
                     op.deferred = deferred
-        logical = [op for op in self.ops if isinstance(op, _Logical)]
+        logical = [op for op in self.ops if isinstance(op, LogicalOp)]
         # no write into the slaves' memories before the answer is sent
         self.defers_writes = all(op.deferred is not None or not op.steps_write for op in logical)
         written = {id(s.esc) for op in logical for s in op.steps if s.events}
@@ -262,7 +262,7 @@ class FramePlan:
             esc.counters.datagrams += k
 
 
-class _Op:
+class Op:
     wkc_offset: int
 
     def run(self, t_ns: int) -> int:
@@ -272,18 +272,18 @@ class _Op:
 def _op_pieces(d: _Datagram, view: memoryview, slaves: list[tuple[Esc, int]]) -> Pieces:
     data = view[d.data : d.data + d.length]
     if d.cmd in _LOGICAL:
-        op = _Logical.__new__(_Logical)
-        yield from op._pieces(d, data, slaves)
+        op = LogicalOp.__new__(LogicalOp)
+        yield from op.make_pieces(d, data, slaves)
         return op
     yield
     if d.cmd == Command.BRD:
-        return _Brd(d, data, [esc for esc, _ in slaves])
+        return BrdOp(d, data, [esc for esc, _ in slaves])
     if d.cmd in _DC and d.ado == r.DC_SYSTEM_TIME and d.length in (4, 8):
-        return _DcDistribution(d, data, slaves)
+        return DcOp(d, data, slaves)
     raise _NotPlannable
 
 
-class _Brd(_Op):
+class BrdOp(Op):
     """BRD of registers: the OR of every slave's bytes into the datagram, WKC +1 each."""
 
     def __init__(self, d: _Datagram, data: memoryview, slaves: list[Esc]) -> None:
@@ -314,7 +314,7 @@ class _Brd(_Op):
         return len(self.sources)
 
 
-class _DcDistribution(_Op):
+class DcOp(Op):
     """ARMW/FRMW of the system time: the reference puts its time in, the others take it
     into their time control loop; WKC +1 from every slave. Runs of slaves between
     references go through :func:`system_time_loop` in one call."""
@@ -363,7 +363,7 @@ class _DcDistribution(_Op):
 
 
 @dataclass(slots=True)
-class _SlaveStep:
+class SlaveStep:
     """One slave's part of a logical datagram: ``generic`` set -> the ESC's own code."""
 
     esc: Esc
@@ -377,7 +377,7 @@ class _SlaveStep:
     wkc: int = 0
 
 
-class _Logical(_Op):
+class LogicalOp(Op):
     """LRD/LWR/LRW: slice copies through every slave's FMMUs (ETG.1000.4 §6.5).
 
     Slaves whose FMMUs are not plain byte copies (bit-wise mappings, mailbox buffers) run
@@ -386,14 +386,14 @@ class _Logical(_Op):
     first, then the outputs events, then all reads."""
 
     def __init__(self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, int]]) -> None:
-        finish(self._pieces(d, data, slaves))
+        finish(self.make_pieces(d, data, slaves))
 
-    def _pieces(self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, int]]) -> Pieces:
+    def make_pieces(self, d: _Datagram, data: memoryview, slaves: list[tuple[Esc, int]]) -> Pieces:
         self.wkc_offset = d.wkc
         self.data = data
         self.cmd = d.cmd
         self.address = d.adp | d.ado << 16
-        self.steps: list[_SlaveStep] = []
+        self.steps: list[SlaveStep] = []
         for esc, port0_ns in slaves:
             self.steps.append(self._slave(esc, port0_ns, d))
             yield
@@ -409,11 +409,11 @@ class _Logical(_Op):
         self.events = [(s.esc, s.port0_ns, s.events) for s in plain if s.events]
         self.reads = [(t, src) for s in plain for t, src, _, _ in s.reads or ()]
 
-    def _slave(self, esc: Esc, port0_ns: int, d: _Datagram) -> _SlaveStep:
+    def _slave(self, esc: Esc, port0_ns: int, d: _Datagram) -> SlaveStep:
         config = esc.configuration()
         lo, hi = self.address, self.address + d.length
         mem = memoryview(esc.mem)
-        step = _SlaveStep(esc, port0_ns, writes=[], reads=[])
+        step = SlaveStep(esc, port0_ns, writes=[], reads=[])
         assert step.writes is not None and step.reads is not None
         wrote = read = False
         if d.cmd != Command.LRD:
@@ -424,7 +424,7 @@ class _Logical(_Op):
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_WRITE)
                 if r.SM_MODE_MAILBOX in kinds or not byte_aligned(f):
-                    return _SlaveStep(esc, port0_ns, generic=True)
+                    return SlaveStep(esc, port0_ns, generic=True)
                 step.writes.append((mem[p:q], self.data[a:b], a, b))
                 step.write_memory.append((p, q))
                 step.events += len(kinds)
@@ -435,14 +435,14 @@ class _Logical(_Op):
                 p, q, a, b = _copy_range(f, lo, hi)
                 kinds = _sm_last_byte_in(config.active, p, q, r.SM_DIRECTION_READ)
                 if r.SM_MODE_MAILBOX in kinds or not byte_aligned(f):
-                    return _SlaveStep(esc, port0_ns, generic=True)
+                    return SlaveStep(esc, port0_ns, generic=True)
                 step.reads.append((self.data[a:b], mem[p:q], a, b))
                 step.read_memory.append((p, q))
             read = bool(hits)
         step.wkc = wkc_increment(d.cmd, read=read, write=wrote)
         return step
 
-    def writes_deferrable(self, later: list[_Op]) -> bool:
+    def writes_deferrable(self, later: list[Op]) -> bool:
         """Whether the writes and outputs events may wait until after the answer (taking
         the outputs from a copy of the datagram made before the reads): no read in the
         frame takes from memory they write, no later write writes it again, and no
@@ -456,8 +456,8 @@ class _Logical(_Op):
             if s.write_memory:
                 written.setdefault(id(s.esc), []).extend(s.write_memory)
         for op in [self, *later]:
-            if not isinstance(op, _Logical):
-                if isinstance(op, _Brd) and op.hi > PLAN_FREE_REGISTERS:
+            if not isinstance(op, LogicalOp):
+                if isinstance(op, BrdOp) and op.hi > PLAN_FREE_REGISTERS:
                     return False
                 continue
             for s in op.steps:
@@ -527,14 +527,14 @@ class _Logical(_Op):
 _DC_REGISTERS = (r.DC_RECEIVE_TIME_PORT0, r.DC_END)
 
 
-def _reads_dc(op: _Op) -> bool:
+def _reads_dc(op: Op) -> bool:
     """True when ``op`` may read DC registers or clocks (so the loops before it must run)."""
     lo, hi = _DC_REGISTERS
-    if isinstance(op, _DcDistribution):
+    if isinstance(op, DcOp):
         return True
-    if isinstance(op, _Brd):
+    if isinstance(op, BrdOp):
         return op.lo < hi and lo < op.hi
-    if isinstance(op, _Logical):
+    if isinstance(op, LogicalOp):
         return any(s.generic or any(p < hi and lo < q for p, q in s.read_memory) for s in op.steps)
     return True
 
@@ -571,7 +571,7 @@ def _sm_last_byte_in(active: list[SmView], p: int, q: int, direction: int) -> li
     ]
 
 
-def _reads_feed_writes(steps: list[_SlaveStep]) -> bool:
+def _reads_feed_writes(steps: list[SlaveStep]) -> bool:
     """True when a slave's read lands in bytes a later slave's write takes from."""
     for i, step in enumerate(steps):
         for _, _, a, b in step.reads or ():

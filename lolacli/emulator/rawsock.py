@@ -470,9 +470,9 @@ class RawSocketServer:
     def _plans(self) -> bool:
         """The chain's pending frame plans, a piece at a time while no frame waits, before
         the grace: a master polling faster than the grace leaves no idle moment for them
-        (:meth:`Chain.make_plans`). True when a frame waits."""
+        (:meth:`Planner.work`). True when a frame waits."""
         chain = self.chain
-        return chain.plans_pending and not chain.make_plans(self._frame_waiting)
+        return chain.planner.pending and not chain.planner.work(self._frame_waiting)
 
     def _idle(self) -> None:
         """After a frame's work, while no frame waits: keep-warm work when due (the

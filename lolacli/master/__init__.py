@@ -8,8 +8,8 @@
 * Bus Variables (:mod:`lolacli.master.variables`) and device abstraction classes
   (:mod:`lolacli.master.slaves`).
 
-The master imports nothing of :mod:`lolacli.emulator`; :mod:`lolacli.master.simulate`
-composes the two for ``lolacli bus simulate``.
+The master imports nothing of :mod:`lolacli.emulator`; :mod:`lolacli.simulate` (the layer
+above both) composes the two for ``lolacli bus simulate``, the ``sdo`` commands and tests.
 """
 
 from lolacli.master.core import Master, MasterOptions, MasterStats, Refusal

@@ -208,6 +208,8 @@ def _untrack(shm: shared_memory.SharedMemory) -> None:
     try:
         from multiprocessing import resource_tracker
 
-        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+        # the tracked name (with its leading slash) is private to the stdlib
+        name = shm._name  # type: ignore[attr-defined]  # noqa: SLF001
+        resource_tracker.unregister(name, "shared_memory")
     except Exception:  # noqa: BLE001 - best effort; newer Pythons do not track
         pass

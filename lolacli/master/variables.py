@@ -85,7 +85,7 @@ class BusVariable:
             return f"is {variable.bit_size} bits wide; {type(self).__name__} is {self.bit_size}"
         return None
 
-    def _bind(self, image: ProcessImage, variable: Variable) -> None:
+    def bind(self, image: ProcessImage, variable: Variable) -> None:
         self._image = image
         self.name = variable.name
         self._byte, self._bit = divmod(variable.bit_offset, 8)
@@ -94,6 +94,12 @@ class BusVariable:
     @property
     def linked(self) -> bool:
         return self._image is not None
+
+    @property
+    def byte_offset(self) -> int | None:
+        """Where a linked variable of whole bytes (its own struct format) starts in its
+        image; ``None`` for a bit-packed one."""
+        return self._byte if self._bit == 0 and self._struct is not None else None
 
     # -- values
     def read(self, data: bytes | bytearray) -> Any:
@@ -114,7 +120,7 @@ class BusVariable:
         raw = (raw & ~mask) | ((int(value) << self._bit) & mask)
         data[self._byte : self._byte + n] = raw.to_bytes(n, "little")
 
-    def _check(self, value: Any) -> Any:
+    def check(self, value: Any) -> Any:
         return value
 
     @property
@@ -138,9 +144,9 @@ class BusVariable:
                 self._struct.pack_into(image.outputs, self._byte, value)  # type: ignore[union-attr]
                 return
             except struct.error:
-                self._check(value)
+                self.check(value)
                 raise
-        self._to_bits(image.outputs, self._check(value))  # type: ignore[union-attr]
+        self._to_bits(image.outputs, self.check(value))  # type: ignore[union-attr]
 
     def _refuse_write(self) -> None:
         if self._image is None:
@@ -157,7 +163,7 @@ class _BusInt(BusVariable):
     __slots__ = ()
     signed: ClassVar[bool] = False
 
-    def _check(self, value: Any) -> int:
+    def check(self, value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise LinkError(self.name, f"{type(self).__name__} takes an int, not {value!r}")
         lo = -(1 << (self.bit_size - 1)) if self.signed else 0
@@ -175,7 +181,7 @@ class BusBool(BusVariable):
     def read(self, data: bytes | bytearray) -> bool:
         return bool(data[self._byte] >> self._bit & 1)
 
-    def _check(self, value: Any) -> int:
+    def check(self, value: Any) -> int:
         if not isinstance(value, (bool, int)) or value not in (0, 1):
             raise LinkError(self.name, f"BusBool takes True/False, not {value!r}")
         return int(value)
@@ -225,7 +231,7 @@ class BusReal32(BusVariable):
     __slots__ = ()
     eni_types, bit_size, fmt = frozenset({"REAL"}), 32, "f"
 
-    def _check(self, value: Any) -> float:
+    def check(self, value: Any) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise LinkError(self.name, f"{type(self).__name__} takes a number, not {value!r}")
         return float(value)
@@ -253,7 +259,7 @@ class BusBytes(BusVariable):
     def read(self, data: bytes | bytearray) -> bytes:
         return bytes(data[self._byte : self._byte + self._bits // 8])
 
-    def _check(self, value: Any) -> bytes:
+    def check(self, value: Any) -> bytes:
         if not isinstance(value, (bytes, bytearray)) or len(value) != self._bits // 8:
             raise LinkError(self.name, f"BusBytes takes {self._bits // 8} bytes, not {value!r}")
         return bytes(value)
@@ -267,7 +273,7 @@ class BusBytes(BusVariable):
         image = self._need_image()
         if self.direction is Direction.INPUT:
             raise UsageError(f"bus variable {self.name!r} is an input: it cannot be written")
-        data = self._check(value)
+        data = self.check(value)
         with image.lock:
             image.outputs[self._byte : self._byte + len(data)] = data
 
@@ -306,7 +312,7 @@ class _Bits(_BusInt):
     def accepts(self, variable: Variable) -> str | None:
         return None
 
-    def _check(self, value: Any) -> int:
+    def check(self, value: Any) -> int:
         if (
             isinstance(value, bool)
             or not isinstance(value, int)
@@ -385,7 +391,7 @@ class ProcessImage:
         image_bytes = len(self.inputs if v.direction is Direction.INPUT else self.outputs)
         if (v.bit_offset + v.bit_size + 7) // 8 > image_bytes:
             raise LinkError(name, f"lies outside the {image_bytes}-byte {v.direction.value} image")
-        variable._bind(self, v)
+        variable.bind(self, v)
         self.linked.append(variable)
         return variable
 

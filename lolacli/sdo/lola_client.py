@@ -54,7 +54,6 @@ class LolaBus:
         """``where`` ends the slaves' descriptions ("on eth0"); ``name`` names the bus in
         messages about it as a whole ("eth0")."""
         from lolacli.master.core import MasterOptions
-        from lolacli.master.port import SinglePort
         from lolacli.master.preop import PreopBus, configure_from_sii
 
         self.transport = transport
@@ -74,7 +73,7 @@ class LolaBus:
             transport.close()
             raise
         self.eni = eni
-        self.port = SinglePort(self.bus.master)  # mailbox frames: one datagram each
+        self.port = self.bus.master  # mailbox frames: one datagram each
 
     def slaves(self) -> tuple[SlaveRef, ...]:
         return slave_refs(self.eni)

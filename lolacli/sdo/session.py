@@ -168,15 +168,14 @@ class LolaSession(Session):
 
         self.esi = [load_esi(p) for p in options.esi]
         if options.iface is None:
-            from lolacli.emulator.run import EmulateOptions, make_chain
-            from lolacli.master.transport import ChainTransport
+            from lolacli.simulate import VirtualBus
 
             eni = load_eni(options.eni if options.eni is not None else default_eni())
-            chain = make_chain(eni, EmulateOptions(), esi=self.esi)
+            virtual = VirtualBus(eni, esi=self.esi)
             name = Path(eni.source).name if eni.source else "ENI"
             where = f"of the emulated chain ({name})"
             self.source = f"the emulated chain ({name})"
-            self.bus = LolaBus(ChainTransport(chain), eni, where=where, timeout_s=options.timeout_s)
+            self.bus = LolaBus(virtual.transport, eni, where=where, timeout_s=options.timeout_s)
         else:
             from lolacli.master.transport import RawSocketTransport
 

@@ -172,7 +172,7 @@ def simulated(tmp_path_factory):
     transactions), some frames lost, written by the simulator's pcapng recorder."""
     from lolacli.cli.common import default_eni
     from lolacli.files import load_eni
-    from lolacli.master.simulate import SimulateOptions, simulate
+    from lolacli.simulate import SimulateOptions, simulate
 
     path = tmp_path_factory.mktemp("sim") / "lola-600.pcapng"
     simulate(load_eni(default_eni()),

@@ -42,7 +42,7 @@ def simulated(tmp_path_factory: pytest.TempPathFactory) -> Path:
     the simulator's own pcapng writer: about 1.7 MB, 27 chunks of SMALL_CHUNK."""
     from lolacli.cli.common import default_eni
     from lolacli.files import load_eni
-    from lolacli.master.simulate import SimulateOptions, simulate
+    from lolacli.simulate import SimulateOptions, simulate
 
     path = tmp_path_factory.mktemp("sim") / "lola-400.pcapng"
     simulate(load_eni(default_eni()),

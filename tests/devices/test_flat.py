@@ -52,7 +52,7 @@ def test_load_and_store_carry_values_and_scalars() -> None:
     struct.pack_into("<i", flat.vals, target, 777)  # as the kernel would change it
     flat.store(DeviceScalars(t_ns=5_000, power=0x27, previous_cw=0x0F))
     assert drive.od.get_int(0x607A) == 777
-    assert (drive.t_ns, int(drive.power), drive._previous_cw) == (5_000, 0x27, 0x0F)
+    assert (drive.t_ns, int(drive.power), drive.previous_cw) == (5_000, 0x27, 0x0F)
 
 
 def test_bit_mapped_io_and_analog_channels() -> None:

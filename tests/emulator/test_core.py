@@ -27,6 +27,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -59,6 +60,7 @@ from tests.emulator.test_general_path import (
 from tests.emulator.test_general_path import _random_frame as _register_frame
 from tests.emulator.test_plan import _random_frame
 
+ROOT = Path(__file__).resolve().parents[2]
 CORPUS = Path(os.environ.get("LOLACLI_CORPUS", Path(__file__).parents[3] / "shared" / "corpus"))
 CORPUS_ENIS = sorted((CORPUS / "eni").glob("*.xml")) if (CORPUS / "eni").is_dir() else []
 PERIOD_NS = 500_000
@@ -127,7 +129,7 @@ class Twin:
         assert replies[0] == replies[1], f"frame {self.frames}: {frame.hex()}"
         self._note_held()
         key = layout_key(frame)
-        plan = self.c._plans.get(key) if key is not None else None
+        plan = self.c.planner.plans.get(key) if key is not None else None
         if plan is not None and isinstance(plan.compiled, CompiledPlan):
             self.compiled_frames += 1
         if defer:  # as the raw-socket server: firmware a piece at a time, then the cycle
@@ -220,7 +222,7 @@ def assert_same_slave(a: Esc, b: Esc, where: str) -> None:
     if values_a != values_b:
         differ = [(x, y) for x, y in zip(values_a, values_b, strict=True) if x != y]
         raise AssertionError(f"{where}: object dictionaries differ: {differ[:4]}")
-    for name in ("t_ns", "state", "power", "_previous_cw", "_last_sample"):
+    for name in ("t_ns", "state", "power", "previous_cw", "last_sample"):
         assert getattr(da, name, None) == getattr(db, name, None), f"{where}: {name}"
     assert da.od.version == db.od.version and da.od.writes == db.od.writes, where
     assert da.od.al_state == db.od.al_state, where
@@ -895,10 +897,10 @@ def test_a_slave_that_starts_waiting_for_op_invalidates_the_plans() -> None:
     chain.run_firmware()  # a checked request is entered by a piece of firmware of its own
     esc.request_state(AlState.SAFEOP)
     chain.run_firmware()
-    epoch = chain._epoch[0]
+    epoch = chain.planner.epoch
     esc.request_state(AlState.OP)
     assert esc.pending_op and esc.al_state == AlState.SAFEOP
-    assert chain._epoch[0] != epoch
+    assert chain.planner.epoch != epoch
 
 
 def test_engine_choice() -> None:
@@ -929,7 +931,7 @@ def _lola_plan() -> tuple[Chain, CompiledPlan]:
     bus.bring_up(eni)
     for _ in range(3):
         bus.cycle(eni)
-    plans = [p for p in chain._plans.values() if p is not None and p.logical]
+    plans = [p for p in chain.planner.plans.values() if p is not None and p.logical]
     compiled = plans[0].compiled
     assert isinstance(compiled, CompiledPlan)
     return chain, compiled
@@ -939,7 +941,7 @@ def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
     """Every single-word change of a valid program is either refused by the check or
     still within bounds; those that pass run (under a sanitizer build: without a fault)."""
     chain, compiled = _lola_plan()
-    lib = compiled._lib
+    lib = compiled.lib
     program = ctypes.cast(compiled.table.prog, ctypes.POINTER(ctypes.c_int64))
     words = compiled.table.prog_len
     rng = random.Random(5)
@@ -968,7 +970,7 @@ def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None
-    lib = core._lib
+    lib = core.lib
     row = SlaveTable.from_address(core.address)  # the first drive's table
     assert lib.lolacli_core_check_slave(core.address) == 0
     for name, bad in [
@@ -995,7 +997,7 @@ def test_kernel_refuses_register_tables_out_of_bounds() -> None:
     chain, _compiled = _lola_plan()
     core = chain._core
     assert core is not None and core._regs is not None
-    lib, table = core._lib, core._regs
+    lib, table = core.lib, core._regs
     address = ctypes.addressof(table)
     assert lib.lolacli_core_check_registers(address) == 0
     for name, bad in [
@@ -1141,3 +1143,26 @@ def test_kernel_under_address_and_undefined_behaviour_sanitizers() -> None:
         )
     assert run.returncode == 0, (run.stdout + run.stderr)[-3000:]
     assert " passed" in run.stdout
+
+
+def test_without_the_c_core_the_fallback_is_said_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No C core built: the default engine is the Python reference, and the first chain
+    says so on stderr (a SlowFallbackWarning), the next ones do not."""
+    monkeypatch.delenv("LOLACLI_CHAIN_ENGINE", raising=False)
+    monkeypatch.setattr(core_module, "core_available", lambda: False)
+    monkeypatch.setattr(core_module, "_fallback_said", False)
+    with pytest.warns(core_module.SlowFallbackWarning, match="Python reference"):
+        assert chain_engine() == "python"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert chain_engine() == "python"
+    script = (
+        "import lolacli.emulator.core as c\n"
+        "c.core_available = lambda: False\n"
+        "c.chain_engine(); c.chain_engine()\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "LOLACLI_CHAIN_ENGINE"}
+    env["PYTHONPATH"] = str(ROOT)
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
+    assert done.returncode == 0
+    assert done.stderr.count("is not built") == 1

@@ -311,7 +311,7 @@ def test_nothing_outside_the_esc_package_reads_its_private_members() -> None:
     esc = build_chain(load_eni(EXAMPLES / "single_drive.xml")).slaves[0]
     assert isinstance(esc, Esc)
     private = {n for n in [*vars(esc), *dir(Esc)] if n.startswith("_") and not n.endswith("__")}
-    assert {"_cache", "_mailbox_queue", "_register_side_effects"} <= private
+    assert {"_cache", "_mailbox_queue"} <= private
     package = root / "lolacli" / "emulator" / "esc"
     found = []
     for path in [*(root / "lolacli").rglob("*.py"), *(root / "tests").rglob("*.py")]:

@@ -254,7 +254,7 @@ def _against_the_reference(
     eni = load_eni(EXAMPLES / name)
     fast = build_chain(eni, drift_ppb=10, engine=engine)
     slow = build_chain(eni, drift_ppb=10, engine="python")
-    fast.plan_after = slow.plan_after = 0
+    fast.planner.plan_after = slow.planner.plan_after = 0
     stations = [s.station_address for s in eni.slaves]
     for chain in (fast, slow):  # station addresses first, as a master gives them
         for i, station in enumerate(stations):

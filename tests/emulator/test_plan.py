@@ -1,7 +1,7 @@
 """Frame plans give the same bytes as the general path: replies, ESC memories, clocks.
 
 Two chains of the same ENI get the same frames at the same times: one answers through
-frame plans wherever it can (``plan_after = 1``), the other never (``plan_after = 0``).
+frame plans wherever it can (``planner.plan_after = 1``), the other never (``0``).
 Bring-up through the ENI's InitCmds, cyclic frames with changing outputs, SDO traffic,
 a drive fault with its emergency, and random frames built from the plannable commands
 (random logical windows, registers, DC addressing) mixed with others.
@@ -38,9 +38,9 @@ class Twin:
 
     def __init__(self, eni: Eni, engine: str | None = None) -> None:
         self.fast = build_chain(eni, drift_ppb=20, engine=engine)
-        self.fast.plan_after = self.fast.register_plan_after = 1
+        self.fast.planner.plan_after = self.fast.planner.register_plan_after = 1
         self.slow = build_chain(eni, drift_ppb=20, engine=engine)
-        self.slow.plan_after = 0
+        self.slow.planner.plan_after = 0
         self.slaves = self.fast.slaves
         self.timing = self.fast.timing
         self.frames = 0
@@ -59,7 +59,7 @@ class Twin:
             self.fast.run_deferred_cycles()
             self.slow.run_deferred_cycles()
         elif defer and roll < 0.75:  # one piece of a plan being made: frames come between
-            self.fast._plan_work(lambda: True)
+            self.fast.planner.work(lambda: True)
         self.frames += 1
         if self.frames % 50 == 0:
             self.same_state()
@@ -208,14 +208,14 @@ def test_a_plan_is_made_in_pieces_between_frames(engine: str) -> None:
         return chain.stats.planned_frames > before
 
     def making() -> bool:  # the cycle runs whole, the plan's first piece then gives way
-        return chain._plan_job is not None
+        return chain.planner.making is not None
 
     new_epoch()  # the bring-up's plans are of the last epoch
     assert not planned_after(cyclic)  # a layout seen before: its plan is asked for ...
     assert chain.run_deferred_cycles(should_yield=making) is False  # ... one piece made
-    assert chain._plan_job is not None
+    assert chain.planner.making is not None
     pieces = 1
-    while chain._plan_job is not None:  # a poll between every two pieces
+    while chain.planner.making is not None:  # a poll between every two pieces
         assert send(poll)[0].wkc == len(eni.slaves)
         chain.run_deferred_cycles(should_yield=lambda: True)
         pieces += 1
@@ -225,15 +225,15 @@ def test_a_plan_is_made_in_pieces_between_frames(engine: str) -> None:
     new_epoch()
     assert not planned_after(cyclic)
     assert chain.run_deferred_cycles(should_yield=making) is False
-    assert chain._plan_job is not None
-    begun = chain._plan_job[1]
+    assert chain.planner.making is not None
+    begun = chain.planner.making
     new_epoch()
     assert chain.run_deferred_cycles(should_yield=making) is False
-    assert chain._plan_job is not None and chain._plan_job[1] == chain._epoch[0] != begun
-    assert not chain._plans
+    assert chain.planner.making is not None and chain.planner.making == chain.planner.epoch != begun
+    assert not chain.planner.plans
     chain.run_deferred_cycles()  # made whole, before the layout's next frame
     assert planned_after(cyclic)
-    assert chain.run_deferred_cycles() is True and chain._plan_job is None  # nothing left
+    assert chain.run_deferred_cycles() is True and chain.planner.making is None  # nothing left
 
 
 class _Lola:
@@ -282,7 +282,7 @@ def test_cyclic_layouts_are_planned_again_before_their_next_frame(engine: str) -
         chain.run_deferred_cycles()
     assert [lola.planned_after(f) for f in frames] == [True, True]
     assert chain.run_deferred_cycles() is True  # nothing left: no plan made again
-    assert chain._plan_job is None
+    assert chain.planner.making is None
 
 
 def test_plans_stay_pending_until_every_cyclic_layout_is_planned_again() -> None:
@@ -293,15 +293,15 @@ def test_plans_stay_pending_until_every_cyclic_layout_is_planned_again() -> None
     chain, planned_after = lola.chain, lola.planned_after
     poll = encode_frame(make_frame([Datagram.physical(C.BRD, 0, 0x0130, 2)]), pad=True)
     planned_after(lola.lrd), planned_after(lola.lwr)
-    chain.make_plans()
+    chain.planner.work()
     assert planned_after(lola.lrd) and planned_after(lola.lwr)
     lola.new_epoch()
-    assert chain.plans_pending
+    assert chain.planner.pending
     planned_after(poll)  # a frame first, which sees the new epoch
-    assert chain.plans_pending
-    assert chain.make_plans(lambda: chain._plan_job is None) is False  # a frame came
-    assert chain.plans_pending  # the other layout is left
-    assert chain.make_plans() is True and not chain.plans_pending
+    assert chain.planner.pending
+    assert chain.planner.work(lambda: chain.planner.making is None) is False  # a frame came
+    assert chain.planner.pending  # the other layout is left
+    assert chain.planner.work() is True and not chain.planner.pending
     assert planned_after(lola.lrd) and planned_after(lola.lwr)
 
 
@@ -313,18 +313,18 @@ def test_a_layout_no_longer_sent_is_planned_again_once_then_forgotten() -> None:
     chain, planned_after = lola.chain, lola.planned_after
     planned_after(lola.lrw)  # once only
     planned_after(lola.lrd), planned_after(lola.lwr)
-    chain.make_plans()
+    chain.planner.work()
     made: list[object] = []
-    pieces = chain._plan_pieces
+    pieces = chain.planner._pieces
 
     def spy(key, asked):  # type: ignore[no-untyped-def]
         made.append(key)
         return (yield from pieces(key, asked))
 
-    chain._plan_pieces = spy  # type: ignore[method-assign]
+    chain.planner._pieces = spy  # type: ignore[method-assign]
     for _ in range(10):
         lola.new_epoch()
-        while not chain.make_plans():
+        while not chain.planner.work():
             pass
         assert planned_after(lola.lrd) and planned_after(lola.lwr)
     assert made.count(layout_key(lola.lrw)) == 1
@@ -497,7 +497,7 @@ def test_a_register_poll_is_planned_only_after_many_repeats_in_one_epoch() -> No
     chain = build_chain(eni)
     bus = Bus(chain)
     bus.bring_up(eni)
-    n = chain.register_plan_after
+    n = chain.planner.register_plan_after
     planned = chain.stats.planned_frames
     for _ in range(n - 1):
         assert bus.one(C.BRD, 0, 0x0130, 2).wkc == 25

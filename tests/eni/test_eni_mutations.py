@@ -251,10 +251,10 @@ def _bus_commands(m: Mutation, eni: Eni, data: bytes, folder: Path) -> None:
     --eni` on the in-process chain (through the file, so the model cache takes part)."""
     from lolacli.emulator.run import EmulateOptions, make_chain
     from lolacli.master.core import Master, MasterOptions
-    from lolacli.master.simulate import SimulateOptions, simulate
     from lolacli.master.transport import ChainTransport
     from lolacli.sdo.client import read
     from lolacli.sdo.session import TransportOptions, open_session
+    from lolacli.simulate import SimulateOptions, simulate
     from lolacli.wire.registers import AlState
 
     if m.target.field.startswith("Config/ProcessImage/"):

@@ -9,7 +9,6 @@ import threading
 
 import pytest
 
-from lolacli.emulator.run import EmulateOptions, make_chain
 from lolacli.emulator.slave import build_chain
 from lolacli.eni.model import Direction
 from lolacli.errors import LinkError, SdoAbortError, TransitionRefusedError, UsageError
@@ -25,6 +24,7 @@ from lolacli.master import (
     MasterOptions,
 )
 from lolacli.master.dc import loop_time_ns, propagation_delays
+from lolacli.simulate import EmulateOptions, VirtualBus
 from lolacli.wire.registers import AlState
 from lolacli.wire.sdo import SdoAbortCode
 from tests.conftest import corpus_files, corpus_ids
@@ -45,10 +45,10 @@ REFUSED = {
 
 
 def _master(eni, options=None, **faults):
-    chain = make_chain(eni, EmulateOptions(**faults))
+    bus = VirtualBus(eni, EmulateOptions(**faults))
     return Master(
-        eni, ChainTransport(chain), options=options or MasterOptions(dc_drift_frames=50)
-    ), chain
+        eni, bus.transport, options=options or MasterOptions(dc_drift_frames=50)
+    ), bus.chain
 
 
 @pytest.mark.parametrize("name", ["lola.xml", "single_drive.xml", "ek1100_io.xml"])
@@ -273,7 +273,7 @@ DRIVE_ENIS = [p for p in CORPUS_ENI if p.name not in REFUSED] + [EXAMPLES / "lol
 def test_simulate_enables_and_moves_every_cia402_drive_found_by_object_index(path) -> None:
     """Drives are found by the objects their PDOs map, whatever the ENI calls the entries
     (rocos eni_tech6: "Status word", "Profile target position", "Actual motor position")."""
-    from lolacli.master.simulate import SimulateOptions, simulate
+    from lolacli.simulate import SimulateOptions, simulate
 
     eni = load_eni(path)
     positions = _cia402_positions(eni)

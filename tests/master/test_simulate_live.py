@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from lolacli.files import load_eni
-from lolacli.master.simulate import SimulateOptions, simulate
+from lolacli.simulate import SimulateOptions, simulate
 from tests.live import LOLA, ROOT, inside, run, run_json, start_emulator, stop_emulator
 
 pytestmark = [pytest.mark.root, pytest.mark.slow]

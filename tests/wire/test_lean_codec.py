@@ -1,6 +1,5 @@
 """The lean paths of a master's mailbox traffic give the general codec's bytes and values:
-one-datagram frames (wire.frame), mailbox messages (wire.mailbox), upload requests and
-expedited upload answers (wire.sdo)."""
+mailbox messages (wire.mailbox), upload requests and expedited upload answers (wire.sdo)."""
 
 from __future__ import annotations
 
@@ -8,16 +7,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from lolacli.errors import WireError
-from lolacli.wire.frame import (
-    Datagram,
-    EthernetHeader,
-    decode_frame,
-    decode_single,
-    encode_frame,
-    encode_single,
-    ethernet_head,
-    make_frame,
-)
 from lolacli.wire.mailbox import (
     decode_mailbox,
     encode_mailbox,
@@ -35,49 +24,6 @@ from lolacli.wire.sdo import (
     expedited_upload_data,
     upload_request,
 )
-
-MACS = st.binary(min_size=6, max_size=6)
-
-
-@given(
-    dst=MACS,
-    src=MACS,
-    cmd=st.integers(0, 14),
-    index=st.integers(0, 255),
-    address=st.integers(0, 0xFFFFFFFF),
-    data=st.binary(max_size=1486),
-)
-def test_single_frames_are_the_general_codecs(dst, src, cmd, index, address, data) -> None:
-    d = Datagram(cmd, index, address, data)
-    general = encode_frame(make_frame([d], src=src, dst=dst), pad=True)
-    assert encode_single(ethernet_head(dst, src), cmd, index, address, data) == general
-    assert decode_single(general) == (cmd, index, address, data, 0)
-    (back,) = decode_frame(general).datagrams
-    assert (back.cmd, back.index, back.address, back.data, back.wkc) == (
-        cmd,
-        index,
-        address,
-        data,
-        0,
-    )
-
-
-def test_decode_single_leaves_other_frames_to_the_general_decoder() -> None:
-    two = encode_frame(
-        make_frame([Datagram(4, 1, 0, b"ab"), Datagram(5, 2, 0, b"cd")], src=bytes(6)), pad=True
-    )
-    assert decode_single(two) is None
-    tagged = encode_frame(
-        make_frame([Datagram(4, 1, 0, b"ab")], src=bytes(6)),
-        pad=True,
-    )
-    vlan = tagged[:12] + b"\x81\x00\x00\x05" + tagged[12:]
-    assert decode_single(vlan) is None
-    assert decode_single(tagged[:20]) is None  # cut short
-    answered = bytearray(tagged)
-    answered[28:30] = (3).to_bytes(2, "little")  # WKC after 2 data bytes
-    assert decode_single(bytes(answered)) == (4, 1, 0, b"ab", 3)
-    assert EthernetHeader().dst == b"\xff" * 6
 
 
 @given(

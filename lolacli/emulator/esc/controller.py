@@ -196,7 +196,7 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         payload = bytes(data)
         plan.store(self.mem, ado, payload)
         if plan.effects:
-            self._register_side_effects(plan, ado, end, payload, t_ns)
+            self.register_side_effects(plan, ado, end, payload, t_ns)
         return 1
 
     def al_control_written(self, control: int) -> None:
@@ -265,12 +265,12 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         plan = register_write(address, end)
         plan.store(self.mem, address, payload)  # the writable bytes
         if plan.effects:
-            self._register_side_effects(plan, address, end, payload, t_ns)
+            self.register_side_effects(plan, address, end, payload, t_ns)
         if end > r.PROCESS_RAM:
             self._sm_written(address, end)
         return True
 
-    def _register_side_effects(
+    def register_side_effects(
         self, plan: RegisterWrite, start: int, end: int, payload: bytes, t_ns: int
     ) -> None:
         if plan.configuration:
@@ -373,7 +373,7 @@ def broadcast_write(
             if loop is not None:
                 loop.append((esc.mem, esc.clock, port.port0_ns, esc.dc_offset_minus_delay_ns()))
             else:
-                esc._register_side_effects(plan, ado, end, payload, t)
+                esc.register_side_effects(plan, ado, end, payload, t)
     if loop:
         system_time_loop(loop, *system_time_written(ado, end, payload), t_ns)
     return len(escs)

@@ -1,0 +1,178 @@
+"""What a simulation runs: :class:`SimulateOptions` (the ``bus simulate`` options) checked
+against the ENI (:func:`check`), and what it gives back (:class:`SimulationResult`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lolacli.eni.model import Eni
+from lolacli.errors import EniError, UsageError
+
+
+@dataclass(frozen=True, slots=True)
+class SimulateOptions:
+    rate_hz: float = 2000.0
+    cycles: int = 20_000
+    pcap: Path | None = None
+    mcap: Path | None = None
+    drop_probability: float = 0.0
+    stuck_safeop: tuple[int, ...] = ()
+    link_down: tuple[int, float] | None = None  # (after slave K, seconds into the run; 0: start)
+    drift_ppb: int = 0
+    seed: int = 0
+    middleware: bool = True  # Bus Variables, drives enabled, joints moving
+    shm: str | None = None
+    pace: bool = False  # no faster than real time
+    watch: tuple[str, ...] = ()
+    set_values: tuple[tuple[str, str], ...] = ()
+    amplitude_counts: int = 20_000
+    period_s: float = 2.0
+    time_sections: bool = True
+    iface: str | None = None  # a live bus in real time instead of the emulated chain
+    # live: busy-wait this last part of every cycle (None: 200 µs, at most 40% of a cycle)
+    busy_wait_us: float | None = None
+    realtime_priority: int = 80  # live: SCHED_FIFO priority where permitted (0: do not ask)
+    frame_timeout_ms: float = 10.0  # live: an acyclic frame not back by then is lost
+    max_lost: int = 0  # lost frames allowed before the run fails
+    max_wkc_mismatches: int = 0
+    max_overruns: int = 0  # cycles not kept (slots skipped + sent over half a cycle late)
+
+
+@dataclass(slots=True)
+class SimulationResult:
+    doc: dict[str, Any]
+    failed: bool
+    interrupted: bool = False
+    notes: list[str] = field(default_factory=list)
+
+
+#: progress(cycle slots done, of)
+Progress = Callable[[int, int], None]
+
+
+#: the most cycle slots one run takes: the per-cycle figures are kept for the statistics
+#: (about 100 B a cycle), so a longer run would outgrow the memory of a small host
+MAX_CYCLES = 20_000_000
+MAX_RATE_HZ = 100_000.0
+
+
+def check(eni: Eni, options: SimulateOptions) -> None:
+    """Options no bus can have: UsageError naming the option and its range (exit 2)."""
+    from lolacli.emulator.run import MAX_DRIFT_PPB
+
+    if not eni.slaves:
+        raise EniError("the ENI has no <Slave>: nothing to simulate", path=eni.source)
+    if not eni.cyclic_frames:
+        raise EniError("the ENI has no cyclic frame: nothing to simulate", path=eni.source)
+    n = len(eni.slaves)
+    if not 1.0 <= options.rate_hz <= MAX_RATE_HZ:
+        raise UsageError(f"--rate {options.rate_hz:g}: expected 1 to {MAX_RATE_HZ:.0f} Hz")
+    if not 1 <= options.cycles <= MAX_CYCLES:
+        raise UsageError(
+            f"--cycles {options.cycles}: expected 1 to {MAX_CYCLES:,} cycles (a --duration "
+            "shorter than one cycle is 0 cycles)"
+        )
+    if not 0.0 <= options.drop_probability <= 1.0:
+        raise UsageError(f"--drop-p {options.drop_probability:g}: expected 0 to 1")
+    if abs(options.drift_ppb) > MAX_DRIFT_PPB:
+        raise UsageError(
+            f"--drift-ppb {options.drift_ppb}: expected -{MAX_DRIFT_PPB:,} to "
+            f"{MAX_DRIFT_PPB:,} ppb (a crystal drifts about ±100,000 ppb)"
+        )
+    for position in options.stuck_safeop:
+        if not 1 <= position <= n:
+            raise UsageError(f"--stuck-safeop {position}: expected a slave position 1 to {n}")
+    if options.link_down is not None:
+        after, at_s = options.link_down
+        if not 0 <= after <= n:
+            raise UsageError(f"--link-down {after}: expected 0 (at the master) to {n}")
+        run_s = options.cycles / options.rate_hz
+        if at_s >= run_s:
+            raise UsageError(
+                f"--link-down {after}@{at_s:g}s: after the run ends ({run_s:g} s of cycles)"
+            )
+    if options.iface is not None:
+        _check_live(options)
+
+
+def _check_live(options: SimulateOptions) -> None:
+    faults = [
+        name
+        for name, given in (
+            ("--drop-p", options.drop_probability > 0),
+            ("--stuck-safeop", bool(options.stuck_safeop)),
+            ("--link-down", options.link_down is not None),
+            ("--drift-ppb", options.drift_ppb != 0),
+        )
+        if given
+    ]
+    if faults:
+        raise UsageError(
+            f"{', '.join(faults)}: faults of the emulated chain; on a live bus give them "
+            "to the `bus emulate` serving it"
+        )
+    if options.pace:
+        raise UsageError("--pace: a live bus runs in real time anyway")
+    busy = options.busy_wait_us
+    if busy is not None and (busy < 0 or busy * 1000 > 1e9 / options.rate_hz):
+        raise UsageError(
+            f"--busy-wait-us {busy:g}: expected 0 to one cycle time ({1e6 / options.rate_hz:g} µs)"
+        )
+
+
+def busy_wait_us(options: SimulateOptions) -> float:
+    """The busy-wait of a live cycle: as given, else 200 µs but at most 40% of a cycle."""
+    if options.busy_wait_us is not None:
+        return options.busy_wait_us
+    return min(200.0, 0.4 * 1e6 / options.rate_hz)
+
+
+DEFAULT_DURATION_NS = 10_000_000_000
+
+
+def options_from_cli(
+    *,
+    rate_hz: float = 2000.0,
+    duration: str | None = None,
+    cycles: int | None = None,
+    link_down: str | None = None,
+    set_values: Sequence[str] = (),
+    stuck_safeop: Sequence[int] = (),
+    watch: Sequence[str] = (),
+    **fields: Any,
+) -> SimulateOptions:
+    """:class:`SimulateOptions` from the command line's spelling: ``duration`` (``10s``,
+    ``500ms``; default 10 s) or ``cycles``, ``link_down`` as ``K[@T]``, ``set_values`` as
+    ``VARIABLE=VALUE``; the other ``fields`` as they are. UsageError for what does not
+    parse or contradicts itself."""
+    from lolacli.emulator.run import parse_link_down
+    from lolacli.timing.model import parse_duration_ns
+
+    if duration is not None and cycles is not None:
+        raise UsageError("--duration and --cycles contradict each other; give one")
+    n_cycles = cycles
+    if n_cycles is None:
+        ns = (
+            parse_duration_ns(duration, "s", what="--duration")
+            if duration is not None
+            else DEFAULT_DURATION_NS
+        )
+        n_cycles = round(ns * rate_hz / 1e9) if rate_hz > 0 else 0
+    pairs = []
+    for item in set_values:
+        name, eq, value = item.rpartition("=")
+        if not eq or not name:
+            raise UsageError(f"--set {item!r}: expected VARIABLE=VALUE")
+        pairs.append((name, value))
+    return SimulateOptions(
+        rate_hz=rate_hz,
+        cycles=n_cycles,
+        link_down=parse_link_down(link_down) if link_down is not None else None,
+        set_values=tuple(pairs),
+        stuck_safeop=tuple(stuck_safeop),
+        watch=tuple(watch),
+        **fields,
+    )
