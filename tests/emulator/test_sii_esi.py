@@ -23,7 +23,7 @@ from lolacli.wire.sii import (
 from lolacli.wire.sii import sii_categories as categories
 from tests.conftest import CORPUS, corpus_files
 from tests.emulator.bus import EXAMPLES, Bus
-from tests.emulator.test_masters import _emulate, _stop, pysoem, veth  # noqa: F401 (fixtures)
+from tests.emulator.test_masters import _stop, emulate, pysoem, veth  # noqa: F401 (fixtures)
 
 ESI_FILES = corpus_files("esi", "*.xml")
 ELMO = CORPUS / "esi" / "elmo_ethercat_sdk__Elmo_ECAT_00010420_V11.xml"
@@ -212,12 +212,12 @@ def test_bus_emulate_missing_esi_is_exit_3(cli, tmp_path: Path) -> None:
 
 @pytest.mark.root
 @pytest.mark.slow
-def test_pysoem_config_init_reads_the_esi_identity(veth, pysoem) -> None:  # noqa: F811
+def test_pysoem_config_init_reads_the_esi_identity(emulate, veth, pysoem) -> None:  # noqa: F811
     """SOEM over a veth pair: the single-drive example served with the Elmo ESI."""
     _need(ELMO)
     device = load_esi(ELMO).find(0x9A, 0x30924, 0x10420)
     assert device is not None
-    proc = _emulate(veth[1], EXAMPLES / "single_drive.xml", "--esi", str(ELMO))
+    proc = emulate(EXAMPLES / "single_drive.xml", "--esi", str(ELMO))
     master = pysoem.Master()
     try:
         master.open(veth[0])
