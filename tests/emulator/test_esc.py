@@ -174,6 +174,23 @@ def test_mailbox_handshake_full_bit_blocks_and_read_empties(drive_bus: Bus) -> N
     assert drive_bus.one(C.FPRD, 0x03E9, 0x1900, 140).wkc == 0  # empty mailbox: no WKC
 
 
+def test_a_mailbox_written_in_init_reaches_no_protocol(drive_bus: Bus) -> None:
+    """A master whose PREOP request was lost writes its SDO request to a slave still in
+    INIT: the firmware keeps its mailbox SMs deactivated there from power-on (as after
+    any return to INIT), so no protocol answers, not even with a mailbox error. After
+    PREOP the same request is served."""
+    _configure_mailbox(drive_bus)
+    upload = bytes.fromhex("0a00 0000 0013 0020 4000 1000 00000000")  # SDO upload 0x1000
+    assert drive_bus.fprd(0x03E9, 0x0807, 1)[0] & 0x01  # SM0: deactivated by the PDI
+    drive_bus.fpwr(0x03E9, 0x1800, upload + bytes(140 - len(upload)))
+    assert not drive_bus.fprd(0x03E9, 0x080D, 1)[0] & 0x08  # nothing in the read mailbox
+    drive_bus.fpwr(0x03E9, r.AL_CONTROL, b"\x02\x00")
+    assert drive_bus.chain.slaves[0].al_state == AlState.PREOP
+    drive_bus.fpwr(0x03E9, 0x1800, upload + bytes(140 - len(upload)))
+    answer = drive_bus.fprd(0x03E9, 0x1900, 140)
+    assert answer[5] & 0x0F == 3 and answer[8] >> 5 == 2  # CoE, SDO upload response
+
+
 def test_fmmu_bit_granular_mapping_and_wkc() -> None:
     eni = load_eni(EXAMPLES / "ek1100_io.xml")
     bus = Bus(build_chain(eni))

@@ -140,6 +140,13 @@ class Esc(ProcessDataWatchdog, Fmmus, DistributedClock, SiiInterface, ErrorCount
         self.outputs_valid = False
         self.pending_op = False
         self._set_al(AlState.INIT, AlStatusCode.NO_ERROR, error=False)
+        # the firmware starts in INIT with its mailbox sync managers deactivated on the
+        # PDI side, as on entering INIT: a mailbox written before PREOP (a master whose
+        # PREOP request was lost) reaches no protocol and gets no answer
+        mailbox_sms = {self.layout.mailbox_out_sm, self.layout.mailbox_in_sm}
+        for sm in mailbox_sms if self.layout.mailbox_out_bytes else ():
+            if sm < self.config.sync_managers:
+                self.mem[self._sm_address(sm) + 7] = r.SM_PDI_DEACTIVATE
         self.set_topology(last=self.last_port)
 
     def process(self, cmd: int, adp: int, ado: int, data: memoryview, t_ns: int) -> tuple[int, int]:
