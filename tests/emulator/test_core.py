@@ -964,6 +964,35 @@ def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
     assert refused > 1000
 
 
+def test_the_per_frame_calls_skip_ctypes_and_answer_as_through_it() -> None:
+    """The built module's own per-frame functions replace the ctypes ones (a sanitizer
+    build loaded from a path keeps ctypes) and answer the cyclic frame as the ctypes
+    declaration of the same function does; a wrong argument is a TypeError."""
+    chain, compiled = _lola_plan()
+    lib = compiled.lib
+    via_ctypes = core_module.load_library(lib._name)
+    assert via_ctypes is not None
+    assert isinstance(via_ctypes.lolacli_core_answer, ctypes._CFuncPtr)
+    assert not isinstance(lib.lolacli_core_answer, ctypes._CFuncPtr)
+    frame = bytes(compiled.buf)
+    answers = []
+    for answer, finish in [
+        (lib.lolacli_core_answer, lib.lolacli_core_finish),
+        (via_ctypes.lolacli_core_answer, via_ctypes.lolacli_core_finish),
+    ]:
+        compiled.pend[0] = 0
+        code = answer(compiled.address, frame, len(frame), 10**12)
+        answers.append((code, bytes(compiled.buf)))
+        finish(compiled.address)
+    assert answers[0] == answers[1]
+    with pytest.raises(TypeError):
+        lib.lolacli_core_answer(compiled.address, bytearray(frame), len(frame), 10**12)
+    with pytest.raises(TypeError):
+        lib.lolacli_core_cycles(compiled.core.address, 1)
+    with pytest.raises(OverflowError):
+        lib.lolacli_core_cycles(compiled.core.address, 1, 1 << 70)
+
+
 def test_kernel_refuses_slave_tables_out_of_bounds() -> None:
     """Offsets, sizes and state values outside what the kernel can run are refused (the
     row counts and buffer lengths are the wrapper's, which sets them from the arrays)."""
