@@ -24,8 +24,7 @@ import struct
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from lolacli.errors import TransportError
 from lolacli.rawsocket import SO_TIMESTAMPNS
@@ -36,9 +35,10 @@ from lolacli.wire.frame import FCS_BYTES, MIN_FRAME_BYTES
 Tap = Callable[[int, bytes, bool], None]
 
 
-@dataclass(frozen=True, slots=True)
-class Received:
-    """A frame as it came back: its bytes and when it left and returned (ns)."""
+class Received(NamedTuple):
+    """A frame as it came back: its bytes and when it left and returned (ns). A named
+    tuple: one is made for every frame (a frozen dataclass's ``__init__`` costs ~0.5 µs
+    more, some 2% of a simulated LOLA cycle)."""
 
     frame: bytes
     sent_ns: int
