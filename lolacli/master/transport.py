@@ -108,6 +108,16 @@ class ChainTransport:
         self.frames_lost = 0
         self.processing_ns = 0  # CPU time spent in the processor (the emulated bus itself)
 
+    @property
+    def link_bit_s(self) -> int:
+        """The master's link speed (bit/s): how long a frame occupies its port."""
+        return self._link_bit_s
+
+    @link_bit_s.setter
+    def link_bit_s(self, bit_s: int) -> None:
+        self._link_bit_s = bit_s
+        self._on_wire_ns: dict[int, int] = {}  # frame_time_on_wire_ns by frame length
+
     def now_ns(self) -> int:
         return self._now
 
@@ -117,7 +127,11 @@ class ChainTransport:
         for tap in self.taps:
             tap(t, frame, False)
         self.frames_sent += 1
-        self._port_free_ns = t + frame_time_on_wire_ns(len(frame), self.link_bit_s)
+        on_wire = self._on_wire_ns.get(len(frame))
+        if on_wire is None:
+            on_wire = frame_time_on_wire_ns(len(frame), self._link_bit_s)
+            self._on_wire_ns[len(frame)] = on_wire
+        self._port_free_ns = t + on_wire
         clock = time.perf_counter_ns
         c0 = clock()
         reply, delay_ns = self.processor.process(frame, t)
