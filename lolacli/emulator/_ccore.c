@@ -524,6 +524,19 @@ void lolacli_core_finish(plan_t *p) {
     }
 }
 
+/* answer, and when it returns 0 the work it left (finish) and the application cycle of
+ * the first n slaves (cycles) at t: Chain.process of a logical frame whose deferred
+ * work and cycle run right after its answer, in one call. Not 0: only answer ran (n out
+ * of range: nothing ran, -2). */
+i64 lolacli_core_answer_cycles(plan_t *p, const uint8_t *frame, i64 frame_len, i64 t, i64 n) {
+    if (n < 0 || n > p->n_slaves) return -2;
+    i64 code = lolacli_core_answer(p, frame, frame_len, t);
+    if (code != 0) return code;
+    lolacli_core_finish(p);
+    lolacli_core_cycles(p->slaves, n, t);
+    return 0;
+}
+
 /* ------------------------------------------------------------------ register frames */
 
 /* A frame whose every datagram is an APRD/FPRD/APWR/FPWR, BRD or BWR of registers that
@@ -1074,6 +1087,14 @@ static PyObject *py_answer(PyObject *self, PyObject *const *args, Py_ssize_t nar
         lolacli_core_answer((plan_t *)(intptr_t)a[0], (const uint8_t *)(intptr_t)a[1], a[2], a[3]));
 }
 
+static PyObject *py_answer_cycles(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[5];
+    if (int_args(args, nargs, 5, "lolacli_core_answer_cycles", 1, a)) return NULL;
+    return PyLong_FromLongLong(lolacli_core_answer_cycles(
+        (plan_t *)(intptr_t)a[0], (const uint8_t *)(intptr_t)a[1], a[2], a[3], a[4]));
+}
+
 static PyObject *py_finish(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     (void)self;
     i64 a[1];
@@ -1107,6 +1128,8 @@ static PyObject *py_registers(PyObject *self, PyObject *const *args, Py_ssize_t 
 
 static PyMethodDef ccore_methods[] = {
     {"lolacli_core_answer", (PyCFunction)(void (*)(void))py_answer, METH_FASTCALL, NULL},
+    {"lolacli_core_answer_cycles", (PyCFunction)(void (*)(void))py_answer_cycles, METH_FASTCALL,
+     NULL},
     {"lolacli_core_finish", (PyCFunction)(void (*)(void))py_finish, METH_FASTCALL, NULL},
     {"lolacli_core_cycles", (PyCFunction)(void (*)(void))py_cycles, METH_FASTCALL, NULL},
     {"lolacli_core_watchdog", (PyCFunction)(void (*)(void))py_watchdog, METH_FASTCALL, NULL},
