@@ -683,6 +683,27 @@ def _lola_moving() -> tuple[Eni, Twin, Script]:
     return eni, twin, script
 
 
+def test_answer_work_and_cycle_in_one_call_as_the_reference(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The cyclic frame's answer, its deferred work and the slaves' cycle in one kernel
+    call (CompiledPlan.answer_cycles) while nothing else waits: taken, and the state the
+    same as the reference's (the watchdogs that expire meanwhile: the test above)."""
+    outcomes: list[bool] = []  # whether the work and the cycle ran in the call
+    answer_cycles = CompiledPlan.answer_cycles
+
+    def counted(self: CompiledPlan, *args: object) -> object:
+        answer, cycled = answer_cycles(self, *args)  # type: ignore[arg-type]
+        outcomes.append(cycled)
+        return answer, cycled
+
+    monkeypatch.setattr(CompiledPlan, "answer_cycles", counted)
+    eni, twin, script = _lola_moving()
+    script.move(20)
+    assert sum(outcomes) >= 10
+    twin.same_state()
+
+
 def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
     """A master clears the watchdog enable of drive 5's output SM in OP, one FPWR that the
     core's register path takes with the slaves held: the core gives that slave back (its
