@@ -123,7 +123,9 @@ class ChainTransport:
 
     def send(self, frame: bytes) -> int:
         t = self._now if self._now > self._port_free_ns else self._port_free_ns
-        self._deliver(t)
+        heap = self._in_flight
+        if heap and heap[0][0] <= t:  # (_deliver's own test: no call when nothing is due)
+            self._deliver(t)
         for tap in self.taps:
             tap(t, frame, False)
         self.frames_sent += 1
@@ -156,7 +158,9 @@ class ChainTransport:
     def wait_until(self, t_ns: int) -> None:
         if t_ns > self._now:
             self._now = t_ns
-        self._deliver(self._now)
+        heap = self._in_flight
+        if heap and heap[0][0] <= self._now:
+            self._deliver(self._now)
 
     def _deliver(self, t_ns: int) -> None:
         """Frames that have returned by ``t_ns`` go to the inbox (and the taps), in order."""
