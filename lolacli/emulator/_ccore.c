@@ -524,6 +524,19 @@ void lolacli_core_finish(plan_t *p) {
     }
 }
 
+/* answer, and when it returns 0 the work it left (finish) and the application cycle of
+ * the first n slaves (cycles) at t: Chain.process of a logical frame whose deferred
+ * work and cycle run right after its answer, in one call. Not 0: only answer ran (n out
+ * of range: nothing ran, -2). */
+i64 lolacli_core_answer_cycles(plan_t *p, const uint8_t *frame, i64 frame_len, i64 t, i64 n) {
+    if (n < 0 || n > p->n_slaves) return -2;
+    i64 code = lolacli_core_answer(p, frame, frame_len, t);
+    if (code != 0) return code;
+    lolacli_core_finish(p);
+    lolacli_core_cycles(p->slaves, n, t);
+    return 0;
+}
+
 /* ------------------------------------------------------------------ register frames */
 
 /* A frame whose every datagram is an APRD/FPRD/APWR/FPWR, BRD or BWR of registers that
@@ -1038,11 +1051,96 @@ i64 lolacli_core_abi(i64 what) {
     return -1;
 }
 
-/* An importable module, so that the build and the package data find it; the functions
- * above are called through ctypes. */
+/* ------------------------------------------------------------------ the module */
+
+/* The per-frame entry points as module functions, with the arguments of their ctypes
+ * declarations in core.py (addresses and lengths as int, the frame as bytes): a call
+ * through ctypes costs ~0.5 us, one of these ~0.05 (three a cycle of the LOLA chain).
+ * core.py uses them when this module is the kernel it loaded, else ctypes (a sanitizer
+ * build loaded from a path). The GIL stays held: the work is a few microseconds. */
+static int int_args(PyObject *const *args, Py_ssize_t nargs, Py_ssize_t want, const char *name,
+                    Py_ssize_t bytes_at, i64 *out) {
+    if (nargs != want) {
+        PyErr_Format(PyExc_TypeError, "%s() takes %zd arguments (%zd given)", name, want, nargs);
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < want; i++) {
+        if (i == bytes_at) { /* the frame: bytes (c_char_p) */
+            if (!PyBytes_Check(args[i])) {
+                PyErr_Format(PyExc_TypeError, "%s(): argument %zd must be bytes", name, i + 1);
+                return -1;
+            }
+            out[i] = (i64)(intptr_t)PyBytes_AS_STRING(args[i]);
+            continue;
+        }
+        out[i] = (i64)PyLong_AsLongLong(args[i]);
+        if (out[i] == -1 && PyErr_Occurred()) return -1;
+    }
+    return 0;
+}
+
+static PyObject *py_answer(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[4];
+    if (int_args(args, nargs, 4, "lolacli_core_answer", 1, a)) return NULL;
+    return PyLong_FromLongLong(
+        lolacli_core_answer((plan_t *)(intptr_t)a[0], (const uint8_t *)(intptr_t)a[1], a[2], a[3]));
+}
+
+static PyObject *py_answer_cycles(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[5];
+    if (int_args(args, nargs, 5, "lolacli_core_answer_cycles", 1, a)) return NULL;
+    return PyLong_FromLongLong(lolacli_core_answer_cycles(
+        (plan_t *)(intptr_t)a[0], (const uint8_t *)(intptr_t)a[1], a[2], a[3], a[4]));
+}
+
+static PyObject *py_finish(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[1];
+    if (int_args(args, nargs, 1, "lolacli_core_finish", -1, a)) return NULL;
+    lolacli_core_finish((plan_t *)(intptr_t)a[0]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *py_cycles(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[3];
+    if (int_args(args, nargs, 3, "lolacli_core_cycles", -1, a)) return NULL;
+    lolacli_core_cycles((slave_t *)(intptr_t)a[0], a[1], a[2]);
+    Py_RETURN_NONE;
+}
+
+static PyObject *py_watchdog(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[3];
+    if (int_args(args, nargs, 3, "lolacli_core_watchdog", -1, a)) return NULL;
+    return PyLong_FromLongLong(lolacli_core_watchdog((slave_t *)(intptr_t)a[0], a[1], a[2]));
+}
+
+static PyObject *py_registers(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    i64 a[4];
+    if (int_args(args, nargs, 4, "lolacli_core_registers", 1, a)) return NULL;
+    return PyLong_FromLongLong(lolacli_core_registers(
+        (const regs_t *)(intptr_t)a[0], (const uint8_t *)(intptr_t)a[1], a[2], a[3]));
+}
+
+static PyMethodDef ccore_methods[] = {
+    {"lolacli_core_answer", (PyCFunction)(void (*)(void))py_answer, METH_FASTCALL, NULL},
+    {"lolacli_core_answer_cycles", (PyCFunction)(void (*)(void))py_answer_cycles, METH_FASTCALL,
+     NULL},
+    {"lolacli_core_finish", (PyCFunction)(void (*)(void))py_finish, METH_FASTCALL, NULL},
+    {"lolacli_core_cycles", (PyCFunction)(void (*)(void))py_cycles, METH_FASTCALL, NULL},
+    {"lolacli_core_watchdog", (PyCFunction)(void (*)(void))py_watchdog, METH_FASTCALL, NULL},
+    {"lolacli_core_registers", (PyCFunction)(void (*)(void))py_registers, METH_FASTCALL, NULL},
+    {NULL, NULL, 0, NULL}};
+
+/* An importable module, so that the build and the package data find it; core.py calls
+ * the functions above through ctypes, the per-frame ones through ccore_methods. */
 static struct PyModuleDef ccore_module = {
     PyModuleDef_HEAD_INIT, "_ccore",
-    "C core of the emulated chain's cyclic work (called through ctypes by lolacli.emulator.core).",
-    -1, NULL, NULL, NULL, NULL, NULL};
+    "C core of the emulated chain's cyclic work (called by lolacli.emulator.core).",
+    -1, ccore_methods, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit__ccore(void) { return PyModule_Create(&ccore_module); }

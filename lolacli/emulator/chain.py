@@ -317,7 +317,31 @@ class Chain:
         compiled = plan.compiled
         if compiled is NOT_COMPILED:
             compiled = self.planner.compiled(plan)
-        answer = compiled.answer(frame, t_ns, self._deferred_dc) if compiled else None
+        answer = None
+        if not compiled:
+            pass
+        elif (
+            plan.logical
+            and not defer_cycles
+            and self._held is None
+            and not self._pdi
+            and not self._deferred_dc
+        ):
+            # what run_deferred_cycles would do next (the plan's deferred work, the
+            # slaves' cycle) in the answer's kernel call when that is all it would do
+            answer, cycled = compiled.answer_cycles(
+                frame, t_ns, self._deferred_dc, len(self._active)
+            )
+            if cycled:
+                assert answer is not None
+                self._deferred_t_ns = None
+                self.stats.logical_frames += 1
+                self.planner.work()
+                self.stats.replies += 1
+                self.stats.planned_frames += 1
+                return answer[0], plan.delay_ns
+        else:
+            answer = compiled.answer(frame, t_ns, self._deferred_dc)
         expired = True  # the Python checks run: no compiled answer, or a watchdog expires
         if answer is None:
             if self._core is not None:

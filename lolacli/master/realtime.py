@@ -31,6 +31,7 @@ PR_GET_TIMERSLACK = 30
 TIMER_SLACK_NS = 1000
 _FIRST_DATAGRAM = ETH_HEADER_BYTES + ECAT_HEADER_BYTES
 _INDEX_AT = _FIRST_DATAGRAM + 1
+_CYCLIC_MIN = _FIRST_DATAGRAM + DATAGRAM_HEADER_BYTES  # a frame with a whole datagram header
 
 
 @dataclass(slots=True)
@@ -136,7 +137,9 @@ class CycleClock:
             return
         index = frame[_INDEX_AT]
         if not returned:
-            if is_cyclic(frame):
+            # is_cyclic, its usual answer (a first datagram LRW/LRD/LWR) without the call
+            first_logical = len(frame) >= _CYCLIC_MIN and frame[_FIRST_DATAGRAM] in LOGICAL
+            if first_logical or is_cyclic(frame):
                 self.sent_ns.append(t_ns)
                 self.lateness_ns.append(t_ns - self.schedule())
                 self._outstanding[index] = t_ns

@@ -683,6 +683,27 @@ def _lola_moving() -> tuple[Eni, Twin, Script]:
     return eni, twin, script
 
 
+def test_answer_work_and_cycle_in_one_call_as_the_reference(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The cyclic frame's answer, its deferred work and the slaves' cycle in one kernel
+    call (CompiledPlan.answer_cycles) while nothing else waits: taken, and the state the
+    same as the reference's (the watchdogs that expire meanwhile: the test above)."""
+    outcomes: list[bool] = []  # whether the work and the cycle ran in the call
+    answer_cycles = CompiledPlan.answer_cycles
+
+    def counted(self: CompiledPlan, *args: object) -> object:
+        answer, cycled = answer_cycles(self, *args)  # type: ignore[arg-type]
+        outcomes.append(cycled)
+        return answer, cycled
+
+    monkeypatch.setattr(CompiledPlan, "answer_cycles", counted)
+    eni, twin, script = _lola_moving()
+    script.move(20)
+    assert sum(outcomes) >= 10
+    twin.same_state()
+
+
 def test_a_watchdog_switched_off_in_op_by_the_register_path_stays_off() -> None:
     """A master clears the watchdog enable of drive 5's output SM in OP, one FPWR that the
     core's register path takes with the slaves held: the core gives that slave back (its
@@ -962,6 +983,35 @@ def test_kernel_refuses_programs_that_reach_outside_their_buffers() -> None:
         program[k] = saved
     assert lib.lolacli_core_check_plan(compiled.address) == 0
     assert refused > 1000
+
+
+def test_the_per_frame_calls_skip_ctypes_and_answer_as_through_it() -> None:
+    """The built module's own per-frame functions replace the ctypes ones (a sanitizer
+    build loaded from a path keeps ctypes) and answer the cyclic frame as the ctypes
+    declaration of the same function does; a wrong argument is a TypeError."""
+    chain, compiled = _lola_plan()
+    lib = compiled.lib
+    via_ctypes = core_module.load_library(lib._name)
+    assert via_ctypes is not None
+    assert isinstance(via_ctypes.lolacli_core_answer, ctypes._CFuncPtr)
+    assert not isinstance(lib.lolacli_core_answer, ctypes._CFuncPtr)
+    frame = bytes(compiled.buf)
+    answers = []
+    for answer, finish in [
+        (lib.lolacli_core_answer, lib.lolacli_core_finish),
+        (via_ctypes.lolacli_core_answer, via_ctypes.lolacli_core_finish),
+    ]:
+        compiled.pend[0] = 0
+        code = answer(compiled.address, frame, len(frame), 10**12)
+        answers.append((code, bytes(compiled.buf)))
+        finish(compiled.address)
+    assert answers[0] == answers[1]
+    with pytest.raises(TypeError):
+        lib.lolacli_core_answer(compiled.address, bytearray(frame), len(frame), 10**12)
+    with pytest.raises(TypeError):
+        lib.lolacli_core_cycles(compiled.core.address, 1)
+    with pytest.raises(OverflowError):
+        lib.lolacli_core_cycles(compiled.core.address, 1, 1 << 70)
 
 
 def test_kernel_refuses_slave_tables_out_of_bounds() -> None:

@@ -287,3 +287,48 @@ def test_simulate_enables_and_moves_every_cia402_drive_found_by_object_index(pat
     doc = simulate(eni, SimulateOptions(cycles=3000, watch=tuple(positions))).doc
     assert doc["drives"] == doc["drives_enabled"] == len(positions), doc
     assert all(abs(doc["watch"][n] - home[n]) > 1000 for n in positions), (home, doc["watch"])
+
+
+def test_an_exchange_sends_the_frame_encode_frame_makes() -> None:
+    """The frame an exchange packs in place is encode_frame's of the same datagrams
+    numbered and chained (every field at its edges: the M, circulating and reserved bits,
+    IRQ, WKC, data of 0 to 1,486 bytes, 1 to 12 datagrams); data over 2,047 bytes is left
+    to encode_frame, which refuses it."""
+    import random
+
+    from lolacli.errors import WireError
+    from lolacli.wire.frame import Datagram, EthernetHeader, Frame, encode_frame
+
+    eni = load_eni(EXAMPLES / "lola.xml")
+    master = Master(eni, VirtualBus(eni).transport)
+    rng = random.Random(24)
+    for _ in range(400):
+        datagrams = [
+            Datagram(
+                rng.choice([1, 2, 4, 5, 10, 11, 12, 14]),
+                rng.randrange(256),
+                rng.choice([0, 0xFFFFFFFF, rng.randrange(1 << 32)]),
+                rng.randbytes(rng.choice([0, 1, 2, 4, 37, 1486 // rng.randint(1, 12)])),
+                rng.choice([0, 1, 0xFFFF]),
+                rng.choice([0, 0xFFFF]),
+                rng.random() < 0.3,
+                rng.random() < 0.5,
+                rng.randrange(8),
+            )
+            for _ in range(rng.randint(1, 12))
+        ]
+        if sum(d.wire_bytes for d in datagrams) > 0x7FF:
+            continue
+        index = rng.randrange(256)
+        last = len(datagrams) - 1
+        numbered = tuple(
+            Datagram(d.cmd, index, d.address, d.data, d.wkc, d.irq, d.circulating, i < last,
+                     d.reserved)
+            for i, d in enumerate(datagrams)
+        )  # fmt: skip
+        header = EthernetHeader(src=master.source_mac, dst=eni.master.destination_mac)
+        assert master._request(datagrams, index) == encode_frame(Frame(header, numbered), pad=True)
+    big = [Datagram.physical(4, 0x1001, 0x1000, 0x800)]
+    assert master._request(big, 1) is None
+    with pytest.raises(WireError):
+        master.exchange(big)
