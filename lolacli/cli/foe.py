@@ -21,6 +21,7 @@ from lolacli.cli.options import EniOption, EsiOption, IfaceOption
 from lolacli.cli.sdo import BackendOption, SlaveArgument
 
 SCHEMA = "lolacli.foe/1"
+MAX_WRITE_BYTES = 256 * 1024 * 1024  # read whole into memory before the transfer
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -136,9 +137,12 @@ def write_cmd(
 
     key = _password(password)
     try:
-        data = file.read_bytes()
+        with open(file, "rb") as f:  # a device file (/dev/zero) ends at the limit
+            data = f.read(MAX_WRITE_BYTES + 1)
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror or exc}", path=str(file)) from None
+    if len(data) > MAX_WRITE_BYTES:
+        raise InputError(f"larger than {MAX_WRITE_BYTES:,} bytes: not a firmware", path=str(file))
     target_name = name if name is not None else file.name
     base = {"slave": slave, "direction": "write", "name": target_name}
 

@@ -142,6 +142,16 @@ def test_bad_usage_and_input(cli, tmp_path: Path, args: list[str], code: int) ->
     assert len(err.strip().splitlines()) == 1
 
 
+def test_a_file_without_end_is_refused_at_the_limit(cli) -> None:
+    """/dev/zero as the firmware: read up to the limit and refused (exit 3), not read
+    until memory runs out."""
+    from lolacli.cli.foe import MAX_WRITE_BYTES
+
+    code, out, err = cli("foe", "write", "3", "/dev/zero")
+    assert code == 3 and out == ""
+    assert f"larger than {MAX_WRITE_BYTES:,} bytes" in err
+
+
 def test_ctrl_c_is_exit_130(tmp_path: Path) -> None:
     """SIGINT in the middle of a transfer (60 MiB, about 6 s here; the signal comes once
     the process has used 0.8 s of CPU, past its start-up): one line, exit 130."""
