@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from decimal import Decimal
 from pathlib import Path
 
 import mcap.reader
@@ -182,7 +183,7 @@ def test_a_stop_while_opening_leaves_a_file_that_opens(tmp_path):
 def test_timestamps_are_the_day_of_the_run(tmp_path):
     """Transport time (virtual from 0, or monotonic) plus the wall clock at the first
     frame: tshark shows today, and the MCAP log times agree with the pcapng."""
-    before = time.time()
+    before = time.time_ns()
     clock = WallClock()
     frames = PcapngRecorder(tmp_path / "t.pcapng", clock)
     messages = McapRecorder(tmp_path / "t.mcap", clock)
@@ -191,13 +192,15 @@ def test_timestamps_are_the_day_of_the_run(tmp_path):
         messages.write("/cycle", i * 500_000, {"cycle": i, "t_ns": i * 500_000})
     frames.close()
     messages.close()
-    after = time.time()
-    epochs = [float(t) for t in _tshark(tmp_path / "t.pcapng")]
-    assert before <= epochs[0] <= after
-    assert [round((t - epochs[0]) * 1e6) for t in epochs] == [0, 500, 1000]
+    after = time.time_ns()
+    # exact decimals (the pcapng is in nanoseconds): a float of today's epoch keeps only
+    # ~16 digits, so the two could differ by one in the last place
+    epochs_ns = [int(Decimal(t) * 1_000_000_000) for t in _tshark(tmp_path / "t.pcapng")]
+    assert before <= epochs_ns[0] <= after
+    assert [t - epochs_ns[0] for t in epochs_ns] == [0, 500_000, 1_000_000]
     with open(tmp_path / "t.mcap", "rb") as f:
         times = [m.log_time for _, _, m in mcap.reader.make_reader(f).iter_messages()]
-    assert [round(t / 1e3) for t in times] == [round(e * 1e6) for e in epochs]
+    assert times == epochs_ns
 
 
 def _simulate(tmp_path: Path, delay_s: float, k: int) -> tuple[int, Path, Path, str]:
