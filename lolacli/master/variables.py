@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 from lolacli.eni.model import Direction, Slave, Variable
 from lolacli.eni.model import ProcessImage as EniProcessImage
 from lolacli.errors import LinkError, UsageError
+from lolacli.wire.datatypes import DataType, data_type_from_name
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,7 +47,7 @@ class BusVariable:
     """A typed process-data variable (see the module docstring). Make one with
     ``BusInt32.input()`` / ``BusInt32.output()`` (or ``BusInt32(Direction.INPUT)``)."""
 
-    eni_types: ClassVar[frozenset[str]] = frozenset()
+    data_types: ClassVar[frozenset[DataType]] = frozenset()
     bit_size: ClassVar[int] = 0
     fmt: ClassVar[str] = ""
 
@@ -76,9 +77,9 @@ class BusVariable:
     # -- linking
     def accepts(self, variable: Variable) -> str | None:
         """Why ``variable`` does not fit this type, or None when it does."""
-        data_type = " ".join(variable.data_type.upper().split())
-        if self.eni_types and data_type and data_type not in self.eni_types:
-            taken = ", ".join(sorted(self.eni_types))
+        named = variable.data_type.strip()
+        if self.data_types and named and data_type_from_name(named) not in self.data_types:
+            taken = ", ".join(sorted(t.name for t in self.data_types))
             kind = type(self).__name__
             return f"is {variable.data_type} ({variable.bit_size} bits); {kind} takes {taken}"
         if variable.bit_size != self.bit_size:
@@ -175,7 +176,7 @@ class _BusInt(BusVariable):
 
 class BusBool(BusVariable):
     __slots__ = ()
-    eni_types = frozenset({"BOOL", "BIT"})
+    data_types = frozenset({DataType.BOOLEAN, DataType.BIT1})
     bit_size = 1
 
     def read(self, data: bytes | bytearray) -> bool:
@@ -189,47 +190,56 @@ class BusBool(BusVariable):
 
 class BusInt8(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt, signed = frozenset({"SINT"}), 8, "b", True
+    data_types = frozenset({DataType.INTEGER8})
+    bit_size, fmt, signed = 8, "b", True
 
 
 class BusUInt8(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"USINT", "BYTE", "BITARR", "BITARR8"}), 8, "B"
+    data_types = frozenset({DataType.UNSIGNED8, DataType.BYTE, DataType.BITARR8})
+    bit_size, fmt = 8, "B"
 
 
 class BusInt16(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt, signed = frozenset({"INT"}), 16, "h", True
+    data_types = frozenset({DataType.INTEGER16})
+    bit_size, fmt, signed = 16, "h", True
 
 
 class BusUInt16(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"UINT", "WORD", "BITARR16"}), 16, "H"
+    data_types = frozenset({DataType.UNSIGNED16, DataType.WORD, DataType.BITARR16})
+    bit_size, fmt = 16, "H"
 
 
 class BusInt32(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt, signed = frozenset({"DINT"}), 32, "i", True
+    data_types = frozenset({DataType.INTEGER32})
+    bit_size, fmt, signed = 32, "i", True
 
 
 class BusUInt32(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"UDINT", "DWORD", "BITARR32"}), 32, "I"
+    data_types = frozenset({DataType.UNSIGNED32, DataType.DWORD, DataType.BITARR32})
+    bit_size, fmt = 32, "I"
 
 
 class BusInt64(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt, signed = frozenset({"LINT"}), 64, "q", True
+    data_types = frozenset({DataType.INTEGER64})
+    bit_size, fmt, signed = 64, "q", True
 
 
 class BusUInt64(_BusInt):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"ULINT", "LWORD"}), 64, "Q"
+    data_types = frozenset({DataType.UNSIGNED64})
+    bit_size, fmt = 64, "Q"
 
 
 class BusReal32(BusVariable):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"REAL"}), 32, "f"
+    data_types = frozenset({DataType.REAL32})
+    bit_size, fmt = 32, "f"
 
     def check(self, value: Any) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -239,7 +249,8 @@ class BusReal32(BusVariable):
 
 class BusReal64(BusReal32):
     __slots__ = ()
-    eni_types, bit_size, fmt = frozenset({"LREAL"}), 64, "d"
+    data_types = frozenset({DataType.REAL64})
+    bit_size, fmt = 64, "d"
 
 
 class BusBytes(BusVariable):
@@ -278,8 +289,8 @@ class BusBytes(BusVariable):
             image.outputs[self._byte : self._byte + len(data)] = data
 
 
-#: the Bus Variable type for an ENI data type (where one type fits)
-TYPE_FOR_ENI: dict[str, type[BusVariable]] = {
+#: the Bus Variable type for a data type (where one type fits)
+TYPE_FOR: dict[DataType, type[BusVariable]] = {
     t: cls
     for cls in (
         BusBool,
@@ -294,13 +305,14 @@ TYPE_FOR_ENI: dict[str, type[BusVariable]] = {
         BusReal32,
         BusReal64,
     )
-    for t in cls.eni_types
+    for t in cls.data_types
 }
 
 
 def variable_for(variable: Variable) -> BusVariable:
     """A Bus Variable of the type that fits an ENI variable (BusBytes for arrays)."""
-    cls = TYPE_FOR_ENI.get(" ".join(variable.data_type.upper().split()))
+    data_type = data_type_from_name(variable.data_type)
+    cls = None if data_type is None else TYPE_FOR.get(data_type)
     if cls is None or cls.bit_size != variable.bit_size:
         cls = BusBytes if variable.bit_size % 8 == 0 else _Bits
     return cls(variable.direction)

@@ -10,7 +10,7 @@ import threading
 import pytest
 
 from lolacli.emulator.slave import build_chain
-from lolacli.eni.model import Direction
+from lolacli.eni.model import Direction, Variable
 from lolacli.errors import LinkError, SdoAbortError, TransitionRefusedError, UsageError
 from lolacli.files import load_eni
 from lolacli.master import (
@@ -24,6 +24,7 @@ from lolacli.master import (
     MasterOptions,
 )
 from lolacli.master.dc import loop_time_ns, propagation_delays
+from lolacli.master.variables import variable_for
 from lolacli.simulate import EmulateOptions, VirtualBus
 from lolacli.wire.registers import AlState
 from lolacli.wire.sdo import SdoAbortCode
@@ -332,3 +333,35 @@ def test_an_exchange_sends_the_frame_encode_frame_makes() -> None:
     assert master._request(big, 1) is None
     with pytest.raises(WireError):
         master.exchange(big)
+
+
+@pytest.mark.parametrize(
+    ("name", "bits", "kind"),
+    [
+        ("UDINT", 32, "BusUInt32"),
+        ("UNSIGNED32", 32, "BusUInt32"),
+        ("dword", 32, "BusUInt32"),
+        ("DINT", 32, "BusInt32"),
+        ("INTEGER32", 32, "BusInt32"),
+        ("BIT", 1, "BusBool"),
+        ("BOOLEAN", 1, "BusBool"),
+        ("LREAL", 64, "BusReal64"),
+        ("REAL64", 64, "BusReal64"),
+        ("BITARR", 8, "BusUInt8"),
+        ("ARRAY [0..5] OF BYTE", 48, "BusBytes"),
+        ("BIT2", 2, "_Bits"),
+    ],
+)
+def test_a_bus_variable_type_comes_from_the_one_data_type_table(
+    name: str, bits: int, kind: str
+) -> None:
+    """ENI, ESI and CiA names of one type take one Bus Variable class, through
+    ``wire.datatypes.data_type_from_name`` (no table of ENI names of its own)."""
+    variable = Variable("x", Direction.INPUT, 0, bits, name)
+    bus = variable_for(variable)
+    assert type(bus).__name__ == kind
+    assert bus.accepts(variable) is None
+    if kind == "BusUInt32":
+        assert BusInt32.input().accepts(variable) == (
+            f"is {name} (32 bits); BusInt32 takes INTEGER32"
+        )
