@@ -84,8 +84,8 @@ class SdoAbortError(LolaError):
         self.code = code
         self.text = message
         super().__init__(
-            f"SDO 0x{index:04X}:{subindex:02X} aborted: code 0x{code:08X}"
-            + (f", {message}" if message else "")
+            f"SDO 0x{index:04X}:{subindex:02X} aborted 0x{code:08X}"
+            + (f": {message}" if message else "")
         )
 
 

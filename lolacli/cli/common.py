@@ -206,8 +206,33 @@ def stderr_console() -> Any:
     return Console(stderr=True, highlight=False)
 
 
+def text_width() -> int:
+    """The width human output fits: the terminal's, ``$COLUMNS``, else 80 (piped)."""
+    import shutil
+
+    return max(40, shutil.get_terminal_size((80, 24)).columns)
+
+
+def wrapped(text: str, indent: str = "    ") -> list[str]:
+    """A line of human output fitted to :func:`text_width`: broken between words,
+    continuation lines indented; a word longer than a line (a path) is kept whole."""
+    import textwrap
+
+    return textwrap.wrap(
+        text,
+        text_width(),
+        subsequent_indent=indent,
+        break_on_hyphens=False,
+        break_long_words=False,
+    ) or [""]
+
+
+def write_wrapped(stream: Any, text: str) -> None:
+    stream.write("".join(f"{line}\n" for line in wrapped(text)))
+
+
 def warn(message: str) -> None:
-    sys.stderr.write(f"lolacli: {message}\n")
+    write_wrapped(sys.stderr, f"lolacli: {message}")
 
 
 def debug_enabled() -> bool:

@@ -16,7 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json, wrapped
 from lolacli.cli.options import EniOption, EsiOption, IfaceOption
 from lolacli.cli.sdo import BackendOption, SlaveArgument
 
@@ -81,8 +81,6 @@ def _run(fmt: OutputFormat, base: dict[str, Any], call: Any) -> Any:
 
 def _say(result: Any, verb: str, path: Path) -> None:
     """Three lines, each fitted to the terminal (80 columns when piped)."""
-    import shutil
-    import textwrap
 
     from lolacli.text import number, plural
 
@@ -98,9 +96,7 @@ def _say(result: Any, verb: str, path: Path) -> None:
         f"  {', '.join(how)} ({result.backend}); slave back in INIT",
         f"  file {path}",
     ]
-    width = max(40, shutil.get_terminal_size((80, 24)).columns)
-    wrap = textwrap.TextWrapper(width, subsequent_indent="    ", break_on_hyphens=False)
-    out = [w for line in lines for w in wrap.wrap(line)]
+    out = [w for line in lines for w in wrapped(line)]
     sys.stdout.write("".join(line + "\n" for line in out))
 
 

@@ -19,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, emit_json
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json, text_width, wrapped
 from lolacli.cli.options import (
     DurationOption,
     EniOption,
@@ -176,29 +176,8 @@ def _run_access(fmt: OutputFormat, base: dict[str, Any], call: Any) -> None:
     _render_value(result)
 
 
-def _width() -> int:
-    """The width human output fits: the terminal's, ``$COLUMNS``, else 80 (piped)."""
-    import shutil
-
-    return max(40, shutil.get_terminal_size((80, 24)).columns)
-
-
-def _wrapped(text: str, indent: str = "    ") -> list[str]:
-    """A line of human output fitted to the width: broken between words, continuation
-    lines indented (a word longer than a line is broken where it must be)."""
-    import textwrap
-
-    return textwrap.wrap(
-        text,
-        _width(),
-        subsequent_indent=indent,
-        break_on_hyphens=False,
-        drop_whitespace=True,
-    ) or [""]
-
-
 def _print(*lines: str) -> None:
-    _write_lines(line for text in lines for line in _wrapped(text))
+    _write_lines(line for text in lines for line in wrapped(text))
 
 
 def _write_lines(lines: Any) -> None:
@@ -213,7 +192,7 @@ def _write_lines(lines: Any) -> None:
 
 def _note(text: str) -> None:
     """A note on stderr (``lolacli: note: …``), wrapped like the rest."""
-    sys.stderr.write("".join(f"{line}\n" for line in _wrapped(f"lolacli: note: {text}")))
+    sys.stderr.write("".join(f"{line}\n" for line in wrapped(f"lolacli: note: {text}")))
 
 
 def _render_value(result: Any) -> None:
@@ -401,7 +380,7 @@ def _render_list(report: dict[str, Any]) -> None:
             rows.append((e["object"], e["name"] or "", kind, access, _list_default(e)))
     headers = ("object", "name", "type", "access", "default")
     widest = [max([len(h), *(len(r[i]) for r in rows)]) for i, h in enumerate(headers)]
-    room = _width() - widest[0] - widest[2] - widest[3] - 2 * (len(headers) - 1)
+    room = text_width() - widest[0] - widest[2] - widest[3] - 2 * (len(headers) - 1)
     name_w = max(16, room - min(widest[4], 20))
     default_w = max(8, room - min(name_w, widest[1]))
     table = Table(show_edge=False, pad_edge=False, box=None)
@@ -596,7 +575,7 @@ def serve_cmd(
         with NodeServer(can, specs, interface=interface):  # closed however the block ends
             names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
             text = f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
-            sys.stderr.write("".join(f"{line}\n" for line in _wrapped(text)))
+            sys.stderr.write("".join(f"{line}\n" for line in wrapped(text)))
             sys.stderr.flush()
             while deadline is None or time.monotonic() < deadline:
                 time.sleep(0.05)  # the root's handlers raise a stop here at once

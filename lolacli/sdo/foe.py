@@ -118,7 +118,7 @@ class LolaFoeSession(FoeSession):
 
         ref = resolve_ref(spec, self.bus.slaves(), source=self.session.source)
         slave = self.bus.eni.slaves[ref.position - 1]
-        where = f"slave {slave.position} ({slave.name}) {self.bus.where}"
+        where = " ".join(filter(None, (f"slave {slave.position} ({slave.name})", self.bus.where)))
         at = SlaveAt(ref.position, ref.station_address, slave.name, where)
         return LolaFoeTarget(self, at, str(spec).strip())
 

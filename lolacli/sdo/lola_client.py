@@ -82,7 +82,7 @@ class LolaBus:
         """The SDO client of the slave at ``ref.position``, brought to PREOP first."""
         slave = self.eni.slaves[ref.position - 1]
         name = label or slave.name
-        what = f"slave {slave.position} ({slave.name}) {self.where}"
+        what = f"slave {slave.position} ({slave.name}){self._on}"
         mailbox = slave.mailbox
         if mailbox is None:
             raise UsageError(f"{what} has no mailbox: no SDO")
@@ -94,7 +94,11 @@ class LolaBus:
             up = self.bus.bring_up(slave)
         except TransitionRefusedError as exc:
             raise TransportError(f"{what} did not reach PREOP: {exc}") from None
-        return LolaClient(self, up, f"slave {slave.position} ({name}) {self.where}")
+        return LolaClient(self, up, f"slave {slave.position} ({name}){self._on}")
+
+    @property
+    def _on(self) -> str:
+        return f" {self.where}" if self.where else ""
 
     def close(self) -> None:
         self.bus.close()

@@ -173,9 +173,8 @@ class LolaSession(Session):
             eni = load_eni(options.eni if options.eni is not None else default_eni())
             virtual = VirtualBus(eni, esi=self.esi)
             name = Path(eni.source).name if eni.source else "ENI"
-            where = f"of the emulated chain ({name})"
-            self.source = f"the emulated chain ({name})"
-            self.bus = LolaBus(virtual.transport, eni, where=where, timeout_s=options.timeout_s)
+            self.source = f"the emulated chain ({name})"  # its errors name the slave only
+            self.bus = LolaBus(virtual.transport, eni, where="", timeout_s=options.timeout_s)
         else:
             from lolacli.master.transport import RawSocketTransport
 

@@ -70,7 +70,7 @@ class FoeErrorCode(IntEnum):
 
 _ERROR_TEXT = {
     FoeErrorCode.NOT_DEFINED: "not defined",
-    FoeErrorCode.NOT_FOUND: "the file was not found",
+    FoeErrorCode.NOT_FOUND: "file not found",
     FoeErrorCode.ACCESS_DENIED: "access to the file is denied",
     FoeErrorCode.DISK_FULL: "the disk is full",
     FoeErrorCode.ILLEGAL: "illegal FoE operation",

@@ -138,49 +138,51 @@ class SdoAbortCode(IntEnum):
     NO_DATA = 0x08000024
 
 
+#: what each CiA 301 abort code means, in words of our own short enough that an error
+#: line (``SDO 0x6099:05 aborted 0x06020000: …``) fits 80 columns
 _ABORT_TEXT: dict[int, str] = {
-    0x05030000: "Toggle bit not changed",
-    0x05040000: "SDO protocol timeout",
-    0x05040001: "Client/server command specifier not valid or unknown",
-    0x05040002: "Invalid block size",
-    0x05040003: "Invalid sequence number",
+    0x05030000: "toggle bit did not alternate",
+    0x05040000: "SDO protocol timed out",
+    0x05040001: "unknown command specifier",
+    0x05040002: "invalid block size",
+    0x05040003: "invalid sequence number",
     0x05040004: "CRC error",
-    0x05040005: "Out of memory",
-    0x06010000: "Unsupported access to an object",
-    0x06010001: "Attempt to read a write-only object",
-    0x06010002: "Attempt to write a read-only object",
-    0x06010003: "Subindex cannot be written, subindex 0 must be 0 for write access",
-    0x06010004: "Complete access not supported for objects of variable length",
-    0x06010005: "Object length exceeds the mailbox size",
-    0x06010006: "Object mapped to an RxPDO, SDO download blocked",
-    0x06020000: "Object does not exist in the object dictionary",
-    0x06040041: "Object cannot be mapped to the PDO",
-    0x06040042: "The mapped objects would exceed the PDO length",
-    0x06040043: "General parameter incompatibility",
-    0x06040047: "General internal incompatibility in the device",
-    0x06060000: "Access failed because of a hardware error",
-    0x06070010: "Data type does not match, length of service parameter does not match",
-    0x06070012: "Data type does not match, length of service parameter too high",
-    0x06070013: "Data type does not match, length of service parameter too low",
-    0x06090011: "Subindex does not exist",
-    0x06090030: "Value range of parameter exceeded",
-    0x06090031: "Value of parameter written too high",
-    0x06090032: "Value of parameter written too low",
-    0x06090033: "Detected module ident list does not match the configured one",
-    0x06090036: "Maximum value is less than minimum value",
-    0x060A0023: "Resource not available: SDO connection",
-    0x08000000: "General error",
-    0x08000020: "Data cannot be transferred or stored to the application",
-    0x08000021: "Data cannot be transferred or stored because of local control",
-    0x08000022: "Data cannot be transferred or stored in the present device state",
-    0x08000023: "Object dictionary dynamic generation failed or no object dictionary",
-    0x08000024: "No data available",
+    0x05040005: "out of memory",
+    0x06010000: "unsupported access",
+    0x06010001: "object is write-only",
+    0x06010002: "object is read-only",
+    0x06010003: "subindex 0 must be 0 to write",
+    0x06010004: "no complete access here",
+    0x06010005: "object larger than mailbox",
+    0x06010006: "mapped to an RxPDO",
+    0x06020000: "object does not exist",
+    0x06040041: "object cannot be mapped",
+    0x06040042: "PDO length exceeded",
+    0x06040043: "parameters incompatible",
+    0x06040047: "internal incompatibility",
+    0x06060000: "hardware error",
+    0x06070010: "data type or length mismatch",
+    0x06070012: "value too long for its type",
+    0x06070013: "value too short for its type",
+    0x06090011: "subindex does not exist",
+    0x06090030: "value out of range",
+    0x06090031: "value too high",
+    0x06090032: "value too low",
+    0x06090033: "module ident list mismatch",
+    0x06090036: "maximum below minimum",
+    0x060A0023: "no SDO connection free",
+    0x08000000: "general error",
+    0x08000020: "data cannot be stored",
+    0x08000021: "cannot store: local control",
+    0x08000022: "cannot store in this state",
+    0x08000023: "no object dictionary",
+    0x08000024: "no data available",
 }
 
 
 def abort_text(code: int) -> str:
-    """The text of an SDO abort code; unknown codes read ``Unknown abort code 0x….``."""
-    return _ABORT_TEXT.get(code, f"Unknown abort code 0x{code:08X}")
+    """The text of an SDO abort code; unknown codes read ``unknown abort code``."""
+    return _ABORT_TEXT.get(code, "unknown abort code")
 
 
 def abort_code(code: int) -> SdoAbortCode | int:

@@ -92,7 +92,7 @@ def test_a_difference_and_an_unexpected_abort_are_exit_1(cli, channel, tmp_path)
     assert results[0]["message"] == "expected 411 (0x0000019B), read 410 (0x0000019A)"
     assert (
         results[1]["abort_code"] == "0x06020000"
-        and "Object does not exist" in results[1]["message"]
+        and "object does not exist" in results[1]["message"]
     )
     assert "expected abort 0x06020000" in results[2]["message"]
     code, out, _ = _run(cli, channel, path)

@@ -93,11 +93,11 @@ def test_write_then_read(network) -> None:
 @pytest.mark.parametrize(
     ("call", "code", "text"),
     [
-        (lambda c: c.upload(0x2345, 0), 0x06020000, "Object does not exist"),
-        (lambda c: c.upload(0x1018, 9), 0x06090011, "Subindex does not exist"),
+        (lambda c: c.upload(0x2345, 0), 0x06020000, "object does not exist"),
+        (lambda c: c.upload(0x1018, 9), 0x06090011, "subindex does not exist"),
         (lambda c: c.upload(0x2002, 0), 0x06010001, "write-only"),
-        (lambda c: c.download(0x1000, 0, b"\0\0\0\0"), 0x06010002, "write a read-only"),
-        (lambda c: c.download(0x2001, 0, b"\0\0\0\0"), 0x06070010, "length of service"),
+        (lambda c: c.download(0x1000, 0, b"\0\0\0\0"), 0x06010002, "is read-only"),
+        (lambda c: c.download(0x2001, 0, b"\0\0\0\0"), 0x06070010, "length mismatch"),
     ],
 )
 def test_aborts_carry_code_and_text(network, call, code, text) -> None:
@@ -154,11 +154,11 @@ def test_cli_abort_exit_1_human_and_json(cli, channel, gateway) -> None:
     doc = json.loads(out)
     assert doc["error"] == {
         "abort_code": "0x06020000",
-        "message": "Object does not exist in the object dictionary",
+        "message": "object does not exist",
     }
     code, out, err = cli("sdo", "write", "16", "0x1000", "5", *_can(channel))
     assert code == 1 and out == ""
-    assert "0x06010002" in err and "Attempt to write a read-only object" in err
+    assert "0x06010002" in err and "object is read-only" in err
     code, _out, err = cli("sdo", "write", "16", "0x2001", "5", "--type", "u32", *_can(channel))
     assert code == 1 and "0x06070010" in err
 

@@ -123,7 +123,7 @@ def test_sdo_abort_replay_sdo_error_frame_544() -> None:
     )
     abort = decode_sdo(mailbox.payload)
     assert abort == SdoAbort(0x1001, 0, SdoAbortCode.NO_OBJECT, CoeService.SDO_REQUEST)
-    assert abort.text == "Object does not exist in the object dictionary"
+    assert abort.text == "object does not exist"
     assert abort_text(0x06020000) == abort.text
     assert encode_sdo(abort) == mailbox.payload
     assert encode_mailbox(mailbox) == d.data[:16]
