@@ -180,6 +180,14 @@ def _temporary(path: Path) -> tuple[IO[bytes], str]:
     return os.fdopen(fd, "wb"), tmp
 
 
+def check_target(path: str | Path) -> None:
+    """InputError (exit 3) when ``path`` cannot be written (tried with a temporary file
+    beside it, removed at once)."""
+    out, tmp = _temporary(Path(path))
+    out.close()
+    os.unlink(tmp)
+
+
 def export_mcap(report: CaptureReport, path: str | Path, *, engine: str = "auto",
                 should_stop: Callable[[], bool] = never) -> ExportResult:
     """Write ``report``'s capture to ``path`` as MCAP (see the module docstring).
@@ -218,4 +226,4 @@ def _umask() -> int:
     return mask
 
 
-__all__ = ["SCHEMA", "ExportResult", "Stopped", "export_mcap"]
+__all__ = ["SCHEMA", "ExportResult", "Stopped", "check_target", "export_mcap"]

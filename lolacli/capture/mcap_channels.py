@@ -40,7 +40,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "type": "object",
         "properties": {
             "frame": {**_INT, "description": "frame number, 1-based (as Wireshark's)"},
-            "t_ns": {**_INT, "description": "timestamp (ns since 1970)"},
+            "t_ns": {**_INT, "description": "capture: its timestamp (ns since 1970); "
+                                            "simulate: the transport's clock (ns)"},
             "length": {**_INT, "description": "bytes on the wire"},
             "returned": {"type": ["boolean", "null"],
                          "description": "came back from the bus (link layer: source MAC "
@@ -57,14 +58,19 @@ SCHEMAS: dict[str, dict[str, Any]] = {
         "type": "object",
         "properties": {
             "cycle": {**_INT, "description": "cycle number"},
-            "t_ns": {**_INT, "description": "when the cyclic frame left (ns)"},
+            "t_ns": {**_INT, "description": "capture: when the cyclic frame left; "
+                                            "simulate: the master's clock at the cycle's "
+                                            "end (ns)"},
             "frame": {**_INT_OR_NULL, "description": "capture: the cyclic frame's number"},
-            "round_trip_ns": _INT_OR_NULL,
+            "round_trip_ns": {**_INT_OR_NULL,
+                              "description": "capture: this frame's; simulate: the last "
+                                             "one measured"},
             "period_ns": {**_INT_OR_NULL,
-                          "description": "time since the previous cycle's frame left"},
+                          "description": "since the previous message's t_ns (capture: "
+                                         "the previous answered cyclic frame)"},
             "wkc": {"type": ["array", "null"], "items": _INT,
-                    "description": "working counter of each datagram of the returned "
-                                   "frame"},
+                    "description": "capture: working counter of each datagram of the "
+                                   "returned frame"},
             "wkc_mismatches": {**_INT, "description": "WKC mismatches so far (simulate)"},
             "lost_frames": {**_INT, "description": "lost frames so far (simulate)"},
             "sections_ns": {"type": "object", "additionalProperties": _INT,
