@@ -40,6 +40,8 @@ ETHERTYPE_ECAT = 0x88A4
 REG_DC_SYSTIME_DIFF = 0x092C
 #: frames remembered for the WKC of a returned frame found later by the pairing
 WKC_WINDOW = 1 << 16
+#: frames after an outgoing one searched for its answer (timestamps may go backwards)
+LOOK_AHEAD = 1024
 TOPICS = (ch.FRAMES, ch.CYCLE, ch.DC)
 
 
@@ -72,8 +74,11 @@ class ExportResult:
         }
 
 
-def _decode(frame: CapturedFrame) -> tuple[bool | None, list[tuple[int, int, int, bytes]]]:
-    """(returned by the link layer, (cmd, address, wkc, data) of each datagram); no
+Datagrams = list[tuple[int, int, int, bytes, int]]
+
+
+def _decode(frame: CapturedFrame) -> tuple[bool | None, Datagrams]:
+    """(returned by the link layer, (cmd, address, wkc, data, index) of each datagram); no
     datagrams for frames that are not EtherCAT or do not decode."""
     from lolacli.errors import WireError
     from lolacli.wire.frame import decode_ecat_payload
@@ -88,13 +93,13 @@ def _decode(frame: CapturedFrame) -> tuple[bool | None, list[tuple[int, int, int
         _, _, datagrams, _ = decode_ecat_payload(frame.data, link.payload)
     except WireError:
         return link.returned, []
-    return link.returned, [(d.cmd, d.address, d.wkc, d.data) for d in datagrams]
+    return link.returned, [(d.cmd, d.address, d.wkc, d.data, d.index) for d in datagrams]
 
 
-def _dc_reads(datagrams: list[tuple[int, int, int, bytes]]) -> Iterator[tuple[int, int | None]]:
+def _dc_reads(datagrams: Datagrams) -> Iterator[tuple[int, int | None]]:
     """(signed difference ns, station) of each answered APRD/FPRD of 0x092C (the rule of
     the analysis's scanner)."""
-    for cmd, address, wkc, data in datagrams:
+    for cmd, address, wkc, data, _ in datagrams:
         ado = address >> 16
         if cmd in (1, 4) and wkc >= 1 and ado <= REG_DC_SYSTIME_DIFF <= ado + len(data) - 4:
             at = REG_DC_SYSTIME_DIFF - ado
@@ -115,7 +120,9 @@ class _Export:
         self.counts = dict.fromkeys(TOPICS, 0)
         self.frames = iter(CaptureReader(report.path))
         self.should_stop = should_stop
-        self.recent: OrderedDict[int, list[tuple[int, list[int]]]] = OrderedDict()
+        # frame number -> (timestamp, returned, datagram shape, WKCs) of recent frames
+        self.recent: OrderedDict[int, tuple[int, bool | None, tuple[int, ...], list[int]]] = (
+            OrderedDict())
         self.cycle = 0
         self.last_sent: int | None = None
 
@@ -134,7 +141,8 @@ class _Export:
                 "returned": returned, "data": base64.b64encode(frame.data).decode("ascii"),
             })
             if datagrams:
-                self.recent.setdefault(t, []).append((frame.number, [d[2] for d in datagrams]))
+                shape = tuple(d[0] << 24 | d[4] << 16 | len(d[3]) for d in datagrams)
+                self.recent[frame.number] = (t, returned, shape, [d[2] for d in datagrams])
                 if len(self.recent) > WKC_WINDOW:
                     self.recent.popitem(last=False)
             for error, slave in _dc_reads(datagrams):
@@ -152,13 +160,31 @@ class _Export:
                 continue
             sent, out_frame = t - r, m >> 1
             period = None if self.last_sent is None else sent - self.last_sent
-            wkc = next((w for n, w in self.recent.get(t, ()) if n > out_frame), None)
+            wkc = self._returned_wkc(out_frame, t)
             self.write(ch.CYCLE, t, {
                 "cycle": self.cycle, "t_ns": sent, "frame": out_frame, "round_trip_ns": r,
                 "period_ns": period, "wkc": wkc,
             })
             self.cycle += 1
             self.last_sent = sent
+
+    def _returned_wkc(self, out_frame: int, at_ns: int) -> list[int] | None:
+        """The WKCs of the frame that answered frame ``out_frame`` at ``at_ns``: the first
+        frame after it at that time with its datagrams (commands, lengths), one the link
+        layer says returned first."""
+        sent = self.recent.get(out_frame)
+        if sent is None:
+            return None
+        found = None
+        for n in range(out_frame + 1, out_frame + 1 + LOOK_AHEAD):
+            got = self.recent.get(n)
+            if got is None:  # not EtherCAT, or not read yet
+                continue
+            if got[0] == at_ns and got[2] == sent[2]:
+                if got[1] is not False:
+                    return got[3]
+                found = found or got[3]
+        return found
 
     def finish(self) -> None:
         self.frames_until(None)
