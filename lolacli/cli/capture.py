@@ -151,6 +151,12 @@ def export_cmd(
         raise typer.Exit(1)
 
 
+def _size(n: int) -> str:
+    from lolacli.text import number
+
+    return number(n / 1e6, "MB", 1) if n >= 1e6 else number(n / 1e3, "kB", 1)
+
+
 def _render_export(data: dict[str, Any]) -> None:
     from lolacli.cli.common import say, stdout_console
     from lolacli.text import number
@@ -160,7 +166,7 @@ def _render_export(data: dict[str, Any]) -> None:
 
     console = stdout_console()
     say(console, f"wrote {data['mcap']}: {count(data['frames'], 'frame')}, "
-        f"{count(len(data['channels']), 'channel')}, {number(data['bytes'] / 1e6, 'MB', 1)}")
+        f"{count(len(data['channels']), 'channel')}, {_size(data['bytes'])}")
     for c in data["channels"]:
         say(console, f"  {c['topic']:<8} {count(c['messages'], 'message')} ({c['schema']})")
     findings = data["findings"]
