@@ -237,6 +237,7 @@ class McapRecorder:
         self.path = str(path)
         self.clock = clock if clock is not None else WallClock()
         self.messages = 0
+        self.topics: dict[str, int] = dict.fromkeys(mcap_channels.SCHEMAS, 0)  # messages
         self.frames = 0
         self._out = _McapFile(chunk_bytes)
         weakref.finalize(self, self._out.close)  # closed when collected, if not before
@@ -245,6 +246,7 @@ class McapRecorder:
     def write(self, topic: str, t_ns: int, message: dict[str, Any]) -> None:
         self._out.message(topic, self.clock(t_ns), mcap_channels.encode(message))
         self.messages += 1
+        self.topics[topic] += 1
 
     def __call__(self, t_ns: int, frame: bytes, returned: bool) -> None:
         """A transport tap: every frame sent and received, on ``/frames``."""

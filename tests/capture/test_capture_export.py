@@ -151,6 +151,7 @@ def test_simulate_writes_the_same_topics_and_schemas(tmp_path: Path) -> None:
     for frame, (_, m) in zip(frames, messages[FRAMES], strict=True):
         assert base64.b64decode(m["data"]) == frame.data and m["frame"] == frame.number
     assert doc["mcap"]["messages"] == sum(len(v) for v in messages.values())
+    assert doc["mcap"]["channels"] == {t: len(messages.get(t, [])) for t in SCHEMAS}
     # the figures Foxglove plots: round trip and period of each cycle
     cycles = [m for _, m in messages[CYCLE]]
     assert len(cycles) == doc["cycles"] + doc["startup_cycles"]
