@@ -122,6 +122,9 @@ class CaptureReport:
     round_trip_ns: np.ndarray | None = None
     round_trip_at_ns: np.ndarray | None = None
     cycle_period_ns: np.ndarray | None = None
+    # the rules of the pass the report is of (direction, cyclic-stream mode, signature):
+    # :func:`stream_pairs` reads the file again with them
+    rules: tuple[int, int, int] = (S.DIR_AUTO, S.MODE_LOGICAL, 0)
 
     @property
     def lost_frames(self) -> int:
@@ -289,6 +292,26 @@ def analyze_file(
     return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
 
 
+#: ``on_pairs(frames_read, round_trip_ns, returned_at_ns, meta)`` of :func:`stream_pairs`:
+#: the pairs found since the last call, in return order; ``meta`` is the outgoing frame's
+#: number << 1 | 1 when it is cyclic; ``frames_read`` the frames scanned so far.
+OnPairs = Callable[[int, np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def stream_pairs(report: CaptureReport, on_pairs: OnPairs, *, engine: str = "auto",
+                 chunk_bytes: int = CHUNK_BYTES,
+                 should_stop: Callable[[], bool] = never) -> None:
+    """Read ``report``'s capture again with the rules of its pass and hand every pair
+    (out/return) to ``on_pairs`` as it is found: the per-pair series of the analysis,
+    streamed (bounded memory, unlike ``keep_series``)."""
+    reader = CaptureReader(report.path)
+    eng = choose_engine(engine, os.path.getsize(reader.path))
+    dirmode, mode, sig = report.rules
+    p = _Pass(reader, eng, dirmode, mode, sig, False, chunk_bytes, None, should_stop)
+    p.on_pairs = on_pairs
+    p.run()
+
+
 def _zeros(n: int, py: bool) -> Any:
     return [0] * n if py else np.zeros(n, np.int64)
 
@@ -375,6 +398,7 @@ class _Pass:
         self.sdo = SdoTracker()
         self.stopped_at: int | None = None
         self.cut_short = False
+        self.on_pairs: OnPairs | None = None
 
     # --- tables ----------------------------------------------------------------------
     def _new_pair_table(self, slots: int) -> None:
@@ -547,6 +571,8 @@ class _Pass:
             if self.keep_series:
                 self.rt_series.append(rt)
                 self.rt_ts.append(_rows(self.o_rtts, n))
+            if self.on_pairs is not None:
+                self.on_pairs(int(st[S.S_FRAMES]), rt, _rows(self.o_rtts, n), meta)
         n = int(st[S.S_N_PERIOD])
         if n:
             self.periods.append(_compact(_rows(self.o_period, n)))
@@ -685,6 +711,7 @@ class _Pass:
             round_trip_ns=_take(self.rt_series) if keep else None,
             round_trip_at_ns=_take(self.rt_ts) if keep else None,
             cycle_period_ns=_take(self.periods) if keep else None,
+            rules=(st[S.S_DIRMODE], st[S.S_MODE], st[S.S_STREAM_SIG]),
         )
 
     def _direction_rule(self, st: list[int]) -> str:

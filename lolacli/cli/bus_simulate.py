@@ -38,7 +38,8 @@ Pcap = Annotated[
 ]
 Mcap = Annotated[
     Path | None,
-    typer.Option("--mcap", help="Write MCAP: per-cycle timing, joints, DC error (JSON)."),
+    typer.Option("--mcap", help="Write MCAP: every frame, per-cycle timing, joints, DC "
+                 "error (JSON; the channels of capture export --mcap)."),
 ]
 LinkDown = Annotated[
     str | None,

@@ -1,4 +1,4 @@
-"""`lolacli capture …` commands: analyze, list.
+"""`lolacli capture …` commands: analyze, export, list.
 
 The library (``lolacli.capture``: numpy) and rich/matplotlib are imported inside
 the commands.
@@ -100,6 +100,81 @@ def analyze_cmd(
             sys.stderr.write(f"lolacli: wrote {written}\n")
     if report.failed:
         raise typer.Exit(1)
+
+
+McapOption = Annotated[
+    Path,
+    typer.Option("--mcap", help="Write MCAP here: /frames (every frame), /cycle (round "
+                 "trip, period, WKC), /dc (system time difference), JSON for Foxglove."),
+]
+
+
+@app.command("export")
+def export_cmd(
+    file: CaptureArgument,
+    mcap: McapOption,
+    fmt: FormatOption = OutputFormat.human,
+    engine: EngineOption = "auto",
+) -> None:
+    """Export a capture as MCAP: every frame (its bytes base64) and per-cycle figures
+    (round trip, cycle period, WKC, DC system time difference) as JSON-schema channels
+    that Foxglove plots, the channels `bus simulate --mcap` writes. The file is written
+    whole or not at all (a temporary file renamed at the end). The findings are those of
+    `capture analyze` (exit 1 when one is a failure, the file written anyway)."""
+    from lolacli.capture.analyze import analyze_file
+    from lolacli.capture.export import Stopped, check_target, export_mcap
+    from lolacli.interrupt import stop_signals
+
+    check_target(mcap)  # an unwritable path fails before the capture is read
+    result = None
+    with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
+        report = analyze_file(file, progress=progress, engine=engine, should_stop=stop)
+        if not stop():
+            try:
+                result = export_mcap(report, mcap, engine=engine, should_stop=stop)
+            except Stopped:
+                pass
+    if stop() or result is None:
+        sys.stderr.write(f"lolacli: stopped by {_signal_name(stop.exit_code)}; {mcap} "
+                         "not written\n")
+        raise typer.Exit(stop.exit_code)
+    from lolacli.findings import verdict as verdict_of
+
+    data = result.to_dict()
+    data["verdict"] = verdict_of(report.findings)
+    data["findings"] = [f.to_dict() for f in report.findings]
+    if fmt is OutputFormat.json:
+        emit_json(data)
+    else:
+        _render_export(data)
+    if report.failed:
+        raise typer.Exit(1)
+
+
+def _size(n: int) -> str:
+    from lolacli.text import number
+
+    return number(n / 1e6, "MB", 1) if n >= 1e6 else number(n / 1e3, "kB", 1)
+
+
+def _render_export(data: dict[str, Any]) -> None:
+    from lolacli.cli.common import say, stdout_console
+    from lolacli.text import number
+
+    def count(n: int, noun: str) -> str:
+        return number(n, noun if n == 1 else noun + "s", 0)
+
+    console = stdout_console()
+    say(console, f"wrote {data['mcap']}: {count(data['frames'], 'frame')}, "
+        f"{count(len(data['channels']), 'channel')}, {_size(data['bytes'])}")
+    for c in data["channels"]:
+        say(console, f"  {c['topic']:<8} {count(c['messages'], 'message')} ({c['schema']})")
+    findings = data["findings"]
+    if findings:
+        say(console, f"verdict {data['verdict']}: {count(len(findings), 'finding')} "
+            "(as capture analyze gives them)")
+        for f in findings:
+            say(console, f"  {f['severity']}: {f['message']}", hang=4)
 
 
 def _timeout_ns(timeout: str | None) -> int | None:

@@ -3,9 +3,10 @@
 :class:`PcapngRecorder` is a transport tap: every frame the master sends and every frame
 that comes back is one Enhanced Packet Block with a nanosecond timestamp, encoded by
 :mod:`lolacli.capture.writer`. :class:`McapRecorder` writes MCAP through the ``mcap``
-library: JSON-schema channels ``/cycle`` (per-cycle timing, WKC, lost frames),
-``/joints`` (per-joint target and actual position), ``/dc`` (largest system time
-difference).
+library: the JSON-schema channels of :mod:`lolacli.capture.mcap_channels` (the ones
+``capture export --mcap`` writes): ``/frames`` (every frame, as a transport tap),
+``/cycle`` (per-cycle timing, WKC, lost frames), ``/joints`` (per-joint target and actual
+position), ``/dc`` (largest system time difference).
 
 Timestamps are wall-clock time (:class:`WallClock`): the transport's clock (virtual in
 simulation, monotonic on a live bus) plus the wall-clock time at the first frame or
@@ -24,13 +25,14 @@ latest when the interpreter exits.
 
 from __future__ import annotations
 
-import json
+import base64
 import time
 import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
+from lolacli.capture import mcap_channels
 from lolacli.capture.writer import epb, idb, shb
 from lolacli.errors import UsageError
 
@@ -147,37 +149,6 @@ class PcapngRecorder:
         self._out.close()
 
 
-_SCHEMAS: dict[str, dict[str, Any]] = {
-    "/cycle": {
-        "title": "lolacli.cycle",
-        "type": "object",
-        "properties": {
-            "cycle": {"type": "integer"},
-            "t_ns": {"type": "integer"},
-            "round_trip_ns": {"type": ["integer", "null"]},
-            "wkc_mismatches": {"type": "integer"},
-            "lost_frames": {"type": "integer"},
-            "sections_ns": {"type": "object", "additionalProperties": {"type": "integer"}},
-        },
-    },
-    "/joints": {
-        "title": "lolacli.joints",
-        "type": "object",
-        "properties": {
-            "cycle": {"type": "integer"},
-            "names": {"type": "array", "items": {"type": "string"}},
-            "target": {"type": "array", "items": {"type": "integer"}},
-            "actual": {"type": "array", "items": {"type": "integer"}},
-        },
-    },
-    "/dc": {
-        "title": "lolacli.dc",
-        "type": "object",
-        "properties": {"t_ns": {"type": "integer"}, "max_error_ns": {"type": "integer"}},
-    },
-}
-
-
 class _Sink:
     """What the mcap Writer writes to: held until the recorder moves it to the file."""
 
@@ -231,14 +202,7 @@ class _McapFile(_WholeFile):
         self.file = open_output(path)
         writer = self.writer
         writer.start(profile="", library="lolacli")  # the head
-        for topic, schema in _SCHEMAS.items():  # (into the first chunk)
-            schema_id = writer.register_schema(
-                name=str(schema["title"]), encoding="jsonschema",
-                data=json.dumps(schema).encode(),
-            )
-            self.channels[topic] = writer.register_channel(
-                topic=topic, message_encoding="json", schema_id=schema_id
-            )
+        self.channels = mcap_channels.register(writer)  # (into the first chunk)
         self.add(self.sink.take())
         self.busy = False
 
@@ -273,14 +237,24 @@ class McapRecorder:
         self.path = str(path)
         self.clock = clock if clock is not None else WallClock()
         self.messages = 0
+        self.topics: dict[str, int] = dict.fromkeys(mcap_channels.SCHEMAS, 0)  # messages
+        self.frames = 0
         self._out = _McapFile(chunk_bytes)
         weakref.finalize(self, self._out.close)  # closed when collected, if not before
         self._out.open(path)
 
     def write(self, topic: str, t_ns: int, message: dict[str, Any]) -> None:
-        data = json.dumps(message, separators=(",", ":")).encode()
-        self._out.message(topic, self.clock(t_ns), data)
+        self._out.message(topic, self.clock(t_ns), mcap_channels.encode(message))
         self.messages += 1
+        self.topics[topic] += 1
+
+    def __call__(self, t_ns: int, frame: bytes, returned: bool) -> None:
+        """A transport tap: every frame sent and received, on ``/frames``."""
+        self.frames += 1
+        self.write(mcap_channels.FRAMES, t_ns, {
+            "frame": self.frames, "t_ns": t_ns, "length": len(frame), "returned": returned,
+            "data": base64.b64encode(frame).decode("ascii"),
+        })
 
     def close(self) -> None:
         """Finish the file, or end it after its last whole chunk (see :class:`_McapFile`)."""

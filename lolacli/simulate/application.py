@@ -135,6 +135,7 @@ class Application:
         self.fixed: list[tuple[BusVariable, Any]] = []
         self.shm: Any = None
         self.mcap: Any = None
+        self._last_record_ns: int | None = None  # the /cycle message's time, last cycle
         self.homes: dict[int, int] = {}
         self.final_states: dict[int, str] = {}  # position -> AL state at the end
         self.t_enable_ns = 0
@@ -229,6 +230,7 @@ class Application:
         t = master.transport.now_ns()
         rt = stats.round_trip_ns[-1] if stats.round_trip_ns else None
         sections = {name: values[-1] for name, values in master.sections_ns.items() if values}
+        self._last_record_ns, last = t, self._last_record_ns
         self.mcap.write(
             "/cycle",
             t,
@@ -236,6 +238,7 @@ class Application:
                 "cycle": stats.cycles,
                 "t_ns": t,
                 "round_trip_ns": rt,
+                "period_ns": None if last is None else t - last,
                 "wkc_mismatches": stats.wkc_mismatches,
                 "lost_frames": stats.frames_lost,
                 "sections_ns": sections,

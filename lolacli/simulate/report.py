@@ -295,7 +295,8 @@ def report(
             "seed": options.seed,
         },
         "pcap": {"path": pcap.path, "frames": pcap.frames} if pcap is not None else None,
-        "mcap": {"path": mcap.path, "messages": mcap.messages} if mcap is not None else None,
+        "mcap": {"path": mcap.path, "messages": mcap.messages, "channels": dict(mcap.topics)}
+        if mcap is not None else None,
         "shm": options.shm,
     }
 

@@ -147,6 +147,8 @@ def _compose(
     pcap, mcap = recorders
     if pcap is not None:
         transport.taps.append(pcap)
+    if mcap is not None:
+        transport.taps.append(mcap)  # /frames
     master_options = MasterOptions(
         cycle_time_ns=round(1e9 / options.rate_hz), time_sections=options.time_sections
     )
