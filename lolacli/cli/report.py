@@ -128,8 +128,6 @@ def _write(report: Any, output: Path, fmt: PageFormat) -> None:
     written = write_report(report, output, fmt.value)
     console = stdout_console()
     render_verdict(console, report.verdict, report.findings)
-    for r in report.regressions:
-        say(console, f"regression: {r['figure']}")
     for note in report.notes:
         say(console, f"note: {note}")
     for path in written:

@@ -86,8 +86,10 @@ class Source:
     @property
     def headline(self) -> dict[str, float | None]:
         d = self.doc
-        rt = (d.get("round_trip_cyclic_us") or d.get("round_trip_us")) or {}
-        jitter = d.get("cycle_jitter_us") or {}
+        unusable = set(d.get("unusable_stats") or ())  # a capture's quantised timestamps
+        rt_key = "round_trip_cyclic_us" if d.get("round_trip_cyclic_us") else "round_trip_us"
+        rt = (d.get(rt_key) if rt_key not in unusable else None) or {}
+        jitter = (d.get("cycle_jitter_us") if "cycle_period_us" not in unusable else None) or {}
         if self.kind == "simulation":
             rate = d.get("max_rate_hz")
         else:
@@ -278,19 +280,21 @@ def _timing(eni: Eni | None, sources: list[Source], notes: list[str]) -> Section
     eni_name = eni.source if eni is not None else None
     columns: list[tuple[str, dict[str, Any]]] = []
     for s in sources:
+        def warn(message: str, label: str = s.label) -> None:
+            warnings.append(f"{label}: {message}")
+
         try:
             if s.kind == "simulation":
                 rt = s.doc.get("round_trip_us")
                 if eni is None or not rt:
                     continue
                 request = TimingRequest(eni=eni_name, measured=f"{rt['median']}us")
-                doc = request.run(read, None, warnings.append).doc
+                doc = request.run(read, None, warn).doc
                 doc["measured_from"] = "simulation: median round trip"
             else:
                 request = TimingRequest(eni=eni_name, capture=s.doc["file"],
                                         statistic=Statistic.median)
-                doc = request.run(read if eni is not None else None, s.doc,
-                                  warnings.append).doc
+                doc = request.run(read if eni is not None else None, s.doc, warn).doc
         except LolaError as exc:
             notes.append(f"timing model for {s.label}: {exc}")
             continue
@@ -396,6 +400,9 @@ def _bus(sources: list[Source]) -> Section:
     row("in flight at the end", [str(s.doc.get("in_flight_at_end", "–")) for s in sources])
     row("WKC mismatches", [f"{s.doc.get('wkc_mismatches', 0):,} of "
                            f"{s.doc.get('wkc_checked', 0):,} checked" for s in sources])
+    unusable = [", ".join(s.doc.get("unusable_stats") or ()) or "none" for s in sources]
+    if any(u != "none" for u in unusable):
+        row("unusable (quantised or backward timestamps)", unusable)
     tables = [Table(head, rows, "Round trip, cycle and frames")]
     for s in sources:
         if s.kind == "capture":
