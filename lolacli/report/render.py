@@ -90,7 +90,8 @@ def _html_table(table: Table, link_last: bool) -> str:
     out = ['<div class="scroll"><table>']
     if table.caption:
         out.append(f"<caption>{e(table.caption)}</caption>")
-    out.append("<tr>" + "".join(f"<th>{e(c)}</th>" for c in table.columns) + "</tr>")
+    if any(table.columns):  # a two-column list of name and value has no header
+        out.append("<tr>" + "".join(f"<th>{e(c)}</th>" for c in table.columns) + "</tr>")
     for row in table.rows:
         cells = []
         for i, cell in enumerate(row):
