@@ -82,6 +82,12 @@ def report_cmd(
     captures = capture or []
     if eni is None and not captures and not simulate:
         raise UsageError("nothing to report: give --eni, --capture or --simulate")
+    simulation_only = {"--rate": rate != 2000.0, "--duration": duration is not None,
+                       "--drop-p": drop_p != 0.0, "--stuck-safeop": bool(stuck_safeop),
+                       "--drift-ppb": drift_ppb != 0, "--seed": seed != 0}
+    if not simulate and any(simulation_only.values()):
+        given = ", ".join(k for k, v in simulation_only.items() if v)
+        raise UsageError(f"{given}: options of the simulation; add --simulate")
     check_output(output)  # before any work
     tolerance_percent = parse_tolerance(tolerance)
     base = load_baseline(baseline) if baseline is not None else None
@@ -127,7 +133,11 @@ def _write(report: Any, output: Path, fmt: PageFormat) -> None:
 
     written = write_report(report, output, fmt.value)
     console = stdout_console()
-    render_verdict(console, report.verdict, report.findings)
+    findings = report.findings
+    if len(report.sources) > 1:  # say whose finding each is
+        findings = [{**f, "message": f"{f['source']}: {f['message']}"}
+                    if not f["message"].startswith(f["source"]) else f for f in findings]
+    render_verdict(console, report.verdict, findings)
     for note in report.notes:
         say(console, f"note: {note}")
     for path in written:
