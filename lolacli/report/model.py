@@ -79,6 +79,7 @@ class Source:
     doc: dict[str, Any]
     round_trip_us: np.ndarray | None = None
     round_trip_t_s: np.ndarray | None = None  # x of "over time" (None: the pair's number)
+    period_us: np.ndarray | None = None  # cycle periods of the cyclic stream
     dc_t_s: np.ndarray | None = None  # seconds since the cyclic run started
     dc_error_ns: np.ndarray | None = None
     timing: dict[str, Any] | None = None  # bus timing's document with this measured total
@@ -193,12 +194,14 @@ def _sources(captures: Sequence[CaptureReport], simulation: SimulationResult | N
         at = c.round_trip_at_ns
         t = (at - at[0]) / 1e9 if at is not None and rt is not None and at.size == rt.size \
             and at.size else None
-        out.append(Source(label, "capture", c.to_dict(), rt, t))
+        period = c.cycle_period_ns / 1000.0 if c.cycle_period_ns is not None else None
+        out.append(Source(label, "capture", c.to_dict(), rt, t, period))
     if simulation is not None:
         s = simulation.series
         src = Source("simulation", "simulation", simulation.doc)
         if s is not None:
             src.round_trip_us = np.asarray(s.round_trip_ns, dtype=np.float64) / 1000.0
+            src.period_us = np.diff(np.asarray(s.sent_ns, dtype=np.int64)) / 1000.0
             if s.dc_error_ns:
                 dc = np.asarray(s.dc_error_ns, dtype=np.int64)
                 src.dc_t_s = (dc[:, 0] - s.start_ns) / 1e9

@@ -48,11 +48,7 @@ def specs(report: Report) -> list[Spec]:
     out: list[Spec] = []
     rt = [s for s in report.sources if s.round_trip_us is not None and s.round_trip_us.size]
     if "bus" in present and rt:
-        lo = min(float(s.round_trip_us.min()) for s in rt)  # type: ignore[union-attr]
-        hi = max(float(s.round_trip_us.max()) for s in rt)  # type: ignore[union-attr]
-        if hi <= lo:  # one value: one bar in the middle
-            lo, hi = lo - 0.5, hi + 0.5
-        edges = np.linspace(lo, hi, HIST_BINS + 1)
+        edges = _edges([s.round_trip_us for s in rt])
         out.append(Spec("bus", "rt-histogram", "Round trip: histogram", "round trip (µs)",
                         "frames", [Series(s.label, edges, _counts(s, edges), "bars") for s in rt]))
         cdf = []
@@ -65,6 +61,12 @@ def specs(report: Report) -> list[Spec]:
         out.append(Spec("bus", "rt-time", "Round trip over time",
                         "time since the first return (s)" if timed else "frame",
                         "round trip (µs)", [_over_time(s, timed) for s in rt]))
+    periods = [s for s in report.sources if s.period_us is not None and s.period_us.size]
+    if "bus" in present and periods:
+        edges = _edges([s.period_us for s in periods])
+        out.append(Spec("bus", "cycle-period", "Cycle period: histogram", "cycle period (µs)",
+                        "cycles", [Series(s.label, edges, np.histogram(s.period_us, edges)[0],
+                                          "bars") for s in periods if s.period_us is not None]))
     dc = [s for s in report.sources if s.dc_error_ns is not None and s.dc_error_ns.size]
     if "dc" in present and dc:
         out.append(Spec("dc", "dc-error", "DC: largest |system time difference| per read",
@@ -80,6 +82,17 @@ def specs(report: Report) -> list[Spec]:
                             ("p99", [sections[n]["p99"] for n in names]),
                             ("mean", [sections[n]["mean"] for n in names])]))
     return out
+
+
+def _edges(arrays: list[Any]) -> Any:
+    """Common histogram bin edges of ``arrays``; one value: one bar in the middle."""
+    import numpy as np
+
+    lo = min(float(a.min()) for a in arrays)
+    hi = max(float(a.max()) for a in arrays)
+    if hi <= lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    return np.linspace(lo, hi, HIST_BINS + 1)
 
 
 def _counts(s: Source, edges: Any) -> Any:

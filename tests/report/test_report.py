@@ -95,7 +95,8 @@ def test_simulation_has_every_section_but_comparison(lola, simulation, tmp_path)
     write_report(report, out)
     text = out.read_text()
     assert page_sections(text) == ALL_SECTIONS - {"comparison"}
-    assert text.count("<svg") == 5  # histogram, CDF, over time, DC, software
+    # round trip histogram, CDF, over time; cycle period; DC; software
+    assert text.count("<svg") == 6
 
 
 def test_untimed_simulation_has_no_software_section(lola):
