@@ -128,8 +128,8 @@ def chart(title: str, xlabel: str, ylabel: str, series: Sequence[Series],
     if many:
         for i, s in enumerate(series):
             y = TOP + 14 + 16 * i
-            out.append(f'<rect x="{LEFT + pw - 200}" y="{y - 9}" width="10" height="10" '
-                       f'fill="{COLOURS[i % len(COLOURS)]}"/><text x="{LEFT + pw - 185}" '
+            out.append(f'<rect x="{LEFT + pw - 215}" y="{y - 9}" width="10" height="10" '
+                       f'fill="{COLOURS[i % len(COLOURS)]}"/><text x="{LEFT + pw - 200}" '
                        f'y="{y}">{e(s.label[:28])}</text>')
     out.append("</svg>")
     return "".join(out)
