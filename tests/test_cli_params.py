@@ -104,7 +104,9 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--node": "one node (sdo) or one per --eds (sdo serve)",
     "--can": "the channel to talk on or to serve on",
     "--filter": "variable names or frame terms",
-    "--format": "eni vars also writes csv",
+    "--format": "eni vars also writes csv; report writes an html or md page",
+    "--capture": "bus timing's measured total, or one of a report's measurements",
+    "--output": "where foe read writes the file, or where the report's page goes",
 }
 
 

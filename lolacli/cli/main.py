@@ -18,6 +18,7 @@ from lolacli.cli import (  # noqa: F401
     capture,
     eni,
     foe,
+    report,
     sdo,
 )
 from lolacli.cli.common import debug_enabled
@@ -77,6 +78,7 @@ app.add_typer(bus.app, name="bus")
 app.add_typer(capture.app, name="capture")
 app.add_typer(sdo.app, name="sdo")
 app.add_typer(foe.app, name="foe")
+app.command("report")(report.report_cmd)
 
 
 def _version(value: bool) -> None:

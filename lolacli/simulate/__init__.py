@@ -17,6 +17,7 @@ from lolacli.simulate.bus import EmulateOptions, VirtualBus
 from lolacli.simulate.options import (
     SimulateOptions,
     SimulationResult,
+    SimulationSeries,
     options_from_cli,
 )
 from lolacli.simulate.report import SCHEMA
@@ -28,6 +29,7 @@ __all__ = [
     "SimulateOptions",
     "Simulation",
     "SimulationResult",
+    "SimulationSeries",
     "VirtualBus",
     "options_from_cli",
     "simulate",

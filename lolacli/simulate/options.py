@@ -41,12 +41,24 @@ class SimulateOptions:
     max_overruns: int = 0  # cycles not kept (slots skipped + sent over half a cycle late)
 
 
+@dataclass(frozen=True, slots=True)
+class SimulationSeries:
+    """The per-cycle figures behind the report's statistics, as measured (for plots:
+    ``lolacli report``). Times in ns of the simulation's clock."""
+
+    round_trip_ns: Sequence[int]  # every cyclic frame's, start-up included, in order
+    sent_ns: Sequence[int]  # when each cyclic frame of the run left (periods: differences)
+    dc_error_ns: Sequence[tuple[int, int]]  # (when, largest |system time difference|)
+    start_ns: int  # when the cyclic run started (DC errors before it: start-up)
+
+
 @dataclass(slots=True)
 class SimulationResult:
     doc: dict[str, Any]
     failed: bool
     interrupted: bool = False
     notes: list[str] = field(default_factory=list)
+    series: SimulationSeries | None = None
 
 
 #: progress(cycle slots done, of)

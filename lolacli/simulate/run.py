@@ -38,6 +38,7 @@ from lolacli.simulate.options import (
     Progress,
     SimulateOptions,
     SimulationResult,
+    SimulationSeries,
     busy_wait_us,
     check,
 )
@@ -127,11 +128,21 @@ class Simulation:
             doc = report(eni, options, master, app, states, wall_s, start_ns, recorders)
             doc.update(NO_LIVE_KEYS)
             doc.update(timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
-            return result(doc, options, master, app, interrupted, stop)
+            return _with_series(result(doc, options, master, app, interrupted, stop), master,
+                                clock, start_ns)
         finally:
             _close(recorders)
             if shm is not None:
                 shm.close()
+
+
+def _with_series(
+    res: SimulationResult, master: Master, clock: Any, start_ns: int
+) -> SimulationResult:
+    res.series = SimulationSeries(
+        master.stats.round_trip_ns, clock.sent_ns, master.stats.dc_errors_ns, start_ns
+    )
+    return res
 
 
 def _close(recorders: tuple[Any, Any]) -> None:
@@ -241,7 +252,8 @@ def _live(
                 "kernel_timestamps": transport.kernel_timestamps,
             }
         )
-        return result(doc, options, master, app, interrupted, stop)
+        return _with_series(result(doc, options, master, app, interrupted, stop), master,
+                            clock, start_ns)
     finally:
         transport.close()
         if shm is not None:
