@@ -109,6 +109,34 @@ MaxOverruns = Annotated[
         "before exit 1.",
     ),
 ]
+HostLatencyUs = Annotated[
+    str | None,
+    typer.Option(
+        "--host-latency-us",
+        metavar="MEAN[:STD]",
+        help="The master host's send+receive latency in µs, drawn every frame (log-normal "
+        "of this mean and std, seeded by --seed; default none: the round trip is the bus "
+        "alone). The LOLA seed's figures: 31.2:10.2.",
+    ),
+]
+Forwarding = Annotated[
+    str,
+    typer.Option(
+        "--forwarding",
+        metavar="MODEL",
+        help="Per-slave delay: model (1000 ns each, the timing model's assumption) or "
+        "physics (from each slave's ENI <Physics>: 100BASE-TX 1000 ns, E-bus 300 ns).",
+    ),
+]
+CableM = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--cable-m",
+        metavar="M|K=M",
+        help="Cable length in metres of every segment (M) or of segment K (K=M; 1: master "
+        "to slave 1), 0-100 m at 5 ns/m; default 1 m; repeatable.",
+    ),
+]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
@@ -136,6 +164,9 @@ def simulate_cmd(
     max_lost: MaxLostOption = 0,
     max_wkc: MaxWkcOption = 0,
     max_overruns: MaxOverruns = 0,
+    host_latency_us: HostLatencyUs = None,
+    forwarding: Forwarding = "model",
+    cable_m: CableM = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
@@ -157,6 +188,7 @@ def simulate_cmd(
         middleware=not no_middleware, shm=shm, pace=pace, iface=iface,
         busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
+        host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
     )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
@@ -228,7 +260,7 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
                    f"(+{doc['startup_cycles']:,} start-up)"),
         ("slaves", str(doc["slaves"])),
         ("frame", f"{doc['frame_bytes']:,} B, {doc['wire_time_us']:g} µs on the wire"),
-        ("round trip", _us(doc["round_trip_us"], "mean", "p99", "max")),
+        ("round trip", _us(doc["round_trip_us"], "mean", "std", "p99", "max")),
         ("cycle period", _us(doc["cycle_period_us"], "mean", "std", "max")),
         ("WKC mismatches", f"{doc['wkc_mismatches']:,} of {doc['wkc_checked']:,} checked"),
         ("frames", f"{doc['lost_frames']:,} lost, {doc['late_frames'] or 0:,} late"),
@@ -240,11 +272,43 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
         ("software per cycle", f"{software:g} µs" if software is not None else "not timed"),
         ("max rate", rates),
     ]
+    if doc.get("timing_sources"):
+        rows += _source_rows(doc["timing_sources"])
     if doc.get("mode") == "realtime":
         rows += _live_rows(doc)
     else:
         rows.append(("virtual / wall time", f"{doc['realtime_factor']:g}× real time"))
     return rows
+
+
+def _source_rows(src: dict[str, Any]) -> list[tuple[str, str]]:
+    """Which inputs made the round trip (lolacli.simulate.variation)."""
+    from lolacli.text import number
+
+    fwd, cable, host = src["forwarding"], src["cable"], src["host_latency"]
+    by_delay = ", ".join(
+        f"{n} × {number(int(d), 'ns')}" for d, n in reversed(fwd["slaves_by_delay_ns"].items())
+    )
+    how = "by port physics (ENI)" if fwd["mode"] == "physics" else "assumed (timing model)"
+    lengths = cable["m_per_segment"]
+    metres = (
+        f"{number(lengths, 'm')} a segment" if not isinstance(lengths, list)
+        else f"{number(min(lengths), 'm')} to {number(max(lengths), 'm')} a segment"
+    )
+    host_text = (
+        "none (the round trip is the bus alone)" if host is None
+        else f"{host['distribution']}, mean {number(host['mean'], 'µs')}, std "
+        f"{number(host['std'], 'µs')}, --seed {src['seed']}"
+    )
+    formula = f"{number(src['formula_bus_round_trip_us'], 'µs')} bus"
+    if host is not None:
+        formula += f", {number(src['formula_round_trip_us'], 'µs')} with the host's mean"
+    return [
+        ("slave delays", f"{by_delay}, {how}"),
+        ("cable", f"{metres}, {number(cable['ns_per_m'], 'ns/m')}"),
+        ("host latency", host_text),
+        ("formula", formula),
+    ]
 
 
 def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
