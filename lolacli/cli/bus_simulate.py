@@ -123,7 +123,7 @@ Forwarding = Annotated[
     str,
     typer.Option(
         "--forwarding",
-        metavar="MODEL",
+        metavar="model|physics",
         help="Per-slave delay: model (1000 ns each, the timing model's assumption) or "
         "physics (from each slave's ENI <Physics>: 100BASE-TX 1000 ns, E-bus 300 ns).",
     ),
@@ -173,10 +173,14 @@ def simulate_cmd(
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
     virtual time, enable the drives, move every joint, and report round trip, WKC, lost
     frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
-    verdict. --iface runs the same in real time on a live bus and adds the cycle period
-    and jitter achieved and the scheduling granted. Exit 1 when the verdict fails, 2 for
-    bad options or variables, 3 for an ENI that cannot be simulated, 4 when no slave
-    answers, 130/143 when stopped (recordings are kept up to the last cycle)."""
+    verdict. By default the round trip is the timing model's formula every cycle;
+    --host-latency-us, --forwarding and --cable-m add the host's latency (drawn per frame
+    with --seed), per-slave delays from port physics and cable lengths, and the report
+    says which inputs made it (timing_sources). --iface runs the same in real time on a
+    live bus and adds the cycle period and jitter achieved and the scheduling granted.
+    Exit 1 when the verdict fails, 2 for bad options or variables, 3 for an ENI that
+    cannot be simulated, 4 when no slave answers, 130/143 when stopped (recordings are
+    kept up to the last cycle)."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
     from lolacli.simulate import options_from_cli, simulate
