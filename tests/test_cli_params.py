@@ -105,6 +105,8 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--can": "the channel to talk on or to serve on",
     "--filter": "variable names or frame terms",
     "--format": "eni vars also writes csv",
+    "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
+    "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
 }
 
 

@@ -173,10 +173,9 @@ def simulate_cmd(
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
     virtual time, enable the drives, move every joint, and report round trip, WKC, lost
     frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
-    verdict. By default the round trip is the timing model's formula every cycle;
-    --host-latency-us, --forwarding and --cable-m add the host's latency (drawn per frame
-    with --seed), per-slave delays from port physics and cable lengths, and the report
-    says which inputs made it (timing_sources). --iface runs the same in real time on a
+    verdict. The round trip is the timing model's formula unless --host-latency-us (drawn
+    per frame with --seed), --forwarding physics or --cable-m change it; the report says
+    which inputs made it (timing_sources). --iface runs the same in real time on a
     live bus and adds the cycle period and jitter achieved and the scheduling granted.
     Exit 1 when the verdict fails, 2 for bad options or variables, 3 for an ENI that
     cannot be simulated, 4 when no slave answers, 130/143 when stopped (recordings are
@@ -198,6 +197,11 @@ def simulate_cmd(
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
             result = simulate(load_eni(eni or default_eni()), options, progress=progress, stop=stop)
+    _finish(result, fmt, stop.exit_code)
+
+
+def _finish(result: Any, fmt: OutputFormat, stop_code: int) -> None:
+    """The report on stdout, then the exit code: the stop's, 1 for a failed verdict."""
     if fmt is OutputFormat.json:
         emit_json(result.doc)
     else:
@@ -205,7 +209,7 @@ def simulate_cmd(
     if result.interrupted:
         sys.stderr.write("lolacli: stopped; the report covers the cycles run, recordings "
                          "are kept up to the last cycle\n")
-        raise typer.Exit(stop.exit_code)
+        raise typer.Exit(stop_code)
     if result.failed:
         raise typer.Exit(1)
 
