@@ -107,6 +107,8 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--format": "eni vars also writes csv; report writes an html or md page",
     "--capture": "bus timing's measured total, or one of a report's measurements",
     "--output": "where foe read writes the file, or where the report's page goes",
+    "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
+    "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
 }
 
 

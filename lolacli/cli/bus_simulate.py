@@ -110,6 +110,34 @@ MaxOverruns = Annotated[
         "before exit 1.",
     ),
 ]
+HostLatencyUs = Annotated[
+    str | None,
+    typer.Option(
+        "--host-latency-us",
+        metavar="MEAN[:STD]",
+        help="The master host's send+receive latency in µs, drawn every frame (log-normal "
+        "of this mean and std, seeded by --seed; default none: the round trip is the bus "
+        "alone). The LOLA seed's figures: 31.2:10.2.",
+    ),
+]
+Forwarding = Annotated[
+    str,
+    typer.Option(
+        "--forwarding",
+        metavar="model|physics",
+        help="Per-slave delay: model (1000 ns each, the timing model's assumption) or "
+        "physics (from each slave's ENI <Physics>: 100BASE-TX 1000 ns, E-bus 300 ns).",
+    ),
+]
+CableM = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--cable-m",
+        metavar="M|K=M",
+        help="Cable length in metres of every segment (M) or of segment K (K=M; 1: master "
+        "to slave 1), 0-100 m at 5 ns/m; default 1 m; repeatable.",
+    ),
+]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
@@ -137,16 +165,22 @@ def simulate_cmd(
     max_lost: MaxLostOption = 0,
     max_wkc: MaxWkcOption = 0,
     max_overruns: MaxOverruns = 0,
+    host_latency_us: HostLatencyUs = None,
+    forwarding: Forwarding = "model",
+    cable_m: CableM = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
     virtual time, enable the drives, move every joint, and report round trip, WKC, lost
     frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
-    verdict. --iface runs the same in real time on a live bus and adds the cycle period
-    and jitter achieved and the scheduling granted. Exit 1 when the verdict fails, 2 for
-    bad options or variables, 3 for an ENI that cannot be simulated, 4 when no slave
-    answers, 130/143 when stopped (recordings are kept up to the last cycle)."""
+    verdict. The round trip is the timing model's formula unless --host-latency-us (drawn
+    per frame with --seed), --forwarding physics or --cable-m change it; the report says
+    which inputs made it (timing_sources). --iface runs the same in real time on a
+    live bus and adds the cycle period and jitter achieved and the scheduling granted.
+    Exit 1 when the verdict fails, 2 for bad options or variables, 3 for an ENI that
+    cannot be simulated, 4 when no slave answers, 130/143 when stopped (recordings are
+    kept up to the last cycle)."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
     from lolacli.simulate import options_from_cli, simulate
@@ -158,11 +192,17 @@ def simulate_cmd(
         middleware=not no_middleware, shm=shm, pace=pace, iface=iface,
         busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
+        host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
     )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
             result = simulate(load_eni(eni or default_eni()), options, progress=progress, stop=stop)
+    _finish(result, fmt, stop.exit_code)
+
+
+def _finish(result: Any, fmt: OutputFormat, stop_code: int) -> None:
+    """The report on stdout, then the exit code: the stop's, 1 for a failed verdict."""
     if fmt is OutputFormat.json:
         emit_json(result.doc)
     else:
@@ -170,7 +210,7 @@ def simulate_cmd(
     if result.interrupted:
         sys.stderr.write("lolacli: stopped; the report covers the cycles run, recordings "
                          "are kept up to the last cycle\n")
-        raise typer.Exit(stop.exit_code)
+        raise typer.Exit(stop_code)
     if result.failed:
         raise typer.Exit(1)
 
@@ -229,7 +269,7 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
                    f"(+{doc['startup_cycles']:,} start-up)"),
         ("slaves", str(doc["slaves"])),
         ("frame", f"{doc['frame_bytes']:,} B, {doc['wire_time_us']:g} µs on the wire"),
-        ("round trip", _us(doc["round_trip_us"], "mean", "p99", "max")),
+        ("round trip", _us(doc["round_trip_us"], "mean", "std", "p99", "max")),
         ("cycle period", _us(doc["cycle_period_us"], "mean", "std", "max")),
         ("WKC mismatches", f"{doc['wkc_mismatches']:,} of {doc['wkc_checked']:,} checked"),
         ("frames", f"{doc['lost_frames']:,} lost, {doc['late_frames'] or 0:,} late"),
@@ -241,11 +281,43 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
         ("software per cycle", f"{software:g} µs" if software is not None else "not timed"),
         ("max rate", rates),
     ]
+    if doc.get("timing_sources"):
+        rows += _source_rows(doc["timing_sources"])
     if doc.get("mode") == "realtime":
         rows += _live_rows(doc)
     else:
         rows.append(("virtual / wall time", f"{doc['realtime_factor']:g}× real time"))
     return rows
+
+
+def _source_rows(src: dict[str, Any]) -> list[tuple[str, str]]:
+    """Which inputs made the round trip (lolacli.simulate.variation)."""
+    from lolacli.text import number
+
+    fwd, cable, host = src["forwarding"], src["cable"], src["host_latency"]
+    by_delay = ", ".join(
+        f"{n} × {number(int(d), 'ns')}" for d, n in reversed(fwd["slaves_by_delay_ns"].items())
+    )
+    how = "by port physics (ENI)" if fwd["mode"] == "physics" else "assumed (timing model)"
+    lengths = cable["m_per_segment"]
+    metres = (
+        f"{number(lengths, 'm')} a segment" if not isinstance(lengths, list)
+        else f"{number(min(lengths), 'm')} to {number(max(lengths), 'm')} a segment"
+    )
+    host_text = (
+        "none (the round trip is the bus alone)" if host is None
+        else f"{host['distribution']}, mean {number(host['mean'], 'µs')}, std "
+        f"{number(host['std'], 'µs')}, --seed {src['seed']}"
+    )
+    formula = f"{number(src['formula_bus_round_trip_us'], 'µs')} bus"
+    if host is not None:
+        formula += f", {number(src['formula_round_trip_us'], 'µs')} with the host's mean"
+    return [
+        ("slave delays", f"{by_delay}, {how}"),
+        ("cable", f"{metres}, {number(cable['ns_per_m'], 'ns/m')}"),
+        ("host latency", host_text),
+        ("formula", formula),
+    ]
 
 
 def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:

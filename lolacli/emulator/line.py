@@ -28,12 +28,21 @@ class ChainTiming:
     model's per-slave delay, 1000 ns by default), ``cable_ns`` one cable segment one way
     (1 m at 5 ns/m). Round trip = wire time of the frame (DESIGN.md frame bytes) + slaves
     × per-slave delay + every segment out and back.
+
+    ``slave_delays_ns`` and ``cable_ns_per_segment`` (one per slave, in line order; segment
+    K leads from slave K-1, the master for K = 1, to slave K) replace the uniform figures
+    slave by slave: the per-slave delay of each slave's ESC and ports
+    (:func:`lolacli.timing.model.physics_delays_ns`), split between the way out and the way
+    back as the default is (60/40), and each cable's length. The round trip sums them over
+    the slaves the frame reaches.
     """
 
     link_bit_s: int = LINK_100_MBIT_S
     processing_ns: int = 600
     forward_ns: int = DEFAULT_PER_SLAVE_DELAY_NS - 600
     cable_ns: int = round(DEFAULT_CABLE_M * CABLE_NS_PER_M)
+    slave_delays_ns: tuple[int, ...] | None = None
+    cable_ns_per_segment: tuple[int, ...] | None = None
 
     @property
     def per_slave_delay_ns(self) -> int:
@@ -42,16 +51,43 @@ class ChainTiming:
     def wire_time_ns(self, frame_bytes: int) -> int:
         return wire_time_ns(frame_bytes, self.link_bit_s)
 
+    def split_ns(self, i: int) -> tuple[int, int]:
+        """(processing, forwarding) of the slave at 0-based ``i``."""
+        if self.slave_delays_ns is None or i >= len(self.slave_delays_ns):
+            return self.processing_ns, self.forward_ns
+        delay = self.slave_delays_ns[i]
+        processing = delay * self.processing_ns // max(1, self.per_slave_delay_ns)
+        return processing, delay - processing
+
+    def segment_ns(self, i: int) -> int:
+        """One way over segment ``i`` (0-based: the one into slave i + 1)."""
+        segments = self.cable_ns_per_segment
+        return self.cable_ns if segments is None or i >= len(segments) else segments[i]
+
     def port_times(self, t_ns: int, slaves: int) -> list[PortTimes]:
         """When the frame's head reaches each slave's port 0 (out) and port 1 (back)."""
-        out = [t_ns + (i + 1) * self.cable_ns + i * self.processing_ns for i in range(slaves)]
-        back: list[int | None] = [None] * slaves
-        if slaves:
-            t = out[-1] + self.processing_ns
-            for i in range(slaves - 2, -1, -1):
-                t += self.cable_ns
-                back[i] = t
-                t += self.forward_ns
+        if self.slave_delays_ns is None and self.cable_ns_per_segment is None:
+            out = [t_ns + (i + 1) * self.cable_ns + i * self.processing_ns
+                   for i in range(slaves)]
+            back: list[int | None] = [None] * slaves
+            if slaves:
+                t = out[-1] + self.processing_ns
+                for i in range(slaves - 2, -1, -1):
+                    t += self.cable_ns
+                    back[i] = t
+                    t += self.forward_ns
+            return [PortTimes(o, b) for o, b in zip(out, back, strict=True)]
+        split = [self.split_ns(i) for i in range(slaves)]
+        out, t = [], t_ns
+        for i in range(slaves):
+            t += self.segment_ns(i)
+            out.append(t)
+            t += split[i][0]
+        back = [None] * slaves
+        for i in range(slaves - 2, -1, -1):
+            t += self.segment_ns(i + 1)
+            back[i] = t
+            t += split[i][1]
         return [PortTimes(o, b) for o, b in zip(out, back, strict=True)]
 
     @lru_cache(maxsize=256)  # noqa: B019 - a frozen value object: the cache keeps no chain alive
@@ -59,9 +95,20 @@ class ChainTiming:
         """:meth:`round_trip_ns` kept for the frame layouts a chain sees again."""
         return self.round_trip_ns(list(lengths), slaves)
 
+    def bus_delay_ns(self, slaves: int) -> int:
+        """The round trip less the wire time: the first ``slaves`` slaves' delays and
+        their cable segments out and back."""
+        if self.slave_delays_ns is None and self.cable_ns_per_segment is None:
+            return slaves * self.per_slave_delay_ns + 2 * slaves * self.cable_ns
+        return sum(sum(self.split_ns(i)) + 2 * self.segment_ns(i) for i in range(slaves))
+
     def round_trip_ns(self, datagram_lengths: list[int], slaves: int) -> int:
         wire = wire_time_ns(frame_bytes(datagram_lengths), self.link_bit_s)
-        return predict_total_ns(wire, slaves, self.per_slave_delay_ns, 2 * slaves * self.cable_ns)
+        if self.slave_delays_ns is None and self.cable_ns_per_segment is None:
+            return predict_total_ns(
+                wire, slaves, self.per_slave_delay_ns, 2 * slaves * self.cable_ns
+            )
+        return wire + self.bus_delay_ns(slaves)
 
 
 @dataclass(slots=True)

@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from lolacli.emulator.chain import Chain, Faults
+from lolacli.emulator.line import ChainTiming
 from lolacli.emulator.rawsock import RawSocketServer, ServerStats
 from lolacli.emulator.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
 from lolacli.emulator.sii import sii_from_esi_device
@@ -31,6 +32,7 @@ class EmulateOptions:
     link_down_at_s: float = 0.0  # ... this long after serving starts (0: from the start)
     corrupt_probability: float = 0.0
     foe_password: int = 0  # every slave's FoE password (BOOT: firmware read and write)
+    timing: ChainTiming | None = None  # the line's delays (None: the timing model's defaults)
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,7 +88,11 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
     )
     try:  # the ENI/ESI readers take any integer; SII and register fields have fixed widths
         chain = build_chain(
-            eni, faults=faults, drift_ppb=options.drift_ppb, foe_password=options.foe_password
+            eni,
+            timing=options.timing,
+            faults=faults,
+            drift_ppb=options.drift_ppb,
+            foe_password=options.foe_password,
         )
         for m in esi_matches(eni, esi):
             ident = eni.slaves[m.position - 1].identity

@@ -157,6 +157,9 @@ class Slave:
     dc: DistributedClock | None = None
     inputs: tuple[ProcessDataArea, ...] = ()  # <ProcessData><Recv>
     outputs: tuple[ProcessDataArea, ...] = ()  # <ProcessData><Send>
+    #: <Info><Physics>: one letter per port A, B, C, D (Y 100BASE-TX, K E-bus, F
+    #: 100BASE-FX, blank none); "" when the ENI does not say
+    physics: str = ""
 
     @property
     def inputs_bits(self) -> int:

@@ -490,6 +490,7 @@ class _Reader:
             dc=self.dc(self.child(el, "DC"), init_cmds),
             inputs=self.areas(process_data, "Recv"),
             outputs=self.areas(process_data, "Send"),
+            physics=self.text(info, "Physics").rstrip().upper(),
         )
 
     def auto_inc(self, info: _El, position: int) -> int:

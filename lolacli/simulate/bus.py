@@ -23,13 +23,16 @@ from lolacli.master.transport import ChainTransport
 
 if TYPE_CHECKING:
     from lolacli.eni.esi import EsiFile
+    from lolacli.timing.model import HostLatency
 
 
 class VirtualBus:
     """The emulated chain of ``eni`` (faults: ``faults``; SII images from ``esi`` devices
     as in ``bus emulate``) behind a :class:`ChainTransport` (see the module docstring).
-    UsageError for faults at positions the ENI does not have, EniError for an ENI without
-    slaves."""
+    ``host_latency``: every returning frame also waits the master host's latency, a
+    draw a frame seeded with ``faults.seed``
+    (:class:`~lolacli.simulate.variation.HostLatencyLine`). UsageError for faults at
+    positions the ENI does not have, EniError for an ENI without slaves."""
 
     def __init__(
         self,
@@ -37,11 +40,18 @@ class VirtualBus:
         faults: EmulateOptions | None = None,
         *,
         esi: Sequence[EsiFile] = (),
+        host_latency: HostLatency | None = None,
     ) -> None:
         self.eni = eni
         self.faults = faults or EmulateOptions()
         self.chain = make_chain(eni, self.faults, esi=esi)
-        self.transport = ChainTransport(self.chain)
+        if host_latency is None:
+            self.transport = ChainTransport(self.chain)
+        else:
+            from lolacli.simulate.variation import HostLatencyLine
+
+            line = HostLatencyLine(self.chain, host_latency, self.faults.seed)
+            self.transport = ChainTransport(line)
 
     def now_ns(self) -> int:
         return self.transport.now_ns()

@@ -10,6 +10,7 @@ from typing import Any
 
 from lolacli.eni.model import Eni
 from lolacli.errors import EniError, UsageError
+from lolacli.timing.model import HostLatency
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,6 +40,11 @@ class SimulateOptions:
     max_lost: int = 0  # lost frames allowed before the run fails
     max_wkc_mismatches: int = 0
     max_overruns: int = 0  # cycles not kept (slots skipped + sent over half a cycle late)
+    # the line and the host (lolacli.simulate.variation): None / "model" / () is the
+    # timing model's formula, every cycle the same round trip
+    host_latency: HostLatency | None = None  # drawn a frame, seeded with ``seed``
+    forwarding: str = "model"  # "physics": each slave's delay from its ports' physics
+    cable_m: tuple[str, ...] = ()  # "M" (every segment) and "K=M" (segment K) items
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +112,11 @@ def check(eni: Eni, options: SimulateOptions) -> None:
             raise UsageError(
                 f"--link-down {after}@{at_s:g}s: after the run ends ({run_s:g} s of cycles)"
             )
+    from lolacli.simulate.variation import check_forwarding
+    from lolacli.timing.model import parse_cable_m
+
+    check_forwarding(options.forwarding)
+    parse_cable_m(options.cable_m, n)
     if options.iface is not None:
         _check_live(options)
 
@@ -125,6 +136,20 @@ def _check_live(options: SimulateOptions) -> None:
         raise UsageError(
             f"{', '.join(faults)}: faults of the emulated chain; on a live bus give them "
             "to the `bus emulate` serving it"
+        )
+    modelled = [
+        name
+        for name, given in (
+            ("--host-latency-us", options.host_latency is not None),
+            ("--forwarding", options.forwarding != "model"),
+            ("--cable-m", bool(options.cable_m)),
+        )
+        if given
+    ]
+    if modelled:
+        raise UsageError(
+            f"{', '.join(modelled)}: inputs of the simulated line; a live bus has its own "
+            "delays and measures them"
         )
     if options.pace:
         raise UsageError("--pace: a live bus runs in real time anyway")
@@ -154,14 +179,17 @@ def options_from_cli(
     set_values: Sequence[str] = (),
     stuck_safeop: Sequence[int] = (),
     watch: Sequence[str] = (),
+    host_latency_us: str | None = None,
+    cable_m: Sequence[str] = (),
     **fields: Any,
 ) -> SimulateOptions:
     """:class:`SimulateOptions` from the command line's spelling: ``duration`` (``10s``,
     ``500ms``; default 10 s) or ``cycles``, ``link_down`` as ``K[@T]``, ``set_values`` as
-    ``VARIABLE=VALUE``; the other ``fields`` as they are. UsageError for what does not
+    ``VARIABLE=VALUE``, ``host_latency_us`` as ``MEAN[:STD]`` (µs), ``cable_m`` as ``M``
+    or ``K=M`` items; the other ``fields`` as they are. UsageError for what does not
     parse or contradicts itself."""
     from lolacli.emulator.run import parse_link_down
-    from lolacli.timing.model import parse_duration_ns
+    from lolacli.timing.model import parse_cable_m, parse_duration_ns, parse_host_latency
 
     if duration is not None and cycles is not None:
         raise UsageError("--duration and --cycles contradict each other; give one")
@@ -186,5 +214,21 @@ def options_from_cli(
         set_values=tuple(pairs),
         stuck_safeop=tuple(stuck_safeop),
         watch=tuple(watch),
+        host_latency=parse_host_latency(host_latency_us) if host_latency_us is not None
+        else None,
+        cable_m=_cable_items(tuple(cable_m), parse_cable_m),
         **fields,
     )
+
+
+def _cable_items(items: tuple[str, ...], parse: Callable[..., Any]) -> tuple[str, ...]:
+    """The ``--cable-m`` items, their spelling checked already (segment numbers wait for
+    the ENI: :func:`check`)."""
+    parse(tuple(i for i in items if "=" not in i), 0)
+    for item in items:
+        if "=" in item:
+            k, _, m = item.rpartition("=")
+            if not k.strip().isdigit():
+                raise UsageError(f"--cable-m {item!r}: expected M or K=M (metres, segment K)")
+            parse((m,), 0)
+    return items

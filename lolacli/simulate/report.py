@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from lolacli.emulator.line import ChainTiming
 from lolacli.eni.model import Eni
 from lolacli.errors import TransportError
 from lolacli.findings import Finding, Findings, Severity, verdict
@@ -183,6 +184,25 @@ def timing(master: Master, clock: Any, skipped: int) -> dict[str, Any]:
     doc["never_returned_frames"] = stats.cyclic_lost
     doc["skipped_cycles"] = skipped
     return doc
+
+
+def variation(eni: Eni, options: SimulateOptions, line: ChainTiming | None) -> dict[str, Any]:
+    """What made the round trip (:mod:`lolacli.simulate.variation`): ``host_latency_us``
+    (null: none modelled, the round trip is the bus alone) and ``timing_sources``, each
+    input with its source and the formula's round trip from them."""
+    from lolacli.simulate.variation import timing_sources
+
+    latency = options.host_latency
+    sources = timing_sources(eni, line, options.forwarding, options.cable_m, latency)
+    sources["seed"] = options.seed if latency is not None else None
+    return {
+        "host_latency_us": sources["host_latency"],
+        "timing_sources": sources,
+    }
+
+
+#: a live bus measures what the simulation models: no inputs to state
+LIVE_VARIATION: dict[str, Any] = {"host_latency_us": None, "timing_sources": None}
 
 
 def live_states(master: Master) -> dict[int, str]:

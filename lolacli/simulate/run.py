@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from contextlib import nullcontext
+from dataclasses import replace
 from typing import Any
 
 from lolacli.eni.model import Eni
@@ -43,12 +44,14 @@ from lolacli.simulate.options import (
     check,
 )
 from lolacli.simulate.report import (
+    LIVE_VARIATION,
     NO_LIVE_KEYS,
     final_states,
     live_states,
     report,
     result,
     timing,
+    variation,
 )
 from lolacli.timing.stats import summarize_array
 
@@ -98,9 +101,13 @@ class Simulation:
         check(eni, options)
         if options.iface is not None:
             raise UsageError("--iface: a live bus is not simulated; use simulate()")
+        from lolacli.simulate.variation import line_timing
+
         self.eni = eni
         self.options = options
-        self.bus = VirtualBus(eni, emulate_options(options))
+        self.timing = line_timing(eni, options.forwarding, options.cable_m)
+        faults = replace(emulate_options(options), timing=self.timing)
+        self.bus = VirtualBus(eni, faults, host_latency=options.host_latency)
 
     def run(
         self, *, progress: Progress | None = None, stop: Stop | None = None
@@ -128,6 +135,7 @@ class Simulation:
             doc = report(eni, options, master, app, states, wall_s, start_ns, recorders)
             doc.update(NO_LIVE_KEYS)
             doc.update(timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
+            doc.update(variation(eni, options, self.timing))
             return _with_series(result(doc, options, master, app, interrupted, stop), master,
                                 clock, start_ns)
         finally:
@@ -239,6 +247,7 @@ def _live(
         doc = report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(NO_LIVE_KEYS)
         doc.update(timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
+        doc.update(LIVE_VARIATION)
         wake = summarize_array(wakes)
         doc["wakeup_lateness_us"] = wake.to_dict(scale=1e-3) if wake is not None else None
         doc.update(

@@ -82,6 +82,142 @@ MAX_SLAVES = 0xFFFF
 MAX_FRAME_BYTES = 1518
 
 
+#: 100BASE-TX allows 100 m per segment (IEEE 802.3 clause 25); EtherCAT's own limit too
+MAX_CABLE_M = 100.0
+
+#: Per-slave delay by the physics of the links a slave passes the frame through, in ns for
+#: one link's share (the link in on port 0 and the link out to the next slave; the last
+#: slave loops back through its port 0, which counts twice). ENI/ESI name no ESC chip
+#: (ET1100, ET1200, an FPGA IP core), but they do name each port's physics, and that is
+#: what sets the delay: a 100BASE-TX or 100BASE-FX port adds a PHY's receive and transmit
+#: latency to the ESC's own, an E-bus (LVDS) port has no PHY (Beckhoff ESC datasheet
+#: Section I, "Frame Processing" and "Physical Layer"). The figures:
+#:
+#: * ``K`` (E-bus) 150 ns a link, 300 ns a slave: measured, the corpus capture
+#:   ``ethercrab__replay-dc.pcapng`` (DC receive times 0x0900, frames 506 and 510: about
+#:   300 ns out and back per E-bus terminal, see the module docstring);
+#: * ``Y`` / ``F`` (PHY) 500 ns a link, 1000 ns a slave: the model's assumed default
+#:   (:data:`DEFAULT_PER_SLAVE_DELAY_NS`), so a line of 100BASE-TX slaves predicts what
+#:   ``bus timing`` predicts.
+#:
+#: A link whose physics is unknown takes the default's share. Sub-100 ns effects (the ESC's
+#: receive FIFO, clock phase) are below what a round trip taken at a host resolves and are
+#: not modelled.
+PHYSICS_LINK_DELAY_NS = {"K": 150, "Y": DEFAULT_PER_SLAVE_DELAY_NS // 2,
+                         "F": DEFAULT_PER_SLAVE_DELAY_NS // 2}
+PHYSICS_SOURCE = (
+    "ENI <Info><Physics> per slave: E-bus link 150 ns (corpus ethercrab__replay-dc.pcapng, "
+    "DC receive times), 100BASE-TX/FX link 500 ns (the timing model's assumed 1000 ns a "
+    "slave); ESC datasheet Section I: PHY ports add PHY latency, E-bus ports none"
+)
+
+
+def physics_delays_ns(physics: Sequence[str]) -> list[int]:
+    """Per-slave delay (out and back, ns) of a line whose slaves have these ENI
+    ``<Physics>`` strings (see :data:`PHYSICS_LINK_DELAY_NS`): the share of the link in
+    (the slave's port 0 letter) plus the share of the link out (the next slave's port 0
+    letter; the last slave's own port 0 again)."""
+    default = DEFAULT_PER_SLAVE_DELAY_NS // 2
+
+    def link(p: str) -> int:
+        return PHYSICS_LINK_DELAY_NS.get(p[:1], default)
+
+    links = [link(p) for p in physics]
+    return [
+        links[i] + (links[i + 1] if i + 1 < len(links) else links[i])
+        for i in range(len(links))
+    ]
+
+
+@dataclass(frozen=True, slots=True)
+class HostLatency:
+    """The master host's send-plus-receive latency as a distribution: what a round trip
+    measured at the host holds beyond the bus (network stack, driver, NIC queue and
+    interrupt moderation; a capture path's switch). ``std_ns`` 0: a constant; else a
+    log-normal of that mean and standard deviation (positive, with the long right tail
+    host latencies have; a normal would give negative latencies at the seed's 31 ± 10 µs
+    once in 1000 frames)."""
+
+    mean_ns: int
+    std_ns: int = 0
+
+    def to_dict(self, source: str) -> dict[str, object]:
+        return {
+            "mean": _us(self.mean_ns),
+            "std": _us(self.std_ns),
+            "distribution": "lognormal" if self.std_ns else "constant",
+            "source": source,
+        }
+
+
+#: a host that answers later than the master's frame timeout loses every frame
+MAX_HOST_LATENCY_US = 10_000.0
+
+#: The LOLA seed's host figures, derived: its measured 124.1 ± 10.2 µs round trip (seed
+#: §VI-B, 10 s, Wireshark on a switch) less the bus this model predicts for the LOLA ENI
+#: (67.68 µs wire + 25 × 1000 ns + 25 × 2 × 5 ns = 92.93 µs) leaves 31.2 µs of host,
+#: switch and capture path; the 10.2 µs spread is the seed's, all of it taken as host (the
+#: bus's own is tens of ns). A residual, not a second measurement: a simulation with it
+#: reproduces the seed's figure by construction.
+SEED_HOST_LATENCY_US = (31.2, 10.2)
+
+
+def parse_host_latency(text: str, what: str = "--host-latency-us") -> HostLatency:
+    """``MEAN[:STD]`` in µs (``31.2:10.2``, ``25``) -> :class:`HostLatency`; UsageError
+    for anything else: negative, not finite, above :data:`MAX_HOST_LATENCY_US`, or a
+    spread without a mean."""
+    usage = f"{what} {text!r}: expected MEAN[:STD] in µs, e.g. 31.2:10.2"
+    parts = text.strip().split(":")
+    if len(parts) > 2:
+        raise UsageError(usage)
+    values = []
+    for part in parts:
+        try:
+            value = Decimal(part.strip())
+        except InvalidOperation:
+            raise UsageError(usage) from None
+        if not value.is_finite() or value < 0:
+            raise UsageError(f"{usage} (finite, >= 0)")
+        if value > Decimal(MAX_HOST_LATENCY_US):
+            raise UsageError(
+                f"{usage} (at most {MAX_HOST_LATENCY_US:,.0f} µs: the master's frame timeout)"
+            )
+        values.append(int((value * 1000).to_integral_value()))
+    mean, std = values[0], values[1] if len(values) > 1 else 0
+    if std and not mean:
+        raise UsageError(f"{usage} (a spread needs a mean above 0)")
+    return HostLatency(mean, std)
+
+
+def parse_cable_m(items: Sequence[str], segments: int,
+                  what: str = "--cable-m") -> tuple[float, ...]:
+    """Cable length of every segment (1: master to slave 1, K: slave K-1 to slave K) from
+    ``M`` (all segments) and ``K=M`` (segment K) items, later items winning; default
+    :data:`DEFAULT_CABLE_M`. UsageError for lengths outside 0..:data:`MAX_CABLE_M` m and
+    segments the line does not have."""
+    lengths = [DEFAULT_CABLE_M] * segments
+    for item in items:
+        k_text, eq, m_text = item.strip().rpartition("=")
+        try:
+            m = float(m_text)
+            k = int(k_text) if eq else None
+        except ValueError:
+            raise UsageError(f"{what} {item!r}: expected M or K=M (metres, segment K)") from None
+        if not (isfinite(m) and 0 <= m <= MAX_CABLE_M):
+            raise UsageError(
+                f"{what} {item!r}: a segment is 0 to {MAX_CABLE_M:g} m (100BASE-TX)"
+            )
+        if k is None:
+            lengths = [m] * segments
+        elif 1 <= k <= segments:
+            lengths[k - 1] = m
+        else:
+            raise UsageError(
+                f"{what} {item!r}: segment {k} of 1..{segments} (1: master to slave 1)"
+            )
+    return tuple(lengths)
+
+
 class DelaySource(StrEnum):
     """Where the per-slave delay of an estimate comes from."""
 
@@ -370,6 +506,15 @@ def parse_duration_ns(text: str, default_unit: str | None = "us", what: str = ""
 
 __all__ = [
     "CABLE_NS_PER_M",
+    "MAX_CABLE_M",
+    "MAX_HOST_LATENCY_US",
+    "PHYSICS_LINK_DELAY_NS",
+    "PHYSICS_SOURCE",
+    "SEED_HOST_LATENCY_US",
+    "HostLatency",
+    "parse_cable_m",
+    "parse_host_latency",
+    "physics_delays_ns",
     "DEFAULT_CABLE_M",
     "DEFAULT_PER_SLAVE_DELAY_NS",
     "ESC_DELAY_RANGE_NS",

@@ -39,6 +39,7 @@ from lolacli.emulator import core as core_module
 from lolacli.emulator.chain import Chain, Faults, chain_engine
 from lolacli.emulator.core import ChainCore, CompiledPlan, SlaveTable, core_available
 from lolacli.emulator.esc import Esc
+from lolacli.emulator.line import ChainTiming
 from lolacli.emulator.plan import layout_key
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.run import state_summary
@@ -46,6 +47,7 @@ from lolacli.emulator.slave import build_chain, device_of
 from lolacli.eni.model import Eni
 from lolacli.errors import UsageError, WireError
 from lolacli.files import load_eni
+from lolacli.timing.model import physics_delays_ns
 from lolacli.wire.commands import Command as C
 from lolacli.wire.frame import Datagram, decode_frame, encode_frame, make_frame
 from lolacli.wire.mailbox import MailboxType, encode_mailbox, make_mailbox
@@ -93,10 +95,11 @@ class Twin:
         faults: dict[str, float] | None = None,
         compare_every: int = 29,
         python_devices: tuple[int, ...] = (),
+        timing: ChainTiming | None = None,
     ) -> None:
         def chain(engine: str) -> Chain:
             f = Faults(seed=seed, **(faults or {}))
-            made = build_chain(eni, drift_ppb=drift_ppb, engine=engine, faults=f)
+            made = build_chain(eni, drift_ppb=drift_ppb, engine=engine, faults=f, timing=timing)
             for position in python_devices:  # a step of their own: cycled in Python
                 made._slaves[position].app.device.__class__ = OwnStep  # type: ignore[union-attr]
             return made
@@ -586,6 +589,25 @@ def test_c_core_matches_the_reference_with_cycles_that_give_way() -> None:
     Script(eni, twin, plannable_only=False).run()
     assert twin.gave_way > 50
     assert twin.firmware_pieces > 10
+    assert twin.compiled_frames > 250
+
+
+@pytest.mark.parametrize("name", ["lola.xml", "ek1100_io.xml"])
+def test_c_core_matches_the_reference_on_a_line_of_its_own_delays(name: str) -> None:
+    """Per-slave delays from the ENI's port physics and cable segments of their own
+    (``bus simulate --forwarding physics --cable-m``): the C core takes the line's port
+    times from Python (``set_line``), so both engines see the frame at the same times at
+    every slave (DC receive times 0x0900, system time delays) and answer alike."""
+    eni = load_eni(EXAMPLES / name)
+    n = len(eni.slaves)
+    timing = ChainTiming(
+        slave_delays_ns=tuple(physics_delays_ns([s.physics for s in eni.slaves])),
+        cable_ns_per_segment=tuple(5 * (1 + 7 * i) for i in range(n)),
+    )
+    assert timing.port_times(0, n) != ChainTiming().port_times(0, n)  # a line of its own
+    twin = Twin(eni, timing=timing)
+    assert twin.c._port_offsets == twin.py._port_offsets == timing.port_times(0, n)
+    Script(eni, twin, plannable_only=False).run()
     assert twin.compiled_frames > 250
 
 
