@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.bus_simulate import Duration, Rate
+from lolacli.cli.bus_simulate import CableM, Duration, Forwarding, HostLatencyUs, Rate
 from lolacli.cli.options import DriftOption, DropOption, SeedOption, StuckSafeopOption
 from lolacli.errors import UsageError
 
@@ -66,6 +66,9 @@ def report_cmd(
     stuck_safeop: StuckSafeopOption = None,
     drift_ppb: DriftOption = 0,
     seed: SeedOption = 0,
+    host_latency_us: HostLatencyUs = None,
+    forwarding: Forwarding = "model",
+    cable_m: CableM = None,
     fmt: PageFormatOption = PageFormat.html,
     baseline: BaselineOption = None,
     tolerance: ToleranceOption = "10%",
@@ -84,7 +87,9 @@ def report_cmd(
         raise UsageError("nothing to report: give --eni, --capture or --simulate")
     simulation_only = {"--rate": rate != 2000.0, "--duration": duration is not None,
                        "--drop-p": drop_p != 0.0, "--stuck-safeop": bool(stuck_safeop),
-                       "--drift-ppb": drift_ppb != 0, "--seed": seed != 0}
+                       "--drift-ppb": drift_ppb != 0, "--seed": seed != 0,
+                       "--host-latency-us": host_latency_us is not None,
+                       "--forwarding": forwarding != "model", "--cable-m": bool(cable_m)}
     if not simulate and any(simulation_only.values()):
         given = ", ".join(k for k, v in simulation_only.items() if v)
         raise UsageError(f"{given}: options of the simulation; add --simulate")
@@ -100,7 +105,9 @@ def report_cmd(
 
         options = options_from_cli(
             rate_hz=rate, duration=duration, stuck_safeop=stuck_safeop or (),
-            drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed)  # fmt: skip
+            drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
+            host_latency_us=host_latency_us, forwarding=forwarding,
+            cable_m=cable_m or ())  # fmt: skip
         assert model is not None
         simulation = run_simulation(model, options)
     report = build_report(eni=model, captures=analyses, simulation=simulation, baseline=base,

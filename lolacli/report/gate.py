@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError, UsageError
 from lolacli.findings import Severity
+from lolacli.text import number
 
 if TYPE_CHECKING:
     from lolacli.report.model import Report
@@ -87,19 +88,20 @@ def apply_gate(
                              "worse": worse})
             if worse:
                 regressions.append({"figure": figure, "baseline": old, "value": new,
-                                    "change_percent": change})
+                                    "change_percent": change, "unit": unit})
     report.gate = {"baseline": name,
                    "tolerance_percent": tolerance_percent, "compared": compared}
     report.regressions = regressions
     section = "comparison" if report.section("comparison") else (
         "bus" if report.section("bus") else "verdict")
     for r in regressions:
+        unit = r.pop("unit")  # (not a key of the contract's regressions)
         shown = "" if r["change_percent"] is None else f" ({r['change_percent']:+.1f} %)"
+        old, new = (number(v, unit, 1) for v in (r["baseline"], r["value"]))
         report.findings.insert(0, {
             "kind": "regression", "severity": Severity.FAILURE.value,
-            "message": f"{r['figure']} got worse: {r['baseline']:,.6g} → "
-                       f"{r['value']:,.6g}{shown}, over the tolerance of "
-                       f"{tolerance_percent:g} %",
+            "message": f"{r['figure']} got worse: {old} → {new}{shown}, "
+                       f"tolerance {tolerance_percent:g} %",
             "frames": [], "cycles": [], "slave": None, "count": 0,
             "source": "regression gate", "section": section,
         })

@@ -218,6 +218,28 @@ def test_gate_names_the_figures_that_got_worse(tmp_path, cli):
     assert "simulation: lost frames got worse" in out
 
 
+def test_gate_names_a_slower_host(tmp_path, cli):
+    """The seed's host latency as the baseline, then a host twice as slow: the round trip
+    figures are named, the frame counts are not; the same host again passes."""
+    base = tmp_path / "base.html"
+    seed_host = ("--host-latency-us", "31.2:10.2")
+    assert cli("report", "--simulate", "--duration", "1s", *seed_host, "-o", base)[0] == 0
+    baseline = base.with_suffix(".json")
+    again = tmp_path / "again.html"
+    code, _, err = cli("report", "--simulate", "--duration", "1s", *seed_host, "-o", again,
+                       "--baseline", baseline)
+    assert code == 0, err
+    worse = tmp_path / "worse.html"
+    code, out, _ = cli("report", "--simulate", "--duration", "1s", "--host-latency-us",
+                       "62.4:10.2", "-o", worse, "--baseline", baseline)
+    assert code == 1
+    named = {r["figure"] for r in json.loads(worse.with_suffix(".json").read_text())[
+        "regressions"]}
+    assert {"simulation: round trip p50", "simulation: round trip p99"} <= named
+    assert "simulation: lost frames" not in named
+    assert "simulation: round trip p50 got worse" in " ".join(out.split())
+
+
 def test_gate_direction_and_tolerance(lola, simulation):
     now = build_report(eni=lola, simulation=simulation).to_dict()["headline"]["simulation"]
     base = {"schema": "lolacli.report/1", "headline": {"simulation": dict(now)}}
