@@ -68,6 +68,7 @@ def apply_gate(
     from lolacli.report.model import HEADLINE
 
     compared, regressions = [], []
+    units: dict[str, str] = {}
     current = {s.label: s.headline for s in report.sources}
     for label, figures in baseline["headline"].items():
         now = current.get(label)
@@ -88,16 +89,16 @@ def apply_gate(
                              "worse": worse})
             if worse:
                 regressions.append({"figure": figure, "baseline": old, "value": new,
-                                    "change_percent": change, "unit": unit})
+                                    "change_percent": change})
+            units[figure] = unit
     report.gate = {"baseline": name,
                    "tolerance_percent": tolerance_percent, "compared": compared}
     report.regressions = regressions
     section = "comparison" if report.section("comparison") else (
         "bus" if report.section("bus") else "verdict")
     for r in regressions:
-        unit = r.pop("unit")  # (not a key of the contract's regressions)
         shown = "" if r["change_percent"] is None else f" ({r['change_percent']:+.1f} %)"
-        old, new = (number(v, unit, 1) for v in (r["baseline"], r["value"]))
+        old, new = (number(v, units[r["figure"]], 1) for v in (r["baseline"], r["value"]))
         report.findings.insert(0, {
             "kind": "regression", "severity": Severity.FAILURE.value,
             "message": f"{r['figure']} got worse: {old} → {new}{shown}, "
