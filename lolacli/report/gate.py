@@ -67,7 +67,8 @@ def apply_gate(
     label); every regression becomes a failure finding linked to its section."""
     from lolacli.report.model import HEADLINE
 
-    compared, regressions = [], []
+    compared: list[dict[str, Any]] = []
+    regressions: list[dict[str, Any]] = []
     units: dict[str, str] = {}
     current = {s.label: s.headline for s in report.sources}
     for label, figures in baseline["headline"].items():
@@ -98,10 +99,10 @@ def apply_gate(
         "bus" if report.section("bus") else "verdict")
     for r in regressions:
         shown = "" if r["change_percent"] is None else f" ({r['change_percent']:+.1f} %)"
-        old, new = (number(v, units[r["figure"]], 1) for v in (r["baseline"], r["value"]))
+        before, after = (number(v, units[r["figure"]], 1) for v in (r["baseline"], r["value"]))
         report.findings.insert(0, {
             "kind": "regression", "severity": Severity.FAILURE.value,
-            "message": f"{r['figure']} got worse: {old} → {new}{shown}, "
+            "message": f"{r['figure']} got worse: {before} → {after}{shown}, "
                        f"tolerance {tolerance_percent:g} %",
             "frames": [], "cycles": [], "slave": None, "count": 0,
             "source": "regression gate", "section": section,
