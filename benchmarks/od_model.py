@@ -1,6 +1,6 @@
 """Could canopen.objectdictionary be the OD model of the emulated drives? The hot paths, measured.
 
-The emulator answers SDO through ``lolacli/emulator/coe_server.py`` (``SdoServer.handle``)
+The emulator answers SDO through ``lolacli/emulator/mailbox/sdo_server.py`` (``SdoServer.handle``)
 against the drive's ``lolacli.od.Dictionary`` (the one model), and its devices read and
 write entries every cycle. This script builds the LOLA joint drive (``Cia402Drive`` of the
 embedded ENI's slave 5), copies its dictionary into a ``canopen.ObjectDictionary`` with a
@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from lolacli.devices.cia402 import Cia402Drive  # noqa: E402
-from lolacli.emulator.coe_server import SdoServer  # noqa: E402
+from lolacli.emulator.mailbox.sdo_server import SdoServer  # noqa: E402
 from lolacli.errors import SdoAbortError  # noqa: E402
 from lolacli.files import load_eni  # noqa: E402
 from lolacli.od import ObjectCode  # noqa: E402

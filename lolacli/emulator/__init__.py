@@ -2,7 +2,8 @@
 
 Pure core (frame bytes in, frame bytes out): :class:`~lolacli.emulator.esc.Esc` (one slave
 controller), :class:`~lolacli.emulator.chain.Chain` (a line of them with its timing model),
-:mod:`~lolacli.emulator.sii` (EEPROM images), :class:`~lolacli.emulator.coe_server.SdoServer`.
+:mod:`~lolacli.emulator.sii` (EEPROM images), the mailbox protocols in
+:mod:`~lolacli.emulator.mailbox` (the SDO server, FoE).
 :func:`build_chain` turns an ENI model into a chain with device models behind every ESC.
 Transport: :mod:`lolacli.emulator.rawsock` serves a chain on a network interface.
 

@@ -16,11 +16,11 @@ from dataclasses import replace
 from lolacli.devices import device_for
 from lolacli.devices.base import ASSIGN_RX, ASSIGN_TX, MAPPING_RX, MAPPING_TX, Device
 from lolacli.emulator.chain import Chain, ChainTiming, Faults
-from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.esc import DcClock, Esc
 from lolacli.emulator.mailbox import MailboxDispatcher
 from lolacli.emulator.mailbox.coe import CoeHandler
 from lolacli.emulator.mailbox.foe import FileStore, FoeServer
+from lolacli.emulator.mailbox.sdo_server import SdoServer
 from lolacli.emulator.registers import AlState
 from lolacli.emulator.sii import sii_from_slave
 from lolacli.eni.model import CoeInitCmd, Direction, Eni, Pdo, PdoEntry, Slave

@@ -15,7 +15,7 @@ import pytest
 
 from lolacli.capture.sdo import SdoTracker
 from lolacli.devices import device_for
-from lolacli.emulator.coe_server import SdoServer
+from lolacli.emulator.mailbox.sdo_server import SdoServer
 from lolacli.files import load_eni
 from lolacli.wire.mailbox import MailboxType, encode_mailbox, make_mailbox
 from lolacli.wire.sdo import EntryDescriptionRequest, encode_sdo, upload_request

@@ -8,7 +8,7 @@ is served in; anything else gets the mailbox error reply of ETG.1000.4 Table 30 
 unsupported protocol, a header too short). It also numbers the answers with the slave's
 own mailbox counter (1..7, ETG.1000.4 Table 29), whichever handler wrote them.
 
-:mod:`.coe` CoE: the SDO server (:class:`lolacli.emulator.coe_server.SdoServer`) as a handler
+:mod:`.coe` CoE: the SDO server (:mod:`.sdo_server`) as a handler
 :mod:`.foe` FoE: file read and write in BOOT, a slave's files kept across state changes
 
 A new protocol (EoE, SoE, …) is a class with ``mailbox_type``, ``states`` and

@@ -1,12 +1,12 @@
-"""CoE in the mailbox: the SDO server (:class:`~lolacli.emulator.coe_server.SdoServer`,
+"""CoE in the mailbox: the SDO server (:class:`~lolacli.emulator.mailbox.sdo_server.SdoServer`,
 SDO up/download and SDO Information) as a :class:`~lolacli.emulator.mailbox.MailboxHandler`.
 Served in PREOP, SAFEOP and OP; a bootloader in BOOT speaks no CoE. Without a server
 (``server`` None) requests are taken and never answered, as by a firmware that hangs."""
 
 from __future__ import annotations
 
-from lolacli.emulator.coe_server import SdoServer
 from lolacli.emulator.mailbox.dispatch import MailboxContext
+from lolacli.emulator.mailbox.sdo_server import SdoServer
 from lolacli.wire.mailbox import MailboxType
 from lolacli.wire.registers import AlState
 

@@ -7,7 +7,7 @@ import struct
 import pytest
 
 from lolacli.devices.cia402 import Cia402Drive
-from lolacli.emulator.coe_server import SdoServer
+from lolacli.emulator.mailbox.sdo_server import SdoServer
 from lolacli.emulator.slave import build_chain
 from lolacli.files import load_eni
 from lolacli.wire.mailbox import MailboxType, decode_mailbox, encode_mailbox, make_mailbox
