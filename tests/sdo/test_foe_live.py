@@ -240,7 +240,7 @@ def test_soem_firm_update_writes_what_our_master_reads_back(firm_update: Path) -
                 "foe", "read", str(SLAVE), name, "-o", str(back), "--iface", live.master,
                 "--timeout", "2", bus=live,
             )  # fmt: skip
-            assert code == 0, err
+            assert code == 0, (err, _doc)
             assert back.read_bytes() == firmware
             source.unlink(missing_ok=True)
             back.unlink(missing_ok=True)
