@@ -291,7 +291,9 @@ def _timing(eni: Eni | None, sources: list[Source], notes: list[str]) -> Section
                 rt = s.doc.get("round_trip_us")
                 if eni is None or not rt:
                     continue
-                request = TimingRequest(eni=eni_name, measured=f"{rt['median']}us")
+                host = (s.doc.get("host_latency_us") or {}).get("mean", 0.0)
+                request = TimingRequest(eni=eni_name, measured=f"{rt['median']}us",
+                                        host_latency_us=host)
                 doc = request.run(read, None, warn).doc
                 doc["measured_from"] = "simulation: median round trip"
             else:
@@ -332,7 +334,7 @@ def _timing_table(columns: list[tuple[str, dict[str, Any]]], sim: dict[str, Any]
         ("slaves", str(first["slaves"]), src["slaves"]),
         ("cable, out and back", number(first["cable_delay_ns"], "ns", 0),
          f"{number(first['cable_m_per_segment'], 'm')} per slave, 5 ns/m"),
-        ("host latency", number(first["host_latency_us"], "µs"), "model input"),
+        ("host latency", number(first["host_latency_us"], "µs"), _host_source(sim)),
         ("per-slave delay", number(pred["per_slave_delay_ns"], "ns", 0),
          f"a priori: {pred['per_slave_delay_source']}"),
         ("predicted round trip", number(first["predicted_total_us"], "µs"), "model"),
@@ -362,11 +364,16 @@ def _timing_table(columns: list[tuple[str, dict[str, Any]]], sim: dict[str, Any]
                  else "–" for label, _ in measured]
         rows.append(["max rate with software", "", *cells,
                      "simulation: 1 / (round trip + software)"])
-    for key, value in (sim or {}).items():
-        if "host_latency" in key and value is not None:
-            rows.append([f"simulation input: {key}", "", *["" for _ in measured],
-                         str(value)])
     return Table(head, rows)
+
+
+def _host_source(sim: dict[str, Any] | None) -> str:
+    """Where the model's host latency comes from: the simulation's draw, or none."""
+    host = (sim or {}).get("host_latency_us")
+    if not host:
+        return "model input (none given)"
+    return (f"simulation: --host-latency-us {host['mean']:g}:{host['std']:g} "
+            f"({host.get('distribution', 'drawn')} mean)")
 
 
 # ---------------------------------------------------------------- bus measurements

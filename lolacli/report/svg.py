@@ -47,7 +47,7 @@ def ticks(lo: float, hi: float, n: int = 5) -> list[float]:
 def _fmt(v: float) -> str:
     if v == 0:
         return "0"
-    if abs(v) >= 10000 or abs(v) < 0.01:
+    if abs(v) >= 1e7 or abs(v) < 0.01:
         return f"{v:.3g}"
     return f"{v:,.6g}"
 
