@@ -225,8 +225,8 @@ class SCurve:
             "max_velocity": float(abs(s["velocity"]).max()),
             "max_acceleration": float(abs(s["acceleration"]).max()),
             "max_jerk": float(max(abs(x) for x in self.jerks)),
-            "end_position": self.end_position,
-            "end_velocity": self.end_velocity,
+            "end_position": self.end_position + 0.0,  # no -0.0
+            "end_velocity": self.end_velocity + 0.0,
         }
 
 
@@ -265,12 +265,27 @@ def plan(distance: float, vmax: float, amax: float, jmax: float, v_start: float 
     if cycle_s is None:
         return _build(dist, vs, ve, vp, (t1, t2, t4, t5, t6), sign, distance, vmax, amax,
                       dmax, jmax, None, t4 > 0.0)
-    # eqs. 7-8 rounded up: T1 and Ta = T1 + T2 (so T2 = Ta - T1), each ramp >= 1 cycle
-    c1 = max(1, math.ceil(t1 / cycle_s - _EPS))
-    ca = max(c1, math.ceil((t1 + t2) / cycle_s - _EPS))
-    c5 = max(1, math.ceil(t5 / cycle_s - _EPS))
-    cd = max(c5, math.ceil((t5 + t6) / cycle_s - _EPS))
-    found = _round(dist, vs, ve, c1, ca, c5, cd, cycle_s, vmax, amax, dmax, jmax)
+    # eqs. 7-8 rounded up: T1 and Ta = T1 + T2 (so T2 = Ta - T1), each ramp >= 1 cycle.
+    # Rounded up, the ramps cover a little more distance, which the re-solved peak takes
+    # up; when it cannot within the limits (or only with a long slow cruise), the
+    # continuous profile of slightly lower limits is rounded instead: its ramps have room.
+    ideal = 2 * (t1 + t5) + t2 + t4 + t6
+    found = None
+    for slack in (0.0, 0.01, 0.03, 0.1, 0.3):
+        if slack:
+            lim = 1.0 - slack
+            vq, _ = _peak(dist, vs, ve, vmax, amax * lim, dmax * lim, jmax * lim)
+            t1, t2 = _ramp(abs(vq - vs), amax * lim, jmax * lim)
+            t5, t6 = _ramp(abs(vq - ve), dmax * lim, jmax * lim)
+        c1 = max(1, math.ceil(t1 / cycle_s - _EPS))
+        ca = max(c1, math.ceil((t1 + t2) / cycle_s - _EPS))
+        c5 = max(1, math.ceil(t5 / cycle_s - _EPS))
+        cd = max(c5, math.ceil((t5 + t6) / cycle_s - _EPS))
+        n = _round(dist, vs, ve, c1, ca, c5, cd, cycle_s, vmax, amax, dmax, jmax)
+        if n is not None and (found is None or _cycles(n) < _cycles(found)):
+            found = n
+        if found is not None and _cycles(found) * cycle_s <= 1.02 * ideal + 8 * cycle_s:
+            break
     if found is None:
         raise UsageError("the phase times could not be rounded to whole cycles within the "
                          "limits (a cycle far longer than the move?)")
@@ -278,6 +293,11 @@ def plan(distance: float, vmax: float, amax: float, jmax: float, v_start: float 
     times = tuple(k * cycle_s for k in found)
     return _build(dist, vs, ve, vp2, times, sign, distance, vmax, amax, dmax, jmax,
                   cycle_s, t4 > 0.0)
+
+
+def _cycles(n: list[int]) -> int:
+    """Whole cycles of a profile of phase cycles [T1, T2, T4, T5, T6]."""
+    return 2 * (n[0] + n[3]) + n[1] + n[2] + n[4]
 
 
 def _round(dist: float, vs: float, ve: float, c1: int, ca: int, c5: int, cd: int,
@@ -308,23 +328,23 @@ def _round(dist: float, vs: float, ve: float, c1: int, ca: int, c5: int, cd: int
                     if n1 < 1 or n5 < 1 or na < n1 or nd < n5:
                         continue
                     n = fits(n1, na, n5, nd)
-                    if n is not None and (best is None or sum(n) + n[0] + n[3]
-                                          < sum(best) + best[0] + best[3]):
+                    if n is not None and (best is None or _cycles(n) < _cycles(best)):
                         best = n
-    if best is not None:
-        return best
     n1, na, n5, nd = c1, ca, c5, cd
-    for _ in range(100_000):
-        # the ramps' reach: a longer ramp widens the band of peaks it can meet
+    for _ in range(100_000 if best is None else 2_000):
+        # the ramps' reach: a longer ramp widens the band of peaks it can meet; the
+        # narrower grows (a tiny velocity change cannot absorb the rounding)
         w1 = min(amax, jmax * n1 * ts) * na
         w2 = min(dmax, jmax * n5 * ts) * nd
         if w1 <= w2:
             n1, na = (n1 + 1, na + 2) if jmax * n1 * ts < amax else (n1, na + 1)
         if w2 <= w1:
             n5, nd = (n5 + 1, nd + 2) if jmax * n5 * ts < dmax else (n5, nd + 1)
+        if best is not None and 2 * (n1 + n5) + (na - n1) + (nd - n5) >= _cycles(best):
+            break  # longer than what is found already
         if (n := fits(n1, na, n5, nd)) is not None:
-            return n
-    return None
+            return n if best is None or _cycles(n) < _cycles(best) else best
+    return best
 
 
 def _cruise_cycles(dist: float, vs: float, ve: float, n: list[int], ts: float, vmax: float,
