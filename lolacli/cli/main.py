@@ -20,6 +20,7 @@ from lolacli.cli import (  # noqa: F401
     foe,
     report,
     sdo,
+    traj,
 )
 from lolacli.cli.common import debug_enabled
 
@@ -78,6 +79,7 @@ app.add_typer(bus.app, name="bus")
 app.add_typer(capture.app, name="capture")
 app.add_typer(sdo.app, name="sdo")
 app.add_typer(foe.app, name="foe")
+app.add_typer(traj.app, name="traj")
 app.command("report")(report.report_cmd)
 
 
