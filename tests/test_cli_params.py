@@ -93,6 +93,8 @@ def _commands():  # type: ignore[no-untyped-def]
 
 #: flags that mean different things in different commands (so their help differs)
 _MEANS_MORE_THAN_ONE_THING = {
+    "--plot": "a command's own plots: capture analyze's, traj plan's profile",
+    "--mcap": "the same channels, from a capture (capture export) or a run (bus simulate)",
     "--eni": "the chain itself; a reference to check against; bus timing's frame source",
     "--iface": "bus simulate runs in real time on it instead of in virtual time",
     "--duration": "bus simulate's is simulated time, the servers' wall time",
