@@ -6,8 +6,8 @@ estimated, smoothed in the frequency domain. Here both records (θd and θ, ever
 are tapered at their ends and Fourier transformed once; the response in each band of
 1/``bands_per_octave`` octave is the cross spectrum over the input's spectrum summed over
 the band's bins (H1 = Σ Y X* / Σ |X|², the smoothing), so bins where the chirp put no
-energy weigh nothing. The bandwidth is where the gain first falls to −3 dB (|H| = 1/√2),
-interpolated linearly in dB over log frequency between the two bands around it.
+energy weigh nothing. The bandwidth is where the gain falls for good below −3 dB
+(|H| = 1/√2), interpolated linearly in dB over log frequency between the two bands around it.
 """
 
 from __future__ import annotations
@@ -72,13 +72,18 @@ def frequency_response(
 
 
 def bandwidth_hz(points: list[Point], level_db: float = MINUS_3DB) -> float | None:
-    """The first frequency where the gain falls through ``level_db`` (None: it never
-    does within the points)."""
-    for a, b in zip(points, points[1:], strict=False):
+    """The frequency above which the gain stays below ``level_db``: its last fall
+    through that level (a dip at low frequency, where friction distorts a small chirp,
+    is not the bandwidth). None when the gain never falls below it, or is below it from
+    the first point."""
+    for i in range(len(points) - 2, -1, -1):
+        a, b = points[i], points[i + 1]
         if a.gain_db >= level_db > b.gain_db:
             la, lb = math.log(a.freq_hz), math.log(b.freq_hz)
             frac = (a.gain_db - level_db) / (a.gain_db - b.gain_db)
             return math.exp(la + frac * (lb - la))
+        if b.gain_db >= level_db:
+            return None  # above the level at the top: not reached
     return None
 
 
