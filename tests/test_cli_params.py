@@ -109,6 +109,7 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--output": "where foe read writes the file, or where the report's page goes",
     "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
     "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
+    "--plot": "a folder of PNGs (capture analyze) or one PNG file (joint track/bode)",
 }
 
 

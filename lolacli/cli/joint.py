@@ -44,6 +44,12 @@ ControlHzOption = Annotated[
     int, typer.Option("--control-hz", min=100, max=10_000,
                       help="Rate of the central control (new targets), Hz.")
 ]
+BusHzOption = Annotated[
+    int,
+    typer.Option("--bus-hz", min=100, max=10_000,
+                 help="Bus rate, Hz: a whole multiple of the control rate (bode: the chirp "
+                 "is computed each bus cycle); cycles between control updates extrapolate."),
+]
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Write a PNG figure here.")]
 
 _DEFAULT_JOINT = "Joint03 L Hip Pitch"  # lolacli.motion.joint.DEFAULT_JOINT (no numpy here)
@@ -202,9 +208,7 @@ def tune_cmd(
     joints: JointsOption = None,
     step_s: StepOption = 0.6,
     control_hz: ControlHzOption = 1000,
-    bus_hz: Annotated[int, typer.Option(
-        "--bus-hz", min=100, max=10_000,
-        help="Bus rate, Hz (a multiple of --control-hz; faster extrapolates).")] = 1000,
+    bus_hz: BusHzOption = 1000,
     max_steps: Annotated[int, typer.Option("--max-steps", min=2, max=200,
                                            help="Most k_e values tried.")] = 50,
     fmt: FormatOption = OutputFormat.human,
@@ -278,9 +282,7 @@ def bode_cmd(
                                              help="Chirp amplitude, rad.")] = 0.0002,
     duration: Annotated[float, typer.Option("--duration", min=0.5, max=60.0, callback=not_nan,
                                             help="Chirp duration, s.")] = 4.0,
-    bus_hz: Annotated[int, typer.Option(
-        "--bus-hz", min=100, max=10_000,
-        help="Bus rate, Hz; the chirp is computed each bus cycle.")] = 2000,
+    bus_hz: BusHzOption = 2000,
     k_e: Annotated[float, typer.Option("--ke", min=0.0, max=10.0, callback=not_nan,
                                        help="k_e of the velocity feed-forward.")] = 0.0,
     feedforward: Annotated[Feedforward, typer.Option(
@@ -315,24 +317,29 @@ def bode_cmd(
         except Stopped:
             _stopped(stop)
             raise
-    doc = {
-        "schema": BODE_SCHEMA,
-        "joint": params.name,
-        "bus_hz": bus_hz,
-        "chirp": {"start_hz": f_start, "stop_hz": f_stop, "amplitude_rad": amplitude,
-                  "duration_s": duration},
-        "feedforward": feedforward.value,
-        "k_e": k_e,
-        "bandwidth_hz": bode.bandwidth_hz,
-        "points": [{"freq_hz": p.freq_hz, "gain_db": p.gain_db, "phase_deg": p.phase_deg}
-                   for p in bode.points],
-    }
+    doc = _bode_doc(params.name, bus_hz, chirp, feedforward.value, k_e, bode)
     if plot is not None:
         _plot_bode(plot, bode)
     if fmt is OutputFormat.json:
         emit_json(doc)
         return
     _render_bode(doc)
+
+
+def _bode_doc(joint: str, bus_hz: int, chirp: Any, feedforward: str, k_e: float,
+              bode: Any) -> dict[str, Any]:
+    return {
+        "schema": BODE_SCHEMA,
+        "joint": joint,
+        "bus_hz": bus_hz,
+        "chirp": {"start_hz": chirp.start_hz, "stop_hz": chirp.stop_hz,
+                  "amplitude_rad": chirp.amplitude_rad, "duration_s": chirp.duration_s},
+        "feedforward": feedforward,
+        "k_e": k_e,
+        "bandwidth_hz": bode.bandwidth_hz,
+        "points": [{"freq_hz": p.freq_hz, "gain_db": p.gain_db, "phase_deg": p.phase_deg}
+                   for p in bode.points],
+    }
 
 
 def _render_bode(doc: dict[str, Any]) -> None:
