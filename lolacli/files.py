@@ -10,6 +10,7 @@ from lolacli.errors import EniError
 if TYPE_CHECKING:
     from lolacli.eni.esi import EsiFile
     from lolacli.eni.model import Eni
+    from lolacli.motion.joint import JointParams
 
 #: Refuse absurdly large "ENI" files before reading them (the largest real exports are ~1 MB).
 MAX_ENI_BYTES = 64 * 1024 * 1024
@@ -63,3 +64,32 @@ def load_esi(path: str | Path) -> EsiFile:
 
 
 __all__ = ["MAX_ENI_BYTES", "load_eni", "load_esi", "lola_path", "read_eni_bytes"]
+
+
+def joints_path() -> Path:
+    """The packaged joint parameters of the LOLA chain (``lolacli/motion/joints.toml``)."""
+    from importlib.resources import files
+
+    return Path(str(files("lolacli.motion").joinpath("joints.toml")))
+
+
+def load_joints(path: str | Path | None = None) -> dict[str, JointParams]:
+    """Read and parse a joints file (``None``: the packaged one). Every failure is an
+    :class:`~lolacli.errors.InputError` (exit 3) naming the file."""
+    from lolacli.errors import InputError
+    from lolacli.motion.joint import parse_joints
+
+    p = Path(path) if path is not None else joints_path()
+    try:
+        with p.open("rb") as f:
+            data = f.read(1 << 20)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", path=str(p)) from None
+    except FileNotFoundError:
+        raise InputError("no such file", path=str(p)) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, not a joints file", path=str(p)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", path=str(p)) from None
+    return parse_joints(text, str(p))

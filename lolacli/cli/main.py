@@ -18,6 +18,7 @@ from lolacli.cli import (  # noqa: F401
     capture,
     eni,
     foe,
+    joint,
     report,
     sdo,
     traj,
@@ -80,6 +81,7 @@ app.add_typer(capture.app, name="capture")
 app.add_typer(sdo.app, name="sdo")
 app.add_typer(foe.app, name="foe")
 app.add_typer(traj.app, name="traj")
+app.add_typer(joint.app, name="joint")
 app.command("report")(report.report_cmd)
 
 
