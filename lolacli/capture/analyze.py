@@ -1,9 +1,10 @@
 """Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
 
-:func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
-:func:`lolacli.capture.scan.scan` (its C twin when built) walk the
-records. The scanner pairs frames, counts commands, counts the working counters and AL
-states it sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
+:func:`analyze_file` maps the capture a window at a time (the C engine on a regular file)
+or reads it in bounded chunks into one reusable buffer (:mod:`lolacli.capture.source`),
+and lets :func:`lolacli.capture.scan.scan` (its C twin when built) walk the records.
+The scanner pairs frames, counts commands, counts the working counters and AL states it
+sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
 configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
 :mod:`lolacli.capture.layout`). Verdicts are drawn once the whole file is read
 (:mod:`lolacli.capture.wkc`, :mod:`lolacli.capture.verdict`), because their references
@@ -21,6 +22,7 @@ more pass.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -272,8 +274,23 @@ def analyze_file(
     ``timeout_ns`` replaces the in-flight timeout (10 x the median round trip, >= 1 ms);
     ``max_lost`` and ``max_wkc_mismatches`` are how many lost frames and WKC mismatches
     are still no failure.
+    A pipe, ``/dev/stdin`` or another file that is not regular is copied to a temporary
+    file first: the analysis reads the file up to three times.
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
+    spool = _spool(path)
+    if spool is not None:
+        with spool:
+            try:
+                report = analyze_file(
+                    spool.name, eni=eni, progress=progress, engine=engine,
+                    keep_series=keep_series, chunk_bytes=chunk_bytes, timeout_ns=timeout_ns,
+                    max_lost=max_lost, max_wkc_mismatches=max_wkc_mismatches,
+                    should_stop=should_stop, mapped=mapped)
+            except CaptureError as exc:
+                raise CaptureError(exc.message, path=str(path), line=exc.line,
+                                   offset=exc.offset) from None
+        return dataclasses.replace(report, path=str(path))
     reader = CaptureReader(path)  # validates the file header
     eng = choose_engine(engine, os.path.getsize(reader.path))
 
@@ -281,6 +298,13 @@ def analyze_file(
         p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress,
                   should_stop, mapped)
         p.run()
+        if p.shrank:
+            # the file shrank under the map: bytes past its new end may have been read as
+            # the zeros of its last page. Read it again, as it is now, by read(): the
+            # result of a file that changes while it is read is the read path's.
+            p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress,
+                      should_stop, mapped=False)
+            p.run()
         return p
 
     # a later pass is the first one read again with other rules; once a pass was stopped
@@ -297,6 +321,30 @@ def analyze_file(
         run = scan_pass(int(run.st[S.S_DIRMODE]), S.MODE_SIGNATURE, run.top_stream())
         stopped_at = run.stopped_by_signal_at
     return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
+
+
+def _spool(path: str | Path) -> Any:
+    """A temporary copy of a stream (pipe, character device, socket), None for a regular
+    file or anything that cannot be opened (CaptureReader says why)."""
+    import shutil
+    import stat
+    import tempfile
+
+    try:
+        if stat.S_ISREG(os.stat(path).st_mode) or os.path.isdir(path):
+            return None
+        src = open(path, "rb")  # noqa: SIM115
+    except OSError:
+        return None
+    copy = tempfile.NamedTemporaryFile(prefix="lolacli-stream-", suffix=".capture")
+    try:
+        with src:
+            shutil.copyfileobj(src, copy, 1 << 20)
+        copy.flush()
+    except BaseException:
+        copy.close()
+        raise
+    return copy
 
 
 def _zeros(n: int, py: bool) -> Any:
@@ -342,6 +390,7 @@ class _Pass:
         self.chunk_bytes = None if chunk_bytes is None else max(chunk_bytes, 1 << 16)
         self.mapped = mapped
         self.mapped_read = False  # whether the pass read a mapped file
+        self.shrank = False  # the mapped file shrank while it was read
         self.progress = progress
         self.should_stop = should_stop
         self.stopped_by_signal_at: int | None = None  # file offset where should_stop stopped
@@ -453,10 +502,9 @@ class _Pass:
                 if self.should_stop():
                     self.stopped_by_signal_at = src.base + pos
                     break
-                if status == S.ST_FAULT:
-                    # the mapped file shrank under the scanner: its new size is the end
-                    src.shrunk(pos)
-                    continue
+                if status == S.ST_FAULT:  # the mapped file shrank under the scanner
+                    self.shrank = True
+                    break
                 if status == S.ST_CORRUPT:
                     self._stop(src, pos)
                     break
@@ -480,8 +528,12 @@ class _Pass:
                 whole = False
                 if eof:
                     break
+                view = None  # (the window's last view goes before it is unmapped)
                 pos = src.advance(pos)
-                view = None
+            if isinstance(src, MappedSource) and self.stopped_by_signal_at is None:
+                self.shrank = self.shrank or src.shrank()
+        if self.shrank:
+            return  # analyze_file reads the file again
         self.k.finish(self.st, self.o_burst)
         self._drain(None)
         if self.progress is not None and self.stopped_by_signal_at is None:

@@ -19,14 +19,17 @@ reading a page past its new end raises SIGBUS, which would end the process. The 
 scanner catches it (``lolacli_scan`` in ``_cscan.c``: a SIGBUS handler that jumps back
 to the scan call when, and only when, the fault happened in its guarded walk) and
 returns :data:`~lolacli.capture.scan.ST_FAULT` with the position of the record it was
-reading; it reads one byte of each page of a record before counting it, so that the
-fault comes before any counter changed. :meth:`MappedSource.shrunk` then takes the file's
-new size as the end, and the record that no longer fits is "cut short", as with a file
-that was already shorter when it was read. Every other read of a mapped file's bytes
-(mailbox and configuration data, pcapng section and interface blocks, the record
-stopped at) goes through ``os.pread`` (:meth:`Source.bytes_at`), which cannot fault.
-Checking the size before each window would leave a window between the check and the
-read; ``MAP_POPULATE`` would not keep pages that a truncation removes either.
+reading (it reads one byte of each page of a record before counting it, so that the
+fault comes before any counter changed). The bytes between the new end and the end of
+its page read as zeros without a fault, so the analysis does not go on from there: a
+pass that faulted, or that ends on a file now shorter than what it mapped
+(:meth:`MappedSource.shrank`), is done again from the start through read()
+(``analyze_file``), and the result is the one the read path gives for the file as it
+is then, as before mapping. Every other read of a mapped file's bytes (mailbox and
+configuration data, pcapng section and interface blocks, the record stopped at) goes
+through ``os.pread`` (:meth:`Source.bytes_at`), which cannot fault. Checking the size
+before each window would leave a gap between the check and the read; ``MAP_POPULATE``
+would not keep pages that a truncation removes either.
 """
 
 from __future__ import annotations
@@ -68,10 +71,6 @@ class Source:
         """``n`` bytes at ``buf[i]`` (fewer when they are past the end, or when a mapped
         file shrank)."""
         raise NotImplementedError
-
-    def shrunk(self, pos: int) -> None:
-        """The scanner faulted reading the record at ``pos``: the file ends earlier now."""
-        self.end, self.eof = pos, True
 
     def close(self) -> None:
         self.f.close()
@@ -117,6 +116,7 @@ class MappedSource(Source):
         self._fd = f.fileno()
         self._window = max(-(-window_bytes // _GRAN) * _GRAN, _GRAN)
         self._map: mmap.mmap | None = None
+        self._mapped_to = 0
         self._open(0, self._window)
 
     def _open(self, offset: int, length: int) -> None:
@@ -133,6 +133,7 @@ class MappedSource(Source):
             self._map.madvise(mmap.MADV_WILLNEED)
         self.buf = np.frombuffer(self._map, np.uint8)
         self.end, self.eof = length, offset + length >= size
+        self._mapped_to = max(self._mapped_to, offset + length)
 
     def _release(self) -> None:
         self.buf = np.zeros(0, np.uint8)
@@ -155,11 +156,9 @@ class MappedSource(Source):
     def bytes_at(self, i: int, n: int) -> bytes:
         return os.pread(self._fd, max(0, min(n, self.end - i)), self.base + i)
 
-    def shrunk(self, pos: int) -> None:
-        size = os.fstat(self._fd).st_size
-        end = min(self.end, max(pos, size - self.base))
-        # the size did not go down: a read error under the mapping; stop at the record
-        self.end, self.eof = (end if end < self.end else pos), True
+    def shrank(self) -> bool:
+        """Whether the file is now shorter than what was mapped of it."""
+        return os.fstat(self._fd).st_size < self._mapped_to
 
     def close(self) -> None:
         try:
