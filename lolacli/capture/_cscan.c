@@ -751,7 +751,14 @@ static void on_bus(int sig, siginfo_t *info, void *ctx) {
  * installed. */
 i64 lolacli_guard(void) {
     if (guard_installed) return 0;
-    struct sigaction sa;
+    struct sigaction sa, now;
+    /* already ours (two threads loading the library at once): keep the saved previous
+     * handler, never save ours as the one to go back to */
+    if (sigaction(SIGBUS, NULL, &now) == 0 && (now.sa_flags & SA_SIGINFO) &&
+        now.sa_sigaction == on_bus) {
+        guard_installed = 1;
+        return 0;
+    }
     memset(&sa, 0, sizeof sa);
     sa.sa_sigaction = on_bus;
     sa.sa_flags = SA_SIGINFO;

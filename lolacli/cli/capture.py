@@ -42,9 +42,22 @@ EngineOption = Annotated[
 ]
 
 
+CapturesArgument = Annotated[
+    list[Path],
+    typer.Argument(help="Capture files (pcap or pcapng), or folders of them. One file: one "
+                   "report. Several, or a folder: a row, or a JSON line "
+                   "(lolacli.capture-batch/1), per file.", show_default=False),
+]
+JobsOption = Annotated[
+    int | None,
+    typer.Option("--jobs", "-j", min=1,
+                 help="Captures analysed at once (several files). Default: the CPUs."),
+]
+
+
 @app.command("analyze")
 def analyze_cmd(
-    file: CaptureArgument,
+    files: CapturesArgument,
     eni: EniCheckOption = None,
     fmt: FormatOption = OutputFormat.human,
     plot: PlotOption = None,
@@ -53,17 +66,36 @@ def analyze_cmd(
     timeout: TimeoutOption = None,
     show_all: AllOption = False,
     engine: EngineOption = "auto",
+    jobs: JobsOption = None,
 ) -> None:
     """Out/return pairing, round trip, cycle period and jitter, lost and late frames, WKC
     verdict, AL states, SDO transactions and DC diagnostics of a capture, with findings.
     Exit 1 when a finding is a failure (lost frames or WKC mismatches over the thresholds,
     a bus that never answered, no EtherCAT traffic, slaves not in OP after the master asked
     for OP, nothing checked against the --eni); frames still in flight when the capture
-    ends are not lost."""
+    ends are not lost. Several captures (or a folder): each analysed once, in one process,
+    one row (JSON: one line) per file; the exit code is the worst file's."""
     from lolacli.capture.analyze import analyze_file
     from lolacli.interrupt import stop_signals
 
     timeout_ns = _timeout_ns(timeout)
+    if len(files) != 1 or files[0].is_dir():
+        from lolacli.cli.capture_batch import analyze_batch
+
+        if plot is not None:
+            raise UsageError("--plot takes one capture, not several")
+        model = None
+        if eni is not None:
+            from lolacli.files import load_eni
+
+            model = load_eni(eni)
+        code = analyze_batch(files, json_lines=fmt is OutputFormat.json, eni=model,
+                             engine=engine, timeout_ns=timeout_ns, max_lost=max_lost,
+                             max_wkc=max_wkc, jobs=jobs)
+        if code:
+            raise typer.Exit(code)
+        return
+    file = files[0]
     if plot is not None:
         from lolacli.capture.plots import plot_folder
 
