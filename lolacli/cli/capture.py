@@ -73,38 +73,19 @@ def analyze_cmd(
     Exit 1 when a finding is a failure (lost frames or WKC mismatches over the thresholds,
     a bus that never answered, no EtherCAT traffic, slaves not in OP after the master asked
     for OP, nothing checked against the --eni); frames still in flight when the capture
-    ends are not lost. Several captures (or a folder): each analysed once, in one process,
-    one row (JSON: one line) per file; the exit code is the worst file's."""
+    ends are not lost. Several captures or a folder: a row (JSON: a line) per file, the
+    exit code the worst file's."""
     from lolacli.capture.analyze import analyze_file
     from lolacli.interrupt import stop_signals
 
     timeout_ns = _timeout_ns(timeout)
-    if len(files) != 1 or files[0].is_dir():
-        from lolacli.cli.capture_batch import analyze_batch
-
-        if plot is not None:
-            raise UsageError("--plot takes one capture, not several")
-        model = None
-        if eni is not None:
-            from lolacli.files import load_eni
-
-            model = load_eni(eni)
-        code = analyze_batch(files, json_lines=fmt is OutputFormat.json, eni=model,
-                             engine=engine, timeout_ns=timeout_ns, max_lost=max_lost,
-                             max_wkc=max_wkc, jobs=jobs)
-        if code:
-            raise typer.Exit(code)
-        return
-    file = files[0]
+    if len(files) != 1 or (file := files[0]).is_dir():
+        return _analyze_many(files, eni, fmt, plot, engine, timeout_ns, max_lost, max_wkc, jobs)
     if plot is not None:
         from lolacli.capture.plots import plot_folder
 
         plot_folder(plot)  # a bad folder fails before the report is written
-    model = None
-    if eni is not None:
-        from lolacli.files import load_eni
-
-        model = load_eni(eni)
+    model = _eni_model(eni)
     # Ctrl-C or SIGTERM during the scan: the report of the frames read so far, then 130/143
     with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
         report = analyze_file(
@@ -132,6 +113,30 @@ def analyze_cmd(
             sys.stderr.write(f"lolacli: wrote {written}\n")
     if report.failed:
         raise typer.Exit(1)
+
+
+def _analyze_many(files: list[Path], eni: Path | None, fmt: OutputFormat, plot: Path | None,
+                  engine: str, timeout_ns: int | None, max_lost: int, max_wkc: int,
+                  jobs: int | None) -> None:
+    """``capture analyze`` of several captures or a folder (lolacli.cli.capture_batch)."""
+    from lolacli.cli.capture_batch import analyze_batch
+
+    if plot is not None:
+        raise UsageError("--plot takes one capture, not several")
+    model = _eni_model(eni)
+    code = analyze_batch(files, json_lines=fmt is OutputFormat.json, eni=model, engine=engine,
+                         timeout_ns=timeout_ns, max_lost=max_lost, max_wkc=max_wkc, jobs=jobs)
+    if code:
+        raise typer.Exit(code)
+
+
+def _eni_model(eni: Path | None) -> Any:
+    """The --eni's model, None without one."""
+    if eni is None:
+        return None
+    from lolacli.files import load_eni
+
+    return load_eni(eni)
 
 
 def _timeout_ns(timeout: str | None) -> int | None:
