@@ -77,8 +77,8 @@ CHUNK_BYTES = CHUNK_BYTES
 #: 5 MB/s).
 SLICE_BYTES = 2 * 1024 * 1024
 SLICE_BYTES_PYTHON = 256 * 1024
-OUT_ROWS = 1 << 16
-PAIR_SLOTS = 1 << 12
+OUT_ROWS = 1 << 14  # > the kernel's minimum (CHECK_EVERY * (MAX_DGRAMS + 2) + ...)
+PAIR_SLOTS = 1 << 10  # grows when half full
 STREAM_SLOTS = 1 << 10
 OBS_SLOTS = 1 << 10
 
