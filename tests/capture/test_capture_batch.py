@@ -72,3 +72,57 @@ def test_plot_with_several_files_is_a_usage_error(cli, corpus, tmp_path):
     code, _out, err = cli("capture", "analyze", *map(str, CAPTURES[:2]), "--plot",
                           str(tmp_path))
     assert code == 2 and "--plot" in err
+
+
+def test_parallel_jobs_give_what_one_at_a_time_gives(cli, corpus):
+    """Threads (the C scan releases the GIL) do not change any figure nor the order."""
+    args = ("capture", "analyze", *map(str, CAPTURES), "--format", "json")
+    code1, one, _ = cli(*args, "--jobs", "1")
+    code4, four, _ = cli(*args, "--jobs", "4")
+    assert (code1, one) == (code4, four)
+    assert len(_lines(one)) == len(CAPTURES)
+
+
+def test_a_stopped_batch_prints_what_it_did_and_exits_130(tmp_path):
+    """SIGINT after the first file: its line is whole, the file being read comes out with
+    its partial report (interrupted), the rest is left out; exit 130."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from lolacli.capture import writer as w
+    from lolacli.wire.commands import Command
+    from lolacli.wire.frame import Datagram, encode_frame, make_frame
+
+    def frame(ret: bool) -> bytes:
+        d = Datagram.logical(Command.LRW, 0x10000, 800, index=1, wkc=3 if ret else 0)
+        return encode_frame(make_frame([d], src=b"\x02" * 6 if ret else b"\x00" * 6), pad=True)
+
+    pairs = b"".join(w.pcap_record(t * 500_000, frame(False))
+                     + w.pcap_record(t * 500_000 + 40_000, frame(True)) for t in range(4000))
+    files = []
+    for k in range(3):
+        f = tmp_path / f"{k}.pcap"
+        f.write_bytes(w.pcap_header() + pairs)
+        files.append(str(f))
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lolacli", "capture", "analyze", *files, "--format", "json",
+         "--jobs", "1", "--engine", "python"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, PYTHONPATH=str(root)))
+    try:
+        first = proc.stdout.readline()  # the first file is done
+        proc.send_signal(signal.SIGINT)
+        rest, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    docs = _lines(first + rest)
+    assert proc.returncode == 130, err
+    assert docs[0]["report"]["interrupted"] is False and docs[0]["file"] == files[0]
+    assert 1 <= len(docs) <= 2
+    if len(docs) == 2:
+        assert docs[1]["file"] == files[1] and docs[1]["report"]["interrupted"] is True
+    assert "stopped" in err
