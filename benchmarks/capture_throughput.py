@@ -6,6 +6,16 @@
     python benchmarks/capture_throughput.py --engine python  # another scanner engine
     python benchmarks/capture_throughput.py --frames 400000 --engines c,python --corpus
                                           # engines against each other, same files, same run
+    python benchmarks/capture_throughput.py --frames 200000 --startup --batch 50
+                                          # also start-up and many small files in one call
+
+Frame sizes (``--lrw-bytes``, default ``64,800``): the 64-byte LRW of the first benchmark
+and the LOLA chain's frame (an 800-byte LRW and a BRD: 846 bytes on the wire with the
+FCS). For each file the run prints frames/s and bytes/s of ``capture analyze``, of
+tshark, and of a plain read of the file (``readinto`` of 8 MiB chunks, the page cache
+to user memory), and the ratios: analysis against tshark and against the plain read.
+``--startup`` times ``capture analyze`` of a small corpus capture against ``python3 -c
+pass``; ``--batch N`` times one call on N small captures against N calls (issue 28).
 
 The capture is what a 2 kHz master produces: per cycle one outgoing frame with an LRW
 (``--lrw-bytes`` of process data) and a BRD of the AL status, and its returned copy
@@ -273,6 +283,18 @@ def bench(
         f"  lolacli capture analyze: {dt:8.2f} s  {frames / dt / 1e6:7.2f} M frames/s  "
         f"peak RSS {rss / 1024:.0f} MB  (engine {rep['engine']})"
     )
+    adt = in_process(path, engine)
+    result.update(analysis_s=adt, analysis_frames_per_s=frames / adt,
+                  analysis_gb_per_s=size / adt / 1e9)
+    print(f"  analysis alone:          {adt:8.3f} s  {frames / adt / 1e6:7.2f} M frames/s  "
+          f"{size / adt / 1e9:.2f} GB/s  (analyze_file, imports done)")
+    rdt = plain_read(path)
+    result.update(lolacli_gb_per_s=size / dt / 1e9, read_s=rdt, read_gb_per_s=size / rdt / 1e9,
+                  ratio_read=rdt / dt)
+    print(f"  lolacli bytes/s:         {size / dt / 1e9:8.2f} GB/s")
+    print(f"  plain read of the file:  {rdt:8.3f} s  {size / rdt / 1e9:7.2f} GB/s  "
+          f"{frames / rdt / 1e6:7.2f} M frames/s")
+    print(f"  ratio lolacli / read:    {rdt / dt:8.2f} x  (1 = as fast as reading it)")
     if tshark and shutil.which("tshark"):
         cmd = [
             "tshark",
@@ -291,9 +313,106 @@ def bench(
         ]
         tdt, _, _ = _timed(cmd, stdout=None)
         result.update(tshark_s=tdt, tshark_frames_per_s=frames / tdt, ratio=tdt / dt)
-        print(f"  tshark -T fields:        {tdt:8.2f} s  {frames / tdt / 1e6:7.2f} M frames/s")
+        print(f"  tshark -T fields:        {tdt:8.2f} s  {frames / tdt / 1e6:7.2f} M frames/s  "
+              f"{size / tdt / 1e9:.3f} GB/s")
         print(f"  ratio lolacli / tshark:  {tdt / dt:8.1f} x")
     return result
+
+
+def in_process(path: Path, engine: str | None, repeat: int = 3) -> float:
+    """Best of ``repeat`` ``analyze_file`` calls in one fresh process, imports done: the
+    analysis without the command's start-up."""
+    probe = (
+        "import sys, time\n"
+        "from lolacli.capture.analyze import analyze_file\n"
+        "best = 1e9\n"
+        f"for _ in range({repeat}):\n"
+        "    t = time.perf_counter()\n"
+        f"    analyze_file({str(path)!r}, max_lost=10**9).to_dict()\n"
+        "    best = min(best, time.perf_counter() - t)\n"
+        "print(best)\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=engine or ENGINE)
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT,
+                       check=True)
+    return float(r.stdout.decode().split()[-1])
+
+
+def plain_read(path: Path, repeat: int = 3) -> float:
+    """Best of ``repeat`` reads of the whole file into one 8 MiB buffer (page cache warm)."""
+    buf = bytearray(8 << 20)
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        with open(path, "rb", buffering=0) as f:
+            while f.readinto(buf):
+                pass
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def _corpus_small() -> Path | None:
+    """The smallest corpus capture with a few hundred frames or more."""
+    corpus = Path(os.environ.get("LOLACLI_CORPUS", ROOT.parent / "shared" / "corpus"))
+    files = sorted((corpus / "pcap").glob("*.pcap*"), key=lambda p: p.stat().st_size)
+    return next((p for p in files if p.stat().st_size > 20_000), files[0] if files else None)
+
+
+def bench_startup(repeat: int = 7) -> dict[str, float]:
+    """Median wall time of ``capture analyze`` of a small corpus capture and of ``python3
+    -c pass``, each a fresh process."""
+    small = _corpus_small()
+    if small is None:
+        print("start-up: no corpus capture found")
+        return {}
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+
+    def median(cmd: list[str]) -> float:
+        times = []
+        for _ in range(repeat):
+            t = time.perf_counter()
+            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                           cwd=ROOT)
+            times.append(time.perf_counter() - t)
+        return sorted(times)[len(times) // 2]
+
+    median(analyze_cmd(small))  # warm
+    empty = median([sys.executable, "-c", "pass"])
+    full = median(analyze_cmd(small))
+    print(f"start-up ({small.name}, median of {repeat}):")
+    print(f"  python3 -c pass:         {empty * 1e3:8.0f} ms")
+    print(f"  capture analyze:         {full * 1e3:8.0f} ms  ({(full - empty) * 1e3:.0f} ms more)")
+    return {"python_pass_s": empty, "analyze_small_s": full, "startup_extra_s": full - empty}
+
+
+def bench_batch(n: int, folder: Path) -> dict[str, float]:
+    """N copies of a small corpus capture: one ``capture analyze`` call on all of them
+    against N calls, one file each."""
+    small = _corpus_small()
+    if small is None:
+        return {}
+    batch = folder / "batch"
+    batch.mkdir(exist_ok=True)
+    files = []
+    for k in range(n):
+        dst = batch / f"{k:04d}{small.suffix}"
+        shutil.copy(small, dst)
+        files.append(dst)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    one = [sys.executable, "-m", "lolacli", "capture", "analyze", "--format", "json"]
+    t = time.perf_counter()
+    r = subprocess.run([*one, *map(str, files)], capture_output=True, env=env, cwd=ROOT)
+    together = time.perf_counter() - t
+    assert len(r.stdout.splitlines()) == n, r.stderr[-500:]
+    t = time.perf_counter()
+    for f in files:
+        subprocess.run([*one, str(f)], stdout=subprocess.DEVNULL, env=env, cwd=ROOT)
+    apart = time.perf_counter() - t
+    print(f"batch of {n} x {small.name}:")
+    print(f"  one call:                {together:8.2f} s  ({together / n * 1e3:.1f} ms a file)")
+    print(f"  {n} calls:                {apart:8.2f} s  ({apart / n * 1e3:.1f} ms a file)")
+    print(f"  ratio calls / one call:  {apart / together:8.1f} x")
+    return {"batch_files": n, "one_call_s": together, "n_calls_s": apart}
 
 
 ENGINES = ("auto", "c", "python")
@@ -345,7 +464,13 @@ def main() -> None:
         default=2_000_000,
         help="approximate EtherCAT frames (2 per cycle); default 2,000,000",
     )
-    ap.add_argument("--lrw-bytes", type=int, default=64, help="LRW process data per frame")
+    ap.add_argument("--lrw-bytes", default="64,800",
+                    help="LRW process data per frame, comma-separated sizes (default 64 and "
+                    "800: the LOLA frame, 846 bytes on the wire)")
+    ap.add_argument("--startup", action="store_true",
+                    help="also time capture analyze of a small capture against python -c pass")
+    ap.add_argument("--batch", type=int, default=0,
+                    help="also time one call on N small captures against N calls")
     ap.add_argument("--format", choices=("pcapng", "pcap", "both"), default="both")
     ap.add_argument("--no-tshark", action="store_true", help="skip the tshark comparison")
     ap.add_argument(
@@ -385,28 +510,38 @@ def main() -> None:
     results: dict[str, object] = {}
     try:
         formats = ("pcapng", "pcap") if args.format == "both" else (args.format,)
-        for fmt in formats:
-            path = folder / f"synthetic-{args.frames}.{fmt}"
+        sizes = [int(v) for v in args.lrw_bytes.split(",")]
+        for lrw_bytes, fmt in [(b, f) for b in sizes for f in formats]:
+            path = folder / f"synthetic-{args.frames}-lrw{lrw_bytes}.{fmt}"
             t = time.perf_counter()
             expected = write_capture(
-                path, args.frames // 2, pcapng=fmt == "pcapng", lrw_bytes=args.lrw_bytes
+                path, args.frames // 2, pcapng=fmt == "pcapng", lrw_bytes=lrw_bytes
             )
+            frame = len(_cyclic_template(lrw_bytes)) + 4
             print(
-                f"{fmt}: {expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
+                f"{fmt}, {frame}-byte cyclic frames (LRW {lrw_bytes} B): "
+                f"{expected['frames']:,} frames, {path.stat().st_size / 1e6:.0f} MB "
                 f"(written in {time.perf_counter() - t:.1f} s)"
             )
+            name = f"{fmt}-lrw{lrw_bytes}"
             for k, engine in enumerate(engines):
-                key = fmt if len(engines) == 1 else f"{fmt}-{engine}"
+                key = name if len(engines) == 1 else f"{name}-{engine}"
                 results[key] = bench(path, expected, not args.no_tshark and k == 0, engine)
-            _ratios(results, fmt, engines)
+            _ratios(results, name, engines)
+            path.unlink()
+        if args.startup:
+            results["startup"] = bench_startup()
+        if args.batch:
+            results["batch"] = bench_batch(args.batch, folder)
         if args.corpus:
             results["corpus"] = bench_corpus(engines, args.repeat)
         if args.rss_gb:
-            frame_bytes = 28 + len(_cyclic_template(args.lrw_bytes)) + 8
+            lrw_large = sizes[-1]
+            frame_bytes = 28 + len(_cyclic_template(lrw_large)) + 8
             cycles = int(args.rss_gb * 1e9 / frame_bytes / 2)
             path = folder / "large.pcapng"
             t = time.perf_counter()
-            expected = write_capture(path, cycles, pcapng=True, lrw_bytes=args.lrw_bytes)
+            expected = write_capture(path, cycles, pcapng=True, lrw_bytes=lrw_large)
             took = time.perf_counter() - t
             print(
                 f"large pcapng: {expected['frames']:,} frames, "

@@ -16,7 +16,10 @@
  * well.
  */
 #include <Python.h>
+#include <setjmp.h>
+#include <signal.h>
 #include <stdint.h>
+#include <string.h>
 
 /* st indices */
 #define S_FRAMES 0
@@ -75,6 +78,7 @@
 #define ST_GROW 3
 #define ST_CORRUPT 4
 #define ST_DONE 5
+#define ST_FAULT 6
 
 #define MODE_LOGICAL 0
 #define DIR_INFER 1
@@ -96,6 +100,7 @@
 #define KIND_WKC 1
 #define KIND_AL_STATUS 2
 #define MAX_RECORD (16 * 1024 * 1024)
+#define TOUCH_STEP 4096
 #define BURST_GAP_NS 1000000
 #define ECHO_ROUND_TRIPS 10
 #define ECHO_WINDOW_NS 1000000
@@ -564,6 +569,14 @@ static void packet(const uint8_t *buf, i64 d, i64 cap, i64 orig, i64 ts, i64 lin
     if (cap < orig) st[S_CUT] += 1;
 }
 
+/* Read one byte of every page of a record [pos, pos + size) from its end back before any
+ * counter changes for it: a mapped file cut short under the scanner faults here, not in
+ * the middle of a record half counted (the record's first bytes were read already). */
+static inline void touch(const uint8_t *buf, i64 pos, i64 size) {
+    const volatile uint8_t *b = buf;
+    for (i64 p = pos + size - 1; p > pos; p -= TOUCH_STEP) (void)b[p];
+}
+
 static int full(Tables *t, i64 cap) {
     i64 *st = t->st;
     i64 lim = cap - MAX_DGRAMS - 2;
@@ -636,9 +649,11 @@ static i64 pcapng_record(const uint8_t *buf, i64 pos, i64 total, i64 btype, int 
 }
 
 /* Walk records from *pos until the buffer ends or the driver must act; returns the
- * status and leaves the position of the next unread record in *pos. */
-i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64 big_,
-                 i64 ns_res, Tables *t) {
+ * status and leaves the position of the next unread record in *pos. *pos is also
+ * written before each record, so that after a bus error (see lolacli_scan) it names the
+ * record being read. */
+static i64 scan_records(const uint8_t *buf, volatile i64 *pos_io, i64 end, i64 eof, i64 fmt,
+                        i64 big_, i64 ns_res, Tables *t) {
     int big = big_ != 0;
     i64 pos = *pos_io;
     i64 cap = t->o_len - CHECK_EVERY * (MAX_DGRAMS + 2);
@@ -647,6 +662,7 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
     i64 pcap_link = t->n_if > 0 ? t->ifs[4] : LINK_ETHERNET;
     for (;;) {
         count += 1;
+        *pos_io = pos;
         /* the observation table before every record: one record may add many keys */
         if (count % CHECK_EVERY == 1 || st[S_W_USED] * 2 > t->w_len) {
             int act = full(t, cap);
@@ -665,6 +681,7 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
             }
             size = 16 + incl;
             if (pos + size > end) break;
+            touch(buf, pos, size);
             i64 frac = u32x(buf, pos + 4, big);
             ts = u32x(buf, pos, big) * 1000000000LL + (ns_res ? frac : frac * 1000);
             d = pos + 16;
@@ -692,6 +709,7 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
                 pos += size;
                 continue;
             }
+            touch(buf, pos, size);
             d = pcapng_record(buf, pos, size, btype, big, t, &incl, &orig, &ts, &link);
             if (d < 0) {
                 pos += size;
@@ -704,6 +722,61 @@ i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64
     *pos_io = pos;
     if (eof) return pos == end ? ST_DONE : ST_CORRUPT;
     return ST_NEED_MORE;
+}
+
+/* A mapped file that shrinks while it is read: the pages past its new end are gone, and
+ * reading them raises SIGBUS, which would kill the process. lolacli_scan guards the
+ * walk: the handler jumps back to it (the fault is synchronous, in this thread, in code
+ * that holds no lock and allocates nothing) and it returns ST_FAULT with *pos at the
+ * record being read; the driver then takes the file's new size as its end. A SIGBUS
+ * outside a guarded walk (another thread, other code) goes to the handler that was
+ * there before (Python's faulthandler, or the default: the process ends as before). */
+static __thread sigjmp_buf *fault_jump;
+static struct sigaction previous_bus;
+static int guard_installed;
+
+static void on_bus(int sig, siginfo_t *info, void *ctx) {
+    (void)sig, (void)info, (void)ctx;
+    sigjmp_buf *jump = fault_jump;
+    if (jump != NULL) {
+        fault_jump = NULL;
+        siglongjmp(*jump, 1);
+    }
+    /* not a guarded read: back to the previous disposition; the faulting instruction
+     * runs again on return and faults into it */
+    sigaction(SIGBUS, &previous_bus, NULL);
+}
+
+/* Install the SIGBUS handler (once; cengine calls it when it loads the library). 0 when
+ * installed. */
+i64 lolacli_guard(void) {
+    if (guard_installed) return 0;
+    struct sigaction sa, now;
+    /* already ours (two threads loading the library at once): keep the saved previous
+     * handler, never save ours as the one to go back to */
+    if (sigaction(SIGBUS, NULL, &now) == 0 && (now.sa_flags & SA_SIGINFO) &&
+        now.sa_sigaction == on_bus) {
+        guard_installed = 1;
+        return 0;
+    }
+    memset(&sa, 0, sizeof sa);
+    sa.sa_sigaction = on_bus;
+    sa.sa_flags = SA_SIGINFO;
+    sigemptyset(&sa.sa_mask);
+    if (sigaction(SIGBUS, &sa, &previous_bus) != 0) return -1;
+    guard_installed = 1;
+    return 0;
+}
+
+i64 lolacli_scan(const uint8_t *buf, i64 *pos_io, i64 end, i64 eof, i64 fmt, i64 big_,
+                 i64 ns_res, Tables *t) {
+    sigjmp_buf jump;
+    volatile i64 *pos = pos_io;
+    if (sigsetjmp(jump, 1) != 0) return ST_FAULT; /* *pos: the record that faulted */
+    fault_jump = &jump;
+    i64 status = scan_records(buf, pos, end, eof, fmt, big_, ns_res, t);
+    fault_jump = NULL;
+    return status;
 }
 
 /* Move the entries of one open-addressing table into a new (empty) one; see scan.rehash.

@@ -1,9 +1,10 @@
 """Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
 
-:func:`analyze_file` reads the capture in bounded chunks into one reusable buffer and lets
-:func:`lolacli.capture.scan.scan` (its C twin when built) walk the
-records. The scanner pairs frames, counts commands, counts the working counters and AL
-states it sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
+:func:`analyze_file` maps the capture a window at a time (the C engine on a regular file)
+or reads it in bounded chunks into one reusable buffer (:mod:`lolacli.capture.source`),
+and lets :func:`lolacli.capture.scan.scan` (its C twin when built) walk the records.
+The scanner pairs frames, counts commands, counts the working counters and AL states it
+sees and tracks DC drift compensation as it goes; the rare mailbox datagrams and
 configuration writes it flags are decoded here in Python (:mod:`lolacli.capture.sdo`,
 :mod:`lolacli.capture.layout`). Verdicts are drawn once the whole file is read
 (:mod:`lolacli.capture.wkc`, :mod:`lolacli.capture.verdict`), because their references
@@ -21,6 +22,7 @@ more pass.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,6 +42,7 @@ from lolacli.capture.reader import (
     Interface,
     parse_idb,
 )
+from lolacli.capture.source import CHUNK_BYTES, MappedSource, Source, open_source
 from lolacli.capture.verdict import (
     FAILURE,
     INFO,
@@ -65,14 +68,17 @@ if TYPE_CHECKING:
     from lolacli.eni.model import Eni
 
 SCHEMA = "lolacli.capture/1"
-CHUNK_BYTES = 8 * 1024 * 1024
+#: bytes read at a time on the read path (pipes, the Python engine); a mapped file is
+#: mapped WINDOW_BYTES at a time (lolacli.capture.source)
+CHUNK_BYTES = CHUNK_BYTES
 #: The scanner is called on at most this much of a chunk at a time, so that between two
 #: calls (where a stop is polled and progress reported) no more than ~10 ms pass with the
-#: compiled engines and ~50 ms with the Python engine (about 5 MB/s).
-SLICE_BYTES = 1024 * 1024
+#: compiled engine (1-4 GB/s on a mapped file) and ~50 ms with the Python engine (about
+#: 5 MB/s).
+SLICE_BYTES = 2 * 1024 * 1024
 SLICE_BYTES_PYTHON = 256 * 1024
-OUT_ROWS = 1 << 16
-PAIR_SLOTS = 1 << 12
+OUT_ROWS = 1 << 14  # > the kernel's minimum (CHECK_EVERY * (MAX_DGRAMS + 2) + ...)
+PAIR_SLOTS = 1 << 10  # grows when half full
 STREAM_SLOTS = 1 << 10
 OBS_SLOTS = 1 << 10
 
@@ -248,13 +254,19 @@ def analyze_file(
     progress: Progress | None = None,
     engine: str = "auto",
     keep_series: bool = False,
-    chunk_bytes: int = CHUNK_BYTES,
+    chunk_bytes: int | None = None,
     timeout_ns: int | None = None,
     max_lost: int = 0,
     max_wkc_mismatches: int = 0,
     should_stop: Callable[[], bool] = never,
+    mapped: bool = True,
 ) -> CaptureReport:
     """Analyse a pcap/pcapng file (streaming; bounded memory).
+
+    The C engine maps a regular file a window at a time and reads in place only the
+    bytes it analyses (``mapped``; :mod:`lolacli.capture.source`); pipes, other files
+    that are not regular, ``mapped=False`` and the Python engine read it in chunks.
+    ``chunk_bytes`` is the chunk or the window (default 8 MiB read, 64 MiB mapped).
 
     ``engine`` is ``"auto"`` (C when built, else Python), ``"c"`` or ``"python"``; both
     give identical results.
@@ -265,15 +277,37 @@ def analyze_file(
     ``timeout_ns`` replaces the in-flight timeout (10 x the median round trip, >= 1 ms);
     ``max_lost`` and ``max_wkc_mismatches`` are how many lost frames and WKC mismatches
     are still no failure.
+    A pipe, ``/dev/stdin`` or another file that is not regular is copied to a temporary
+    file first: the analysis reads the file up to three times.
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
+    spool = _spool(path)
+    if spool is not None:
+        with spool:
+            try:
+                report = analyze_file(
+                    spool.name, eni=eni, progress=progress, engine=engine,
+                    keep_series=keep_series, chunk_bytes=chunk_bytes, timeout_ns=timeout_ns,
+                    max_lost=max_lost, max_wkc_mismatches=max_wkc_mismatches,
+                    should_stop=should_stop, mapped=mapped)
+            except CaptureError as exc:
+                raise CaptureError(exc.message, path=str(path), line=exc.line,
+                                   offset=exc.offset) from None
+        return dataclasses.replace(report, path=str(path))
     reader = CaptureReader(path)  # validates the file header
     eng = choose_engine(engine, os.path.getsize(reader.path))
 
     def scan_pass(dirmode: int, mode: int, sig: int) -> _Pass:
         p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress,
-                  should_stop)
+                  should_stop, mapped)
         p.run()
+        if p.shrank:
+            # the file shrank under the map: bytes past its new end may have been read as
+            # the zeros of its last page. Read it again, as it is now, by read(): the
+            # result of a file that changes while it is read is the read path's.
+            p = _Pass(reader, eng, dirmode, mode, sig, keep_series, chunk_bytes, progress,
+                      should_stop, mapped=False)
+            p.run()
         return p
 
     # a later pass is the first one read again with other rules; once a pass was stopped
@@ -312,6 +346,30 @@ def stream_pairs(report: CaptureReport, on_pairs: OnPairs, *, engine: str = "aut
     p.run()
 
 
+def _spool(path: str | Path) -> Any:
+    """A temporary copy of a stream (pipe, character device, socket), None for a regular
+    file or anything that cannot be opened (CaptureReader says why)."""
+    import shutil
+    import stat
+    import tempfile
+
+    try:
+        if stat.S_ISREG(os.stat(path).st_mode) or os.path.isdir(path):
+            return None
+        src = open(path, "rb")  # noqa: SIM115
+    except OSError:
+        return None
+    copy = tempfile.NamedTemporaryFile(prefix="lolacli-stream-", suffix=".capture")
+    try:
+        with src:
+            shutil.copyfileobj(src, copy, 1 << 20)
+        copy.flush()
+    except BaseException:
+        copy.close()
+        raise
+    return copy
+
+
 def _zeros(n: int, py: bool) -> Any:
     return [0] * n if py else np.zeros(n, np.int64)
 
@@ -340,9 +398,10 @@ class _Pass:
         mode: int,
         stream_sig: int,
         keep_series: bool,
-        chunk_bytes: int,
+        chunk_bytes: int | None,
         progress: Progress | None,
         should_stop: Callable[[], bool] = never,
+        mapped: bool = True,
     ) -> None:
         from lolacli.capture.sdo import SdoTracker
 
@@ -351,7 +410,10 @@ class _Pass:
         self.k = kernels(engine)
         self.py = engine == "python"
         self.keep_series = keep_series
-        self.chunk_bytes = max(chunk_bytes, 1 << 16)
+        self.chunk_bytes = None if chunk_bytes is None else max(chunk_bytes, 1 << 16)
+        self.mapped = mapped
+        self.mapped_read = False  # whether the pass read a mapped file
+        self.shrank = False  # the mapped file shrank while it was read
         self.progress = progress
         self.should_stop = should_stop
         self.stopped_by_signal_at: int | None = None  # file offset where should_stop stopped
@@ -435,19 +497,17 @@ class _Pass:
     def run(self) -> None:
         path = self.reader.path
         total = os.path.getsize(path)
-        buf = np.empty(self.chunk_bytes, np.uint8)
         fmt = self.reader.header.format
         slice_bytes = SLICE_BYTES_PYTHON if self.py else SLICE_BYTES
-        with open(path, "rb") as f:
-            base = 0  # file offset of buf[0]
+        with open_source(path, self.chunk_bytes, mapped=self.mapped and not self.py) as src:
+            self.mapped_read = isinstance(src, MappedSource)
             pos = PCAP_HEADER_BYTES if fmt == FORMAT_PCAP else 0
-            f.seek(0)
-            end, eof = _fill(f, buf, 0)
             view: Any = None
             whole = False  # the next call gets the rest of the buffer (a record > a slice)
             while True:
+                end, eof = src.end, src.eof
                 if view is None:
-                    view = buf[:end].tobytes() if self.py else buf
+                    view = src.buf[:end].tobytes() if self.py else src.buf
                 stop_at = end if whole else min(end, pos + slice_bytes)
                 started = pos
                 pos, status = self.k.scan(
@@ -458,43 +518,48 @@ class _Pass:
                     self.o_rt, self.o_rtts, self.o_rtfr, self.o_period, self.o_burst,
                     self.o_dc, self.o_mbx, self.o_cfg, self.o_evict,
                 )
-                self._drain(view)
+                self._drain(src)
                 if self.progress is not None:
-                    self.progress(min(base + pos, total), total)
+                    self.progress(min(src.base + pos, total), total)
                 if status == S.ST_DONE:
                     break
                 if self.should_stop():
-                    self.stopped_by_signal_at = base + pos
+                    self.stopped_by_signal_at = src.base + pos
+                    break
+                if status == S.ST_FAULT:  # the mapped file shrank under the scanner
+                    self.shrank = True
                     break
                 if status == S.ST_CORRUPT:
-                    self._stop(buf, pos, end, eof, base)
+                    self._stop(src, pos)
                     break
                 if status == S.ST_GROW:
                     self._grow()
                     continue
                 if status == S.ST_BLOCK:
-                    need = self._block(buf, pos, end, eof)
+                    need = self._block(src, pos)
                     if need == 0:
                         pos = self._block_done
                         continue
                     if need < 0:
-                        self._stop(buf, pos, end, eof, base)
+                        self._stop(src, pos)
                         break
                 elif status == S.ST_FLUSH:
                     continue
                 elif stop_at < end:  # the end of a slice, not of the buffer
                     whole = pos == started
                     continue
-                # need more bytes: keep the unread tail, read behind it
+                # need more bytes: the record at pos runs past the buffer
                 whole = False
                 if eof:
                     break
-                buf, end, eof = _shift_and_fill(f, buf, pos, end)
-                view = None
-                base += pos
-                pos = 0
+                view = None  # (the window's last view goes before it is unmapped)
+                pos = src.advance(pos)
+            if isinstance(src, MappedSource) and self.stopped_by_signal_at is None:
+                self.shrank = self.shrank or src.shrank()
+        if self.shrank:
+            return  # analyze_file reads the file again
         self.k.finish(self.st, self.o_burst)
-        self._drain(b"")
+        self._drain(None)
         if self.progress is not None and self.stopped_by_signal_at is None:
             self.progress(total, total)
         if self.interfaces and not any(i.analysed for i in self.interfaces):
@@ -504,19 +569,22 @@ class _Pass:
                 f"{types})", path=str(path)
             )
 
-    def _stop(self, buf: np.ndarray, pos: int, end: int, eof: bool, base: int) -> None:
+    def _stop(self, src: Source, pos: int) -> None:
         """A record the scanner cannot read: the file was cut short (the record runs past
         its end) or is damaged there."""
         self.st[S.S_MALFORMED] += 1
-        self.stopped_at = base + pos
-        self.cut_short = eof and _runs_past_end(buf, pos, end, self.reader.header.format,
-                                                self.big)
+        self.stopped_at = src.base + pos
+        self.cut_short = src.eof and _runs_past_end(src, pos, self.reader.header.format,
+                                                    self.big)
 
-    def _block(self, buf: np.ndarray, pos: int, end: int, eof: bool) -> int:
+    def _block(self, src: Source, pos: int) -> int:
         """A pcapng SHB or IDB at ``pos``: 0 handled, 1 need more bytes, -1 corrupt."""
+        end, eof = src.end, src.eof
         if pos + 12 > end:
             return -1 if eof else 1
-        head = buf[pos : pos + 12].tobytes()
+        head = src.bytes_at(pos, 12)
+        if len(head) < 12:
+            return -1  # the file shrank under a mapped read
         btype = int.from_bytes(head[0:4], "little")
         if btype == 0x0A0D0D0A:
             bom = head[8:12]
@@ -535,7 +603,7 @@ class _Pass:
             self.n_if = 0
         else:
             try:
-                iface = parse_idb(buf[pos : pos + total].tobytes(), self.big)
+                iface = parse_idb(src.bytes_at(pos, total), self.big)
             except ValueError:
                 return -1  # too short: a damaged block
             if abs(iface.ts_params()[3]) > S.TS_OFFSET_LIMIT_NS:
@@ -556,7 +624,9 @@ class _Pass:
             self.ifs[base + j] = v
         self.n_if += 1
 
-    def _drain(self, view: Any) -> None:
+    def _drain(self, src: Source | None) -> None:
+        """Take the scanner's output rows; ``src`` holds the bytes of the datagrams they
+        point at (None after the last call: no rows point at bytes then)."""
         st = self.st
         n = int(st[S.S_N_RT])
         if n:
@@ -594,12 +664,14 @@ class _Pass:
         for r in range(n):
             frame, q, cmd, adp, ado, ln = (int(v) for v in
                                            self.o_cfg[r * S.CFG_COLS:(r + 1) * S.CFG_COLS])
-            self.layout.feed(frame, cmd, adp, ado, bytes(view[q + 10 : q + 10 + ln]))
+            assert src is not None
+            self.layout.feed(frame, cmd, adp, ado, src.bytes_at(q + 10, ln))
         n = int(st[S.S_N_MBX])
         for r in range(n):
             row = [int(v) for v in self.o_mbx[r * S.MBX_COLS:(r + 1) * S.MBX_COLS]]
             frame, ts, q, cmd, address, ln = row[:6]
-            data = bytes(view[q + 10 : q + 10 + ln])
+            assert src is not None
+            data = src.bytes_at(q + 10, ln)
             self.sdo.feed(frame, ts, cmd, address, data)
         for i in (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
                   S.S_N_EVICT):
@@ -852,17 +924,18 @@ def _al_findings(out: Findings, reads: list[AlStatusRead], layout: MasterLayout)
             out.add("al-error", WARNING, f"{who} reports {r.describe()}", [r.last_frame], 1)
 
 
-def _runs_past_end(buf: np.ndarray, pos: int, end: int, fmt: int, big: bool) -> bool:
+def _runs_past_end(src: Source, pos: int, fmt: int, big: bool) -> bool:
     """Whether the record at ``pos`` is sane but longer than the bytes left (cut short)."""
     order: Literal["big", "little"] = "big" if big else "little"
+    end = src.end
     if fmt == FORMAT_PCAP:
         if end - pos < 16:
             return True
-        incl = int.from_bytes(buf[pos + 8 : pos + 12].tobytes(), order)
+        incl = int.from_bytes(src.bytes_at(pos + 8, 4), order)
         return incl <= S.MAX_RECORD and pos + 16 + incl > end
     if end - pos < 8:
         return True
-    size = int.from_bytes(buf[pos + 4 : pos + 8].tobytes(), order)
+    size = int.from_bytes(src.bytes_at(pos + 4, 4), order)
     return 12 <= size <= S.MAX_RECORD and size % 4 == 0 and pos + size > end
 
 
@@ -887,28 +960,3 @@ def _compact(values: np.ndarray) -> np.ndarray:
     if values.size and -(2**31) < values.min() and values.max() < 2**31:
         return values.astype(np.int32)
     return values
-
-
-def _fill(f: Any, buf: np.ndarray, start: int) -> tuple[int, bool]:
-    """Read into ``buf[start:]``; returns (end, eof)."""
-    view = buf.data[start:]
-    got = 0
-    while got < len(view):
-        n = f.readinto(view[got:])
-        if not n:
-            return start + got, True
-        got += n
-    return start + got, False
-
-
-def _shift_and_fill(f: Any, buf: np.ndarray, pos: int, end: int) -> tuple[np.ndarray, int, bool]:
-    """Move the unread tail to the front (growing the buffer for a large block) and read."""
-    tail = end - pos
-    if tail * 2 > buf.size:
-        grown = np.empty(buf.size * 2, np.uint8)
-        grown[:tail] = buf[pos:end]
-        buf = grown
-    else:
-        buf[:tail] = buf[pos:end]
-    end, eof = _fill(f, buf, tail)
-    return buf, end, eof

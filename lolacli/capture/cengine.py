@@ -48,6 +48,10 @@ def _library() -> ctypes.CDLL | None:
     lib.lolacli_rehash.restype = i64
     lib.lolacli_finish.argtypes = [vp, vp]
     lib.lolacli_finish.restype = None
+    lib.lolacli_guard.argtypes = []
+    lib.lolacli_guard.restype = i64
+    if lib.lolacli_guard() != 0:  # the SIGBUS guard of mapped files (lolacli_scan)
+        raise OSError("the C scanner could not install its SIGBUS handler")
     return lib
 
 
@@ -110,6 +114,10 @@ class CKernels:
             raise RuntimeError("the C scanner (lolacli.capture._cscan) is not built")
         self._lib = lib
         self._pos = ctypes.c_int64(0)
+        # the arrays of the last call and their checked _Tables: a scan of a large file
+        # calls the kernel thousands of times with the same arrays
+        self._arrays: tuple[Any, ...] = ()
+        self._tables: _Tables | None = None
 
     def scan(
         self, buf: Any, pos: int, end: int, eof: Any, fmt: int, big: Any, ns_res: Any,
@@ -119,6 +127,29 @@ class CKernels:
     ) -> tuple[int, int]:
         if buf.dtype != np.uint8 or not buf.flags.c_contiguous or not 0 <= pos <= end <= buf.size:
             raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
+        arrays = (st, cmd_counts, pk, pn, pv, sk, sc, wk, wn, wv, o_rt, o_rtts, o_rtfr,
+                  o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, ifs)
+        t = self._tables
+        if t is None or t.n_if != int(n_if) or len(arrays) != len(self._arrays) or not all(
+            a is b for a, b in zip(arrays, self._arrays, strict=True)
+        ):
+            t = self._checked(*arrays, int(n_if))
+        self._arrays, self._tables = arrays, t
+        _check_state(st, pn, ifs, int(n_if))
+        self._pos.value = int(pos)
+        status = self._lib.lolacli_scan(
+            int(buf.ctypes.data), ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
+            int(bool(big)), int(bool(ns_res)), ctypes.byref(t),
+        )
+        return int(self._pos.value), int(status)
+
+    def _checked(
+        self, st: Any, cmd_counts: Any, pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any,
+        wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any,
+        o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any, ifs: Any, n_if: int,
+    ) -> _Tables:
+        """The kernel's table of array pointers, after checking every array's type and
+        size (the arrays' sizes and places never change: a grown table is a new array)."""
         rows = o_rt.size
         p_len, s_len, w_len = pk.size, sk.size, wk.size
         if not (_pow2(p_len) and _pow2(s_len) and _pow2(w_len)) or rows <= S.CHECK_EVERY * (
@@ -137,13 +168,7 @@ class CKernels:
             _ptr(ifs, 5 * int(n_if)),
             int(n_if), p_len, s_len, w_len, rows,
         )
-        _check_state(st, pn, ifs, int(n_if))
-        self._pos.value = int(pos)
-        status = self._lib.lolacli_scan(
-            int(buf.ctypes.data), ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
-            int(bool(big)), int(bool(ns_res)), ctypes.byref(t),
-        )
-        return int(self._pos.value), int(status)
+        return t
 
     def rehash(
         self, ok: Any, on: Any, ov: Any, nk: Any, nn: Any, nv: Any, keep_empty: Any,

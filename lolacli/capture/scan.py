@@ -102,6 +102,9 @@ ST_BLOCK = 2
 ST_GROW = 3
 ST_CORRUPT = 4
 ST_DONE = 5
+#: only the C engine, on a mapped file that shrank under it (a bus error caught in
+#: _cscan.c): the position is the record being read, the driver re-reads the file size
+ST_FAULT = 6
 
 MODE_LOGICAL = 0
 MODE_SIGNATURE = 1
@@ -130,6 +133,9 @@ KIND_AL_STATUS = 2
 #: observations one record may add at most (two per datagram: a WKC and an AL status)
 OBS_PER_RECORD = 2 * MAX_DGRAMS
 MAX_RECORD = 16 * 1024 * 1024
+#: the C engine reads one byte per this many of a record, from its end, before counting
+#: it (a page of a mapped file that is gone faults there, before any counter changed)
+TOUCH_STEP = 4096
 BURST_GAP_NS = 1_000_000
 #: direction inference: a frame that looks exactly like a pending one (WKCs not higher)
 #: is its echo only within ECHO_ROUND_TRIPS x the running round trip (at least

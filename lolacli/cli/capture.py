@@ -42,9 +42,22 @@ EngineOption = Annotated[
 ]
 
 
+CapturesArgument = Annotated[
+    list[Path],
+    typer.Argument(help="Capture files (pcap or pcapng), or folders of them. One file: one "
+                   "report. Several, or a folder: a row, or a JSON line "
+                   "(lolacli.capture-batch/1), per file.", show_default=False),
+]
+JobsOption = Annotated[
+    int | None,
+    typer.Option("--jobs", "-j", min=1,
+                 help="Captures analysed at once (several files). Default: the CPUs."),
+]
+
+
 @app.command("analyze")
 def analyze_cmd(
-    file: CaptureArgument,
+    files: CapturesArgument,
     eni: EniCheckOption = None,
     fmt: FormatOption = OutputFormat.human,
     plot: PlotOption = None,
@@ -53,26 +66,26 @@ def analyze_cmd(
     timeout: TimeoutOption = None,
     show_all: AllOption = False,
     engine: EngineOption = "auto",
+    jobs: JobsOption = None,
 ) -> None:
     """Out/return pairing, round trip, cycle period and jitter, lost and late frames, WKC
     verdict, AL states, SDO transactions and DC diagnostics of a capture, with findings.
     Exit 1 when a finding is a failure (lost frames or WKC mismatches over the thresholds,
     a bus that never answered, no EtherCAT traffic, slaves not in OP after the master asked
     for OP, nothing checked against the --eni); frames still in flight when the capture
-    ends are not lost."""
+    ends are not lost. Several captures or a folder: a row (JSON: a line) per file, the
+    exit code the worst file's."""
     from lolacli.capture.analyze import analyze_file
     from lolacli.interrupt import stop_signals
 
     timeout_ns = _timeout_ns(timeout)
+    if len(files) != 1 or (file := files[0]).is_dir():
+        return _analyze_many(files, eni, fmt, plot, engine, timeout_ns, max_lost, max_wkc, jobs)
     if plot is not None:
         from lolacli.capture.plots import plot_folder
 
         plot_folder(plot)  # a bad folder fails before the report is written
-    model = None
-    if eni is not None:
-        from lolacli.files import load_eni
-
-        model = load_eni(eni)
+    model = _eni_model(eni)
     # Ctrl-C or SIGTERM during the scan: the report of the frames read so far, then 130/143
     with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
         report = analyze_file(
@@ -175,6 +188,30 @@ def _render_export(data: dict[str, Any]) -> None:
             "(as capture analyze gives them)")
         for f in findings:
             say(console, f"  {f['severity']}: {f['message']}", hang=4)
+
+
+def _analyze_many(files: list[Path], eni: Path | None, fmt: OutputFormat, plot: Path | None,
+                  engine: str, timeout_ns: int | None, max_lost: int, max_wkc: int,
+                  jobs: int | None) -> None:
+    """``capture analyze`` of several captures or a folder (lolacli.cli.capture_batch)."""
+    from lolacli.cli.capture_batch import analyze_batch
+
+    if plot is not None:
+        raise UsageError("--plot takes one capture, not several")
+    model = _eni_model(eni)
+    code = analyze_batch(files, json_lines=fmt is OutputFormat.json, eni=model, engine=engine,
+                         timeout_ns=timeout_ns, max_lost=max_lost, max_wkc=max_wkc, jobs=jobs)
+    if code:
+        raise typer.Exit(code)
+
+
+def _eni_model(eni: Path | None) -> Any:
+    """The --eni's model, None without one."""
+    if eni is None:
+        return None
+    from lolacli.files import load_eni
+
+    return load_eni(eni)
 
 
 def _timeout_ns(timeout: str | None) -> int | None:
