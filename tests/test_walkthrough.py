@@ -1,7 +1,8 @@
-"""docs/walkthrough.md runs as written: every ```console block's commands, in order, from an
-empty folder, inside a network namespace of its own (the page's veth pair is made there by
-the page's own ``ip link`` commands, so nothing of it touches the host's interfaces), with
-``lolacli`` this checkout's. And the README's first command writes its report.
+"""docs/walkthrough.md and docs/ci.md run as written: every ```console block's commands,
+in order, from an empty folder, with ``lolacli`` this checkout's; the walkthrough inside a
+network namespace of its own (its veth pair is made there by the page's own ``ip link``
+commands, so nothing of it touches the host's interfaces). And the README's first
+command writes its report.
 
 How a page's block is read (the page says the same to its reader):
 
@@ -11,8 +12,11 @@ How a page's block is read (the page says the same to its reader):
 * A command ending in `` &`` is a job: started in the background and taken as ready once it
   printed its first line; ``kill [-SIG] %N`` stops job N (started N-th) and waits for it.
 * A trailing ``# exit 0 or 1 …`` comment names the exit codes the step may end with (a
-  verdict that depends on the host's timing); any other command must exit 0, and the last
-  line of the output the page shows for it must be in what it printed.
+  verdict that depends on the host's timing, which must then say PASS for 0 and FAIL for
+  1; ``# exit 1``: it must fail); any other
+  command must exit 0. Where one exit code is allowed, the output the page shows after
+  its last ``…`` must be in what the command printed (words compared, so wrapping does
+  not matter).
 
 Needs root, iproute2 and dumpcap (the tshark package); skipped with the reason otherwise.
 """
@@ -38,7 +42,7 @@ from tests.live import PREFIX, ROOT, ip, need_root
 
 PAGE = ROOT / "docs" / "walkthrough.md"
 _BLOCK = re.compile(r"```console\n(.*?)```", re.S)
-_EXIT = re.compile(r"\s#\s*exit\s+(\d+(?:\s+or\s+\d+)*)\b[^'\"]*$")
+_EXIT = re.compile(r"\s#\s*exit\s+(\d+(?:\s+or\s+\d+)*)\b")
 _KILL = re.compile(r"^kill(?:\s+-(\w+))?\s+%(\d+)$")
 _HEREDOC = re.compile(r"<<-?\s*'?\"?(\w+)'?\"?")
 #: a job's first line, at most this long after its start
@@ -142,14 +146,18 @@ def _words(text: str) -> str:
     return " ".join(text.split())
 
 
-@pytest.mark.root
-@pytest.mark.timeout(400)
-def test_the_walkthrough_runs(tmp_path: Path) -> None:
-    need_root("the walkthrough's veth pair")
-    if shutil.which("dumpcap") is None:
-        pytest.skip("needs dumpcap (Debian package tshark / wireshark-common)")
-    page = steps(PAGE.read_text(encoding="utf-8"))
-    # `lolacli` is this checkout's, as `pip install -e .` makes it
+def _shown_tail(step: Step) -> str:
+    """The output the page shows after its last ``…`` (all of it without one), words only:
+    a wrapped line reads the same as the terminal's."""
+    tail: list[str] = []
+    for line in step.output:
+        tail = [] if line.strip() == "…" else [*tail, line]
+    return _words("\n".join(tail))
+
+
+def run_page(page: Path, tmp_path: Path, netns: str | None = None) -> Path:
+    """Run ``page``'s commands in order from an empty folder (inside ``netns`` when given),
+    ``lolacli`` this checkout's as ``pip install -e .`` makes it; the folder."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     wrapper = bin_dir / "lolacli"
@@ -161,14 +169,12 @@ def test_the_walkthrough_runs(tmp_path: Path) -> None:
     env["COLUMNS"] = "80"
     work = tmp_path / "work"
     work.mkdir()
-    (work / "eni_examples").symlink_to(ROOT / "eni_examples")  # the page runs in the checkout
-    netns = f"{PREFIX}w{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
-    ip("netns", "add", netns)
+    (work / "eni_examples").symlink_to(ROOT / "eni_examples")  # the pages run in the checkout
+    shell = ["ip", "netns", "exec", netns, "bash", "-c"] if netns else ["bash", "-c"]
     jobs: list[Job] = []
     log: list[str] = []
     try:
-        for step in page:
-            shell = ["ip", "netns", "exec", netns, "bash", "-c"]
+        for step in steps(page.read_text(encoding="utf-8")):
             if kill := _KILL.match(step.command):
                 job = jobs[int(kill.group(2)) - 1]
                 sig = signal.Signals[f"SIG{kill.group(1) or 'TERM'}"]
@@ -196,24 +202,50 @@ def test_the_walkthrough_runs(tmp_path: Path) -> None:
             assert done.returncode in step.exits, (step.command, done.returncode,
                                                    printed[-3000:], log)
             assert "Traceback" not in printed, printed[-3000:]
-            shown = [line for line in step.output if line.strip() != "…"]
-            if step.exits == {0} and shown and step.output[-1].strip() != "…":
-                assert _words(shown[-1]) in _words(printed), (step.command, shown[-1],
-                                                             printed[-3000:])
-        # what the page's last steps made: the capture and the report over all three inputs
-        doc = json.loads((work / "report" / "lola.json").read_text())
-        assert doc["schema"] == "lolacli.report/1"
-        assert {"verdict", "network", "timing", "bus", "comparison"} <= set(doc["sections"])
-        assert set(doc["headline"]) == {"bus.pcapng", "simulation"}
-        assert doc["headline"]["bus.pcapng"]["round_trip_p50_us"] > 0
-        html = (work / "report" / "lola.html").read_text()
-        assert html.startswith("<!DOCTYPE html>") and "<svg" in html
+            if len(step.exits) == 1 and (tail := _shown_tail(step)):
+                assert tail in _words(printed), (step.command, tail, printed[-3000:])
+            elif len(step.exits) > 1:  # a verdict that depends on the host: the one it says
+                verdict = "Verdict: PASS" if done.returncode == 0 else "Verdict: FAIL"
+                assert verdict in printed, (step.command, done.returncode, printed[-3000:])
     finally:
         for job in jobs:
             if job.proc.poll() is None:
                 job.proc.kill()
                 job.proc.wait()
+    return work
+
+
+@pytest.mark.root
+@pytest.mark.timeout(400)
+def test_the_walkthrough_runs(tmp_path: Path) -> None:
+    need_root("the walkthrough's veth pair")
+    if shutil.which("dumpcap") is None:
+        pytest.skip("needs dumpcap (Debian package tshark / wireshark-common)")
+    netns = f"{PREFIX}w{os.getpid() % 100000:05d}{time.monotonic_ns() % 100:02d}"
+    ip("netns", "add", netns)
+    try:
+        work = run_page(PAGE, tmp_path, netns)
+    finally:
         subprocess.run(["ip", "netns", "del", netns], capture_output=True, check=False)
+    # what the page's last steps made: the report over the ENI, the capture and a simulation
+    doc = json.loads((work / "report" / "lola.json").read_text())
+    assert doc["schema"] == "lolacli.report/1"
+    assert {"verdict", "network", "timing", "bus", "comparison"} <= set(doc["sections"])
+    assert set(doc["headline"]) == {"bus.pcapng", "simulation"}
+    assert doc["headline"]["bus.pcapng"]["round_trip_p50_us"] > 0
+    html = (work / "report" / "lola.html").read_text()
+    assert html.startswith("<!DOCTYPE html>") and "<svg" in html
+
+
+def test_the_ci_page_runs(tmp_path: Path) -> None:
+    """docs/ci.md's commands (no bus: the simulation, sdo check in process, the gate)."""
+    work = run_page(ROOT / "docs" / "ci.md", tmp_path)
+    worse = json.loads((work / "worse" / "lola.json").read_text())
+    assert {r["figure"] for r in worse["regressions"]} == {
+        "simulation: round trip p50", "simulation: round trip p99",
+        "simulation: max rate, bus only"}
+    now = json.loads((work / "now" / "lola.json").read_text())
+    assert now["gate"]["compared"] and not now["regressions"]
 
 
 def test_the_readme_first_command_writes_its_report(tmp_path: Path) -> None:
