@@ -84,3 +84,47 @@ def test_bad_link_text_is_refused(text: str) -> None:
 def test_bad_link_beyond_the_chain_is_refused() -> None:
     with pytest.raises(UsageError, match="--bad-link 26: the chain has slaves 1..25"):
         make_chain(LOLA_ENI, EmulateOptions(bad_link=(26, 0.1)))
+
+
+@pytest.mark.parametrize("k", [1, 9, 25])
+def test_the_capture_of_a_bad_link_bus_names_the_same_link(tmp_path, k: int) -> None:
+    """`bus diag` on a bus with a bad link, its frames captured (pcapng, as the master's
+    side sees them): `capture analyze` finds the counters read in the captured answers
+    and names the link diag named, and counts the lost frames."""
+    from lolacli.capture.analyze import analyze_file
+    from lolacli.master.record import PcapngRecorder
+
+    chain = make_chain(LOLA_ENI, EmulateOptions(bad_link=(k, 0.2), seed=3))
+    transport = ChainTransport(chain)
+    pcap = tmp_path / "bad-link.pcapng"
+    recorder = PcapngRecorder(pcap)
+    transport.taps.append(recorder)
+    report = diagnose(transport, options=SHORT)
+    recorder.close()
+    analysis = analyze_file(pcap)
+    doc = analysis.to_dict()
+    link = doc["error_counters"]["suspect_link"]
+    assert report.suspect is not None
+    assert (link["upstream"], link["downstream"], link["port"]) == (
+        report.suspect.upstream, report.suspect.downstream, report.suspect.port) == (k - 1, k, 0)
+    assert doc["error_counters"]["positions_from"] == "aprd"
+    assert doc["lost_frames"] >= report.probes_lost > 0
+    bad = [f for f in doc["findings"] if f["kind"] == "bad-link"]
+    assert len(bad) == 1 and f"and slave {k} " in bad[0]["message"]
+
+
+def test_a_clean_capture_has_no_suspect(tmp_path) -> None:
+    from lolacli.capture.analyze import analyze_file
+    from lolacli.master.record import PcapngRecorder
+
+    transport = ChainTransport(make_chain(LOLA_ENI, EmulateOptions()))
+    pcap = tmp_path / "clean.pcapng"
+    recorder = PcapngRecorder(pcap)
+    transport.taps.append(recorder)
+    diagnose(transport, options=SHORT)
+    recorder.close()
+    doc = analyze_file(pcap).to_dict()
+    # every slave three times: the scan, before and after the interval
+    assert doc["error_counters"]["reads"] == 3 * N
+    assert doc["error_counters"]["suspect_link"] is None
+    assert not [f for f in doc["findings"] if f["kind"] == "bad-link"]
