@@ -25,13 +25,14 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from lolacli.capture import scan as S
+from lolacli.capture.counters import CounterReads, error_counter_reads
 from lolacli.capture.fast import choose_engine, kernels
 from lolacli.capture.layout import AlStatusRead, MasterLayout, last_al_status
 from lolacli.capture.reader import (
@@ -131,6 +132,8 @@ class CaptureReport:
     # the rules of the pass the report is of (direction, cyclic-stream mode, signature):
     # :func:`stream_pairs` reads the file again with them
     rules: tuple[int, int, int] = (S.DIR_AUTO, S.MODE_LOGICAL, 0)
+    # the ESC error counters the capture's reads of 0x0300 carry (None: no such reads)
+    error_counters: CounterReads | None = None
 
     @property
     def lost_frames(self) -> int:
@@ -223,6 +226,7 @@ class CaptureReport:
             "mailbox": _mailbox_dict(self.sdo),
             "dc": self.dc,
             "time_span_us": self.time_span_ns / 1000.0,
+            "error_counters": self.error_counters.to_dict() if self.error_counters else None,
             "other": {
                 "vlan_frames": c["vlan_frames"],
                 "udp_frames": c["udp_frames"],
@@ -323,7 +327,26 @@ def analyze_file(
     if stopped_at is None and run.st[S.S_LOGICAL_OUT] == 0 and run.st[S.S_OUT] > 0:
         run = scan_pass(int(run.st[S.S_DIRMODE]), S.MODE_SIGNATURE, run.top_stream())
         stopped_at = run.stopped_by_signal_at
-    return run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
+    report = run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
+    if stopped_at is None:
+        report = _counter_findings(report, error_counter_reads(reader.path, eni=eni,
+                                                               should_stop=should_stop))
+    return report
+
+
+def _counter_findings(report: CaptureReport, counters: CounterReads | None) -> CaptureReport:
+    """The link where errors enter, from the counters the capture carries."""
+    report = replace(report, error_counters=counters)
+    link = counters.suspect if counters is not None else None
+    if link is None:
+        return report
+    upstream = "the master" if link.upstream == 0 else f"slave {link.upstream}"
+    extra = Findings()
+    extra.add("bad-link", WARNING,
+              f"errors enter the line between {upstream} and slave {link.downstream} "
+              f"(slave {link.at} port {link.port}, from the error counters read in the "
+              f"capture): {'; '.join(link.evidence)}", slave=link.downstream, count=1)
+    return replace(report, findings=[*report.findings, *extra.ordered()])
 
 
 #: ``on_pairs(frames_read, round_trip_ns, returned_at_ns, meta)`` of :func:`stream_pairs`:

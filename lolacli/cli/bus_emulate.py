@@ -42,6 +42,12 @@ def _link_down(text: str) -> tuple[int, float]:
     return parse_link_down(text)
 
 
+def _bad_link(text: str) -> tuple[int, float]:
+    from lolacli.emulator.run import parse_bad_link
+
+    return parse_bad_link(text)
+
+
 def _cpu(text: str) -> int | str:
     from lolacli.emulator.run import parse_cpu
 
@@ -79,6 +85,16 @@ LinkDownOption = Annotated[
         callback=_usage("--link-down", _link_down),
         help="Cut the cable after slave position K (0: all), from the start or T "
         "after serving starts (seconds, or 500ms).",
+    ),
+]
+BadLinkOption = Annotated[
+    str | None,
+    typer.Option(
+        "--bad-link",
+        metavar="K[:P]",
+        callback=_usage("--bad-link", _bad_link),
+        help="A bad cable into slave position K: it damages a frame with probability P "
+        "(default 0.01): RX error counters rise from slave K on, the master loses the frame.",
     ),
 ]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")]
@@ -126,6 +142,7 @@ def emulate_cmd(
     seed: SeedOption = 0,
     foe_password: FoePasswordOption = 0,
     link_down: LinkDownOption = None,
+    bad_link: BadLinkOption = None,
     duration_s: DurationOption = 0.0,
     quiet: QuietOption = False,
     realtime_priority: PriorityOption = None,
@@ -143,6 +160,7 @@ def emulate_cmd(
     options = EmulateOptions(
         drop_p, tuple(stuck_safeop or ()), drift_ppb, seed,
         cut[0] if cut else None, cut[1] if cut else 0.0, corrupt_p, foe_password,
+        bad_link=bad_link,  # type: ignore[arg-type]  # (K, P) from its callback
     )
     emulation = Emulation(
         load_eni(eni if eni is not None else default_eni()), options,

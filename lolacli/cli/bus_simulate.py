@@ -50,6 +50,15 @@ LinkDown = Annotated[
         "into the cyclic run (seconds, or 500ms).",
     ),
 ]
+BadLink = Annotated[
+    str | None,
+    typer.Option(
+        "--bad-link",
+        metavar="K[:P]",
+        help="A bad cable into slave K damages a frame with probability P (default "
+        "0.01): the master loses it, RX error counters rise from slave K on.",
+    ),
+]
 Shm = Annotated[
     str | None,
     typer.Option(
@@ -152,6 +161,7 @@ def simulate_cmd(
     drop_p: DropOption = 0.0,
     stuck_safeop: StuckSafeopOption = None,
     link_down: LinkDown = None,
+    bad_link: BadLink = None,
     drift_ppb: DriftOption = 0,
     seed: SeedOption = 0,
     shm: Shm = None,
@@ -187,6 +197,7 @@ def simulate_cmd(
 
     options = options_from_cli(
         rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down,
+        bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
         pcap=pcap, mcap=mcap, drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
         middleware=not no_middleware, shm=shm, pace=pace, iface=iface,

@@ -199,6 +199,10 @@ class Chain:
         faults = self.faults
         # a damaged frame never takes a plan
         damaged = faults.corrupt(len(self._active)) if faults.corrupt_probability > 0 else None
+        discarded = False  # a bad link's frame: the master's NIC drops its bad FCS
+        if damaged is None and faults.bad_link is not None:
+            damaged = faults.bad_link_hit(len(self._active))
+            discarded = damaged is not None
         plan = self.planner.lookup(frame, defer_cycles) if damaged is None else None
         if plan is not None:
             if self._held is not None and not plan.defers_writes:
@@ -244,6 +248,9 @@ class Chain:
                 self.run_deferred_cycles()
         elif self._pdi and not defer_cycles:
             self._run_pdi()
+        if discarded:
+            self.stats.dropped += 1
+            return None, 0
         buf[6] |= SOURCE_MAC_LOCAL_BIT
         self.stats.replies += 1
         return bytes(buf), self._delay_ns(tuple(slot.length for slot in found))

@@ -127,6 +127,14 @@ class Faults:
     the marked frame as a forwarded RX error (0x0308 + port: port 0 on the way out,
     port 1 on the way back). The master still gets the frame back, with the working
     counters of the slaves before the damage only.
+
+    ``bad_link`` (a 1-based position K) with ``bad_link_probability``: a bad cable into
+    slave K (from slave K-1, the master for K = 1). A frame it damages is counted as
+    ``corrupt`` counts it (slave K's invalid frame counter 0x0300 on port 0, forwarded RX
+    errors 0x0308/0x0309 further on), and it reaches the master with the bad FCS the ESCs
+    keep marked, so the master's NIC discards it: the master sees a lost frame, as on a
+    real line. Only the way out is damaged, so the first counter that rises is always
+    slave K's port 0.
     """
 
     drop_probability: float = 0.0
@@ -134,6 +142,8 @@ class Faults:
     rng: random.Random = field(default_factory=random.Random)
     corrupt_probability: float = 0.0
     corrupt_at_slave: int | None = None
+    bad_link: int | None = None
+    bad_link_probability: float = 0.0
 
     def __post_init__(self) -> None:
         self.rng.seed(self.seed)
@@ -148,6 +158,14 @@ class Faults:
         if self.corrupt_at_slave is not None:
             return min(self.corrupt_at_slave, slaves)
         return self.rng.randrange(slaves) if slaves else 0
+
+    def bad_link_hit(self, slaves: int) -> int | None:
+        """How many of ``slaves`` process a frame before the bad link damages it; ``None``:
+        it passes intact (or the bad link is beyond the line's end)."""
+        link = self.bad_link
+        if link is None or link > slaves or self.bad_link_probability <= 0:
+            return None
+        return link - 1 if self.rng.random() < self.bad_link_probability else None
 
     @staticmethod
     def count_lost(active: list[Esc]) -> None:

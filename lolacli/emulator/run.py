@@ -33,6 +33,7 @@ class EmulateOptions:
     corrupt_probability: float = 0.0
     foe_password: int = 0  # every slave's FoE password (BOOT: firmware read and write)
     timing: ChainTiming | None = None  # the line's delays (None: the timing model's defaults)
+    bad_link: tuple[int, float] | None = None  # (K, P): the cable into slave K damages frames
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,10 +82,15 @@ def make_chain(eni: Eni, options: EmulateOptions, *, esi: Sequence[EsiFile] = ()
         raise UsageError(f"corrupt probability {options.corrupt_probability} is not in [0, 1]")
     if not 0 <= options.foe_password <= 0xFFFF_FFFF:
         raise UsageError(f"FoE password {options.foe_password} is not a 32-bit unsigned number")
+    bad = options.bad_link
+    if bad is not None and not 1 <= bad[0] <= len(eni.slaves):
+        raise UsageError(f"--bad-link {bad[0]}: the chain has slaves 1..{len(eni.slaves)}")
     faults = Faults(
         drop_probability=options.drop_probability,
         seed=options.seed,
         corrupt_probability=options.corrupt_probability,
+        bad_link=bad[0] if bad else None,
+        bad_link_probability=bad[1] if bad else 0.0,
     )
     try:  # the ENI/ESI readers take any integer; SII and register fields have fixed widths
         chain = build_chain(
@@ -146,6 +152,25 @@ def parse_link_down(text: str) -> tuple[int, float]:
     if position < 0 or not 0.0 <= seconds < 1e9 or (at and seconds == 0.0):
         raise UsageError(f"--link-down {text!r}: K >= 0, SECONDS > 0")
     return position, seconds
+
+
+#: --bad-link K without P: one frame in a hundred damaged
+DEFAULT_BAD_LINK_P = 0.01
+
+
+def parse_bad_link(text: str) -> tuple[int, float]:
+    """``K`` or ``K:P`` -> (position K >= 1, probability P in (0, 1]); UsageError."""
+    position_text, colon, p_text = text.partition(":")
+    try:
+        position = int(position_text)
+        p = float(p_text) if colon else DEFAULT_BAD_LINK_P
+    except ValueError:
+        raise UsageError(
+            f"--bad-link {text!r}: expected K or K:P (slave position, probability)"
+        ) from None
+    if position < 1 or not 0.0 < p <= 1.0:
+        raise UsageError(f"--bad-link {text!r}: K >= 1 and 0 < P <= 1")
+    return position, p
 
 
 def state_summary(chain: Chain) -> str:

@@ -47,6 +47,7 @@ from lolacli.master.core import Master, MasterOptions, Refusal
 from lolacli.master.transport import Transport
 from lolacli.text import transition_text
 from lolacli.wire.commands import Command
+from lolacli.wire.error_counters import ErrorCounters, decode_error_counters
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import (
     AL_ERROR_INDICATOR,
@@ -114,53 +115,6 @@ def decode_ports(dl_status: int, port_descriptor: int) -> tuple[Port, ...]:
             bool(dl_status >> (9 + 2 * p) & 1),
         )
         for p in range(4)
-    )
-
-
-@dataclass(frozen=True, slots=True)
-class ErrorCounters:
-    """Registers 0x0300-0x0313 (ETG.1000.4 Table 40; ET1100 datasheet)."""
-
-    invalid_frame: tuple[int, int, int, int]  # 0x0300 + 2p
-    rx_error: tuple[int, int, int, int]  # 0x0301 + 2p
-    forwarded_rx_error: tuple[int, int, int, int]  # 0x0308 + p
-    processing_unit_error: int  # 0x030C
-    pdi_error: int  # 0x030D
-    lost_link: tuple[int, int, int, int]  # 0x0310 + p
-
-    @property
-    def total(self) -> int:
-        return (
-            sum(self.invalid_frame)
-            + sum(self.rx_error)
-            + sum(self.forwarded_rx_error)
-            + self.processing_unit_error
-            + self.pdi_error
-            + sum(self.lost_link)
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "invalid_frame": list(self.invalid_frame),
-            "rx_error": list(self.rx_error),
-            "forwarded_rx_error": list(self.forwarded_rx_error),
-            "processing_unit_error": self.processing_unit_error,
-            "pdi_error": self.pdi_error,
-            "lost_link": list(self.lost_link),
-        }
-
-
-def decode_error_counters(raw: bytes) -> ErrorCounters:
-    """The 20 bytes read from 0x0300."""
-    if len(raw) < 20:
-        raise ValueError("error counters: 20 bytes from 0x0300 expected")
-    return ErrorCounters(
-        (raw[0], raw[2], raw[4], raw[6]),
-        (raw[1], raw[3], raw[5], raw[7]),
-        (raw[8], raw[9], raw[10], raw[11]),
-        raw[12],
-        raw[13],
-        (raw[16], raw[17], raw[18], raw[19]),
     )
 
 

@@ -22,6 +22,7 @@ class SimulateOptions:
     drop_probability: float = 0.0
     stuck_safeop: tuple[int, ...] = ()
     link_down: tuple[int, float] | None = None  # (after slave K, seconds into the run; 0: start)
+    bad_link: tuple[int, float] | None = None  # (K, P): the cable into slave K damages frames
     drift_ppb: int = 0
     seed: int = 0
     middleware: bool = True  # Bus Variables, drives enabled, joints moving
@@ -103,6 +104,8 @@ def check(eni: Eni, options: SimulateOptions) -> None:
     for position in options.stuck_safeop:
         if not 1 <= position <= n:
             raise UsageError(f"--stuck-safeop {position}: expected a slave position 1 to {n}")
+    if options.bad_link is not None and not 1 <= options.bad_link[0] <= n:
+        raise UsageError(f"--bad-link {options.bad_link[0]}: expected a slave position 1 to {n}")
     if options.link_down is not None:
         after, at_s = options.link_down
         if not 0 <= after <= n:
@@ -128,6 +131,7 @@ def _check_live(options: SimulateOptions) -> None:
             ("--drop-p", options.drop_probability > 0),
             ("--stuck-safeop", bool(options.stuck_safeop)),
             ("--link-down", options.link_down is not None),
+            ("--bad-link", options.bad_link is not None),
             ("--drift-ppb", options.drift_ppb != 0),
         )
         if given
@@ -176,6 +180,7 @@ def options_from_cli(
     duration: str | None = None,
     cycles: int | None = None,
     link_down: str | None = None,
+    bad_link: str | None = None,
     set_values: Sequence[str] = (),
     stuck_safeop: Sequence[int] = (),
     watch: Sequence[str] = (),
@@ -188,7 +193,7 @@ def options_from_cli(
     ``VARIABLE=VALUE``, ``host_latency_us`` as ``MEAN[:STD]`` (µs), ``cable_m`` as ``M``
     or ``K=M`` items; the other ``fields`` as they are. UsageError for what does not
     parse or contradicts itself."""
-    from lolacli.emulator.run import parse_link_down
+    from lolacli.emulator.run import parse_bad_link, parse_link_down
     from lolacli.timing.model import parse_cable_m, parse_duration_ns, parse_host_latency
 
     if duration is not None and cycles is not None:
@@ -211,6 +216,7 @@ def options_from_cli(
         rate_hz=rate_hz,
         cycles=n_cycles,
         link_down=parse_link_down(link_down) if link_down is not None else None,
+        bad_link=parse_bad_link(bad_link) if bad_link is not None else None,
         set_values=tuple(pairs),
         stuck_safeop=tuple(stuck_safeop),
         watch=tuple(watch),

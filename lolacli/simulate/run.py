@@ -88,6 +88,7 @@ def emulate_options(options: SimulateOptions) -> EmulateOptions:
         seed=options.seed,
         link_down_after=cut[0] if cut else None,
         link_down_at_s=cut[1] if cut else 0.0,
+        bad_link=options.bad_link,
     )
 
 
