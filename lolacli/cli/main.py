@@ -12,8 +12,11 @@ from lolacli import __version__
 from lolacli.cli import (  # noqa: F401
     bus,
     bus_emulate,
+    bus_reg,
     bus_scan,
+    bus_sii,
     bus_simulate,
+    bus_state,
     bus_timing,
     capture,
     eni,
