@@ -162,6 +162,7 @@ def test_alias_shows_in_scan_and_survives_a_reload(bus: LiveBus) -> None:
         code_rl3, _doc3, _e = _cli(bus, "bus", "reg", "write", "3", "sii_control_status",
                                    "0x0400")  # fmt: skip
         reloaded = _aliases(bus)
+        scan_text = _human(bus, "bus", "scan", "--no-sii")
         human = _human(bus, "bus", "alias", "5", "0")
     finally:
         stop_emulator(proc)
@@ -179,6 +180,7 @@ def test_alias_shows_in_scan_and_survives_a_reload(bus: LiveBus) -> None:
     assert code_rl == 0 and code_rl3 == 0, err_rl
     assert reload4["written"] == "0004" and reload4["verified"] is False  # done: cleared
     assert reloaded == [0, 0, 0x1234, 77] + [0] * 21
+    assert "alias 4660" in scan_text.stdout and "alias 77" in scan_text.stdout
     assert human.returncode == 0, human.stderr
     assert human.stdout.startswith("slave 5: alias 0x0000 (0) -> 0x0000 (0) in the EEPROM")
 
