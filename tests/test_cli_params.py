@@ -108,7 +108,10 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--filter": "variable names or frame terms",
     "--format": "eni vars also writes csv; report writes an html or md page",
     "--capture": "bus timing's measured total, or one of a report's measurements",
-    "--output": "where foe read writes the file, or where the report's page goes",
+    "--output": "where foe read writes the file, where the report's page goes, or where bus "
+    "sii read saves the image",
+    "--force": "what is overridden: bus simulate's, a configuration register (bus reg write), "
+    "an image's checks (bus sii write)",
     "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
     "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
 }

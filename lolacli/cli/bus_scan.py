@@ -112,7 +112,8 @@ def _render(doc: dict[str, Any]) -> None:
     for s in doc["slaves"]:
         table.add_row(
             str(s["position"]),
-            station(s["station_address"]) if s["station_address"] else "none",
+            (station(s["station_address"]) if s["station_address"] else "none")
+            + (f"\nalias {s['station_alias']}" if s["station_alias"] else ""),
             _text(" ".join((s["name"] or ("-" if s["answered"] else "no answer")).split())),
             _al_state(s),
             _ports(s),

@@ -27,12 +27,20 @@ import struct
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass
 
-from lolacli.errors import WireError
+from lolacli.errors import TransportError, WireError
 from lolacli.master.core import Master
 from lolacli.wire.commands import Command
 from lolacli.wire.frame import Datagram
 from lolacli.wire.registers import SII_COMMAND_SHIFT, Register, SiiCommand, SiiConfig, SiiStatus
-from lolacli.wire.sii import SiiInfo, SiiWords, read_sii_header, read_sii_names
+from lolacli.wire.sii import (
+    CATEGORY_END,
+    HEADER_WORDS,
+    MAX_WORDS,
+    SiiInfo,
+    SiiWords,
+    read_sii_header,
+    read_sii_names,
+)
 
 #: status bits at 0x0502 that fail a read
 READ_ERROR = SiiStatus.COMMAND_ERROR
@@ -68,7 +76,7 @@ def read_sii(master: Master, addresses: Sequence[int], *, auto_increment: bool) 
     """The SII of the slaves at ``addresses`` (auto-increment ADPs ``0, 0xFFFF, ...`` or
     station addresses), in their order. Errors are per slave (:class:`SiiRead`); only the
     transport's own failures raise."""
-    write, read = (Command.APWR, Command.APRD) if auto_increment else (Command.FPWR, Command.FPRD)
+    write, read = _commands(auto_increment)
     configs = master.exchange_many(
         [Datagram.physical(read, a, Register.SII_CONFIG, 1) for a in addresses]
     )
@@ -156,4 +164,184 @@ def _read_words(
     return out
 
 
-__all__ = ["POLLS", "READ_ERROR", "SiiRead", "read_sii"]
+# ------------------------------------------------------------ one slave's whole image
+def _image_walk(words: SiiWords) -> Generator[int, bytes, bytes]:
+    """The header (64 words), then category after category up to and with the 0xFFFF end
+    word (or :data:`~lolacli.wire.sii.MAX_WORDS`): the image as a tool saves it."""
+    yield from words.read(0, HEADER_WORDS)
+    address = HEADER_WORDS
+    while address < MAX_WORDS:
+        head = yield from words.read(address, 1)
+        if _U16.unpack(head)[0] == CATEGORY_END:
+            address += 1
+            break
+        length = _U16.unpack((yield from words.read(address + 1, 1)))[0]
+        yield from words.read(address + 2, length)
+        address += 2 + length
+    return b"".join(words.words.get(a, b"\xff\xff") for a in range(min(address, MAX_WORDS)))
+
+
+def read_images(
+    master: Master, addresses: Sequence[int], *, auto_increment: bool
+) -> list[bytes | str]:
+    """Whole SII images (header and categories up to the end marker) of the slaves at
+    ``addresses``, all at once as :func:`read_sii` reads; per slave the image or why it
+    does not read."""
+    write, read = _commands(auto_increment)
+    configs = master.exchange_many(
+        [Datagram.physical(read, a, Register.SII_CONFIG, 1) for a in addresses]
+    )
+    held = [
+        a
+        for a, d in zip(addresses, configs, strict=True)
+        if d.wkc == 1 and d.data[0] & SiiConfig.PDI_OFFERED
+    ]
+    out: list[bytes | str] = ["not read"] * len(addresses)
+    _owner(master, write, held, to_pdi=False)
+    try:
+        walks = {i: _image_walk(SiiWords()) for i in range(len(addresses))}
+        pending = {i: next(walk) for i, walk in walks.items()}
+        while pending:
+            asks = [(i, addresses[i], word) for i, word in pending.items()]
+            for i, got in _read_words(master, write, read, asks).items():
+                if isinstance(got, str):
+                    out[i] = got
+                    del pending[i]
+                    continue
+                try:
+                    pending[i] = walks[i].send(got)
+                except StopIteration as done:
+                    out[i] = bytes(done.value)
+                    del pending[i]
+    finally:
+        _owner(master, write, held, to_pdi=True)
+    return out
+
+
+def read_image(master: Master, address: int, *, auto_increment: bool) -> bytes:
+    """One slave's whole SII image; TransportError when the EEPROM does not read."""
+    got = read_images(master, [address], auto_increment=auto_increment)[0]
+    if isinstance(got, str):
+        raise TransportError(got)
+    return got
+
+
+def read_words(
+    master: Master, address: int, first_word: int, count: int, *, auto_increment: bool
+) -> bytes:
+    """``count`` words of one slave's EEPROM from ``first_word``; TransportError when they
+    do not read."""
+
+    def walk(words: SiiWords) -> Generator[int, bytes, bytes]:
+        return (yield from words.read(first_word, count))
+
+    write, read = _commands(auto_increment)
+    held = _held(master, read, address)
+    _owner(master, write, held, to_pdi=False)
+    try:
+        gen = walk(SiiWords())
+        word = next(gen)
+        while True:
+            got = _read_words(master, write, read, [(0, address, word)])[0]
+            if isinstance(got, str):
+                raise TransportError(got)
+            try:
+                word = gen.send(got)
+            except StopIteration as done:
+                return bytes(done.value)
+    finally:
+        _owner(master, write, held, to_pdi=True)
+
+
+def write_words(
+    master: Master, address: int, first_word: int, data: bytes, *, auto_increment: bool
+) -> None:
+    """Write ``data`` (whole words) to the EEPROM from word ``first_word``, one word per
+    command: the data to 0x0508, then write enable and the write command with the word
+    address to 0x0502 in one access (ETG.1000.4 §6.4), polled until not busy.
+    TransportError on a missing working counter, a write or command error, or an EEPROM
+    that stays busy."""
+    if len(data) % 2:
+        raise ValueError("SII data is written in whole words")
+    write, read = _commands(auto_increment)
+    held = _held(master, read, address)
+    _owner(master, write, held, to_pdi=False)
+    try:
+        for i in range(len(data) // 2):
+            word = first_word + i
+            command = _U16.pack(SiiStatus.WRITE_ENABLE | SiiCommand.WRITE << SII_COMMAND_SHIFT)
+            frames = [
+                Datagram.physical(write, address, Register.SII_DATA, data[2 * i : 2 * i + 2]),
+                Datagram.physical(
+                    write, address, Register.SII_CONTROL_STATUS, command + _U32.pack(word)
+                ),
+            ]
+            for d in master.exchange(frames):
+                if d.wkc != 1:
+                    raise TransportError(f"SII write of word 0x{word:X} not taken")
+            _wait(master, read, address, f"SII write of word 0x{word:X}", WRITE_ERROR)
+    finally:
+        _owner(master, write, held, to_pdi=True)
+
+
+def reload(master: Master, address: int, *, auto_increment: bool) -> None:
+    """Have the ESC reload its configuration area (station alias, PDI configuration) from
+    the EEPROM, as at power-up; TransportError when it fails."""
+    write, read = _commands(auto_increment)
+    held = _held(master, read, address)
+    _owner(master, write, held, to_pdi=False)
+    try:
+        command = _U16.pack(SiiCommand.RELOAD << SII_COMMAND_SHIFT)
+        got = master.exchange_one(
+            Datagram.physical(write, address, Register.SII_CONTROL_STATUS, command)
+        )
+        if got.wkc != 1:
+            raise TransportError("SII reload not taken")
+        _wait(master, read, address, "SII reload", READ_ERROR)
+    finally:
+        _owner(master, write, held, to_pdi=True)
+
+
+#: status bits at 0x0502 that fail a write
+WRITE_ERROR = SiiStatus.COMMAND_ERROR | SiiStatus.WRITE_ERROR
+
+
+def _commands(auto_increment: bool) -> tuple[Command, Command]:
+    return (Command.APWR, Command.APRD) if auto_increment else (Command.FPWR, Command.FPRD)
+
+
+def _held(master: Master, read: Command, address: int) -> list[int]:
+    got = master.exchange_one(Datagram.physical(read, address, Register.SII_CONFIG, 1))
+    if got.wkc != 1:
+        raise TransportError("the slave does not answer (SII configuration 0x0500)")
+    return [address] if got.data[0] & SiiConfig.PDI_OFFERED else []
+
+
+def _wait(master: Master, read: Command, address: int, what: str, errors: int) -> None:
+    for poll in range(POLLS):
+        if poll:
+            master.idle(master.options.poll_ns)
+        got = master.exchange_one(
+            Datagram.physical(read, address, Register.SII_CONTROL_STATUS, 2)
+        )
+        status = _U16.unpack_from(got.data)[0] if got.wkc == 1 else SiiStatus.BUSY
+        if status & SiiStatus.BUSY:
+            continue
+        if status & errors:
+            raise TransportError(f"{what}: EEPROM error (status 0x{status:04X})")
+        return
+    raise TransportError(f"{what}: EEPROM stays busy")
+
+
+__all__ = [
+    "POLLS",
+    "READ_ERROR",
+    "WRITE_ERROR",
+    "SiiRead",
+    "read_image",
+    "read_images",
+    "read_words",
+    "read_sii",
+    "reload",
+    "write_words",
+]

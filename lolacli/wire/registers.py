@@ -10,7 +10,7 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
-from lolacli.errors import WireError
+from lolacli.errors import UsageError, WireError
 from lolacli.wire._codes import enum_or_int, need
 
 FMMU_BYTES = 16
@@ -491,3 +491,154 @@ def encode_sii_control_status(s: SiiControlStatus) -> int:
         if getattr(s, name):
             word |= mask
     return word
+
+
+# --- names and sizes: the register vocabulary of `bus reg` ----------------------------------
+
+#: ESC address space: 64 KiB of registers and process RAM (ETG.1000.4 §6)
+ESC_ADDRESS_SPACE = 0x10000
+
+#: bytes of each named register (a block: all its fields, e.g. the 4 ports of 0x0300)
+REGISTER_BYTES: dict[Register, int] = {
+    Register.TYPE: 1, Register.REVISION: 1, Register.BUILD: 2, Register.FMMU_COUNT: 1,
+    Register.SM_COUNT: 1, Register.RAM_SIZE: 1, Register.PORT_DESCRIPTOR: 1,
+    Register.ESC_FEATURES: 2, Register.STATION_ADDRESS: 2, Register.STATION_ALIAS: 2,
+    Register.WRITE_ENABLE: 1, Register.WRITE_PROTECTION: 1, Register.ESC_WRITE_ENABLE: 1,
+    Register.ESC_WRITE_PROTECTION: 1, Register.ESC_RESET_ECAT: 1, Register.ESC_RESET_PDI: 1,
+    Register.DL_CONTROL: 4, Register.PHYSICAL_READ_WRITE_OFFSET: 2, Register.DL_STATUS: 2,
+    Register.AL_CONTROL: 2, Register.AL_STATUS: 2, Register.AL_STATUS_CODE: 2,
+    Register.RUN_LED_OVERRIDE: 1, Register.ERR_LED_OVERRIDE: 1, Register.PDI_CONTROL: 1,
+    Register.ESC_CONFIGURATION: 1, Register.PDI_CONFIGURATION: 1,
+    Register.SYNC_LATCH_CONFIGURATION: 1, Register.EXTENDED_PDI_CONFIGURATION: 2,
+    Register.ECAT_EVENT_MASK: 2, Register.PDI_EVENT_MASK: 4, Register.ECAT_EVENT_REQUEST: 2,
+    Register.AL_EVENT_REQUEST: 4, Register.RX_ERROR_COUNTER: 8,
+    Register.FORWARDED_RX_ERROR_COUNTER: 4, Register.PROCESSING_UNIT_ERROR_COUNTER: 1,
+    Register.PDI_ERROR_COUNTER: 1, Register.LOST_LINK_COUNTER: 4, Register.WATCHDOG_DIVIDER: 2,
+    Register.WD_TIME_PDI: 2, Register.WD_TIME_PD: 2, Register.WD_STATUS_PD: 2,
+    Register.WD_COUNTER_PD: 1, Register.WD_COUNTER_PDI: 1, Register.SII_CONFIG: 1,
+    Register.SII_PDI_ACCESS: 1, Register.SII_CONTROL_STATUS: 2, Register.SII_ADDRESS: 4,
+    Register.SII_DATA: 8, Register.MII_CONTROL_STATUS: 2, Register.MII_PHY_ADDRESS: 1,
+    Register.MII_PHY_REGISTER: 1, Register.MII_PHY_DATA: 2, Register.FMMU: FMMU_BYTES,
+    Register.SM: SYNC_MANAGER_BYTES, Register.DC_RECEIVE_TIME_PORT0: 4,
+    Register.DC_RECEIVE_TIME_PORT1: 4, Register.DC_RECEIVE_TIME_PORT2: 4,
+    Register.DC_RECEIVE_TIME_PORT3: 4, Register.DC_SYSTEM_TIME: 8,
+    Register.DC_RECEIVE_TIME_PU: 8, Register.DC_SYSTEM_TIME_OFFSET: 8,
+    Register.DC_SYSTEM_TIME_DELAY: 4, Register.DC_SYSTEM_TIME_DIFFERENCE: 4,
+    Register.DC_SPEED_COUNTER_START: 2, Register.DC_SPEED_COUNTER_DIFF: 2,
+    Register.DC_FILTER_DEPTH_SYSTEM_TIME: 1, Register.DC_FILTER_DEPTH_SPEED_COUNTER: 1,
+    Register.DC_CYCLIC_UNIT_CONTROL: 1, Register.DC_ACTIVATION: 1,
+    Register.DC_SYNC_IMPULSE_LENGTH: 2, Register.DC_ACTIVATION_STATUS: 1,
+    Register.DC_SYNC0_STATUS: 1, Register.DC_SYNC1_STATUS: 1, Register.DC_START_TIME_CYCLIC: 8,
+    Register.DC_NEXT_SYNC1_PULSE: 8, Register.DC_SYNC0_CYCLE: 4, Register.DC_SYNC1_CYCLE: 4,
+    Register.DC_LATCH0_CONTROL: 1, Register.DC_LATCH1_CONTROL: 1, Register.DC_LATCH0_STATUS: 1,
+    Register.DC_LATCH1_STATUS: 1, Register.ESC_SPECIFIC: 16, Register.DIGITAL_IO_OUTPUT: 4,
+    Register.GENERAL_PURPOSE_OUTPUT: 8, Register.GENERAL_PURPOSE_INPUT: 8,
+    Register.USER_RAM: 128, Register.PROCESS_RAM: 8,
+}  # fmt: skip
+
+#: register blocks a master configures and must not change under running process data
+#: (SAFEOP, OP): station address, AL control, watchdogs, FMMUs, sync managers, DC SYNC
+CONFIGURATION_BLOCKS: tuple[tuple[int, int, str], ...] = (
+    (Register.STATION_ADDRESS, 4, "station address"),
+    (Register.DL_CONTROL, 4, "DL control"),
+    (Register.AL_CONTROL, 2, "AL control"),
+    (Register.WATCHDOG_DIVIDER, 0x22, "watchdog"),
+    (Register.FMMU, FMMU_BYTES * FMMU_COUNT_MAX, "FMMU configuration"),
+    (Register.SM, SYNC_MANAGER_BYTES * SYNC_MANAGER_COUNT_MAX, "sync manager configuration"),
+    (Register.DC_SYSTEM_TIME_OFFSET, 12, "DC system time offset and delay"),
+    (Register.DC_CYCLIC_UNIT_CONTROL, 0x28, "DC SYNC configuration"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class RegisterSpan:
+    """``length`` bytes of the ESC from ``address``; ``name`` when it starts a named one."""
+
+    address: int
+    length: int
+    name: str | None = None
+
+
+def register_name(address: int) -> str | None:
+    """``al_status`` for 0x0130, ``sm2`` for 0x0810, ``fmmu1`` for 0x0610; else None."""
+    if Register.FMMU <= address < Register.FMMU + FMMU_BYTES * FMMU_COUNT_MAX:
+        n, rest = divmod(address - Register.FMMU, FMMU_BYTES)
+        return f"fmmu{n}" if rest == 0 else None
+    if Register.SM <= address < Register.SM + SYNC_MANAGER_BYTES * SYNC_MANAGER_COUNT_MAX:
+        n, rest = divmod(address - Register.SM, SYNC_MANAGER_BYTES)
+        return f"sm{n}" if rest == 0 else None
+    try:
+        return str(Register(address).name).lower()
+    except ValueError:
+        return None
+
+
+def register_names() -> tuple[str, ...]:
+    """Every name :func:`parse_register` takes (``fmmuN``, ``smN`` for N = 0..15)."""
+    return tuple(str(r.name).lower() for r in Register) + ("fmmuN", "smN")
+
+
+def _named(text: str) -> tuple[int, int] | None:
+    low = text.strip().lower().replace("-", "_")
+    for prefix, base, step, count in (
+        ("fmmu", Register.FMMU, FMMU_BYTES, FMMU_COUNT_MAX),
+        ("sm", Register.SM, SYNC_MANAGER_BYTES, SYNC_MANAGER_COUNT_MAX),
+    ):
+        tail = low[len(prefix) :]
+        if low.startswith(prefix) and tail.isdigit() and int(tail) < count:
+            return base + step * int(tail), step
+    try:
+        reg = Register[low.upper()]
+    except KeyError:
+        return None
+    return int(reg), REGISTER_BYTES.get(reg, 1)
+
+
+def parse_register(text: str, *, max_length: int = 1486) -> RegisterSpan:
+    """``ADDR[:LEN]``: ADDR a number (``0x130``, ``304``) or a register name (``al_status``,
+    ``sm2``), LEN bytes (default: the named register's size, else 1). UsageError when it is
+    neither, or the span leaves the 64 KiB ESC address space or one datagram
+    (a usage error: it is what the user typed)."""
+    head, sep, tail = text.strip().partition(":")
+    if not head:
+        raise UsageError(f"register {text!r}: give an address or a name (like al_status)")
+    named = _named(head)
+    if named is not None:
+        address, length = named
+    else:
+        try:
+            address = int(head, 0)
+        except ValueError:
+            raise UsageError(
+                f"register {head!r} is neither a number nor a register name "
+                "(like al_status, dl_status, rx_error_counter, sm2)"
+            ) from None
+        length = REGISTER_BYTES.get(Register(address), 1) if address in _ADDRESSES else 1
+    if sep:
+        try:
+            length = int(tail, 0)
+        except ValueError:
+            raise UsageError(f"register length {tail!r} is not a number") from None
+    if not 0 <= address < ESC_ADDRESS_SPACE:
+        raise UsageError(
+            f"register 0x{address:X} is outside the ESC's address space 0x0000-0xFFFF"
+        )
+    if not 1 <= length <= max_length:
+        raise UsageError(f"register length {length}: expected 1 to {max_length} bytes")
+    if address + length > ESC_ADDRESS_SPACE:
+        raise UsageError(
+            f"register 0x{address:04X}:{length} runs past the ESC's address space "
+            "(ends at 0xFFFF)"
+        )
+    return RegisterSpan(address, length, register_name(address))
+
+
+_ADDRESSES = frozenset(int(r) for r in Register)
+
+
+def configuration_block(address: int, length: int) -> str | None:
+    """The name of the first :data:`CONFIGURATION_BLOCKS` block the span touches."""
+    for start, size, name in CONFIGURATION_BLOCKS:
+        if address < start + size and start < address + length:
+            return name
+    return None
