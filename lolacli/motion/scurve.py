@@ -44,6 +44,7 @@ switch, each side within its limit - the switch records say by how much.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -330,21 +331,90 @@ def _round(dist: float, vs: float, ve: float, c1: int, ca: int, c5: int, cd: int
                     n = fits(n1, na, n5, nd)
                     if n is not None and (best is None or _cycles(n) < _cycles(best)):
                         best = n
-    n1, na, n5, nd = c1, ca, c5, cd
-    for _ in range(100_000 if best is None else 2_000):
-        # the ramps' reach: a longer ramp widens the band of peaks it can meet; the
-        # narrower grows (a tiny velocity change cannot absorb the rounding)
-        w1 = min(amax, jmax * n1 * ts) * na
-        w2 = min(dmax, jmax * n5 * ts) * nd
-        if w1 <= w2:
-            n1, na = (n1 + 1, na + 2) if jmax * n1 * ts < amax else (n1, na + 1)
-        if w2 <= w1:
-            n5, nd = (n5 + 1, nd + 2) if jmax * n5 * ts < dmax else (n5, nd + 1)
-        if best is not None and 2 * (n1 + n5) + (na - n1) + (nd - n5) >= _cycles(best):
-            break  # longer than what is found already
-        if (n := fits(n1, na, n5, nd)) is not None:
-            return n if best is None or _cycles(n) < _cycles(best) else best
+    return _grow(dist, vs, ve, c1, ca, c5, cd, ts, vmax, amax, dmax, jmax, best, fits)
+
+
+def _grow(dist: float, vs: float, ve: float, n1: int, na: int, n5: int, nd: int, ts: float,
+          vmax: float, amax: float, dmax: float, jmax: float, best: list[int] | None,
+          fits: Callable[[int, int, int, int], list[int] | None]) -> list[int] | None:
+    """:func:`_round`'s last resort: ever longer ramps, the one with the narrower reach
+    first, until one fits (or is longer than ``best``).
+
+    The candidates are tried in that order, one growth step each, but a run of steps is
+    skipped without calling ``fits`` when a bound shows that none of them can fit: over
+    the next ``m`` steps each ramp grows by at most ``m`` of its own steps, its reach w
+    (monotone in its steps) stays within its values at the two ends, and so do the band
+    of peaks [lo, hi] the ramps can meet and the peak velocity the distance asks for with
+    no cruise (a cruise only moves it towards 0). When the band misses that range by more
+    than the rounding, the whole run is skipped, and the next run tried is twice as long;
+    else half as long, down to one step, which is tried. The result is the same as trying
+    every step, in a few dozen bounds instead of thousands of ``fits``."""
+    def own(n: int, nn: int, a: float, steps: int) -> tuple[int, int]:
+        """A ramp's (T1, Ta) cycles after ``steps`` of its own growth steps."""
+        lim = a / (jmax * ts) if jmax * ts > 0.0 else math.inf
+        q = steps if lim > n + steps + 1 else max(0, min(steps, math.ceil(lim) - n - 1))
+        while q > 0 and not jmax * (n + q - 1) * ts < a:
+            q -= 1  # the closed form's rounding: as the loop compares
+        while q < steps and jmax * (n + q) * ts < a:
+            q += 1
+        return n + q, nn + 2 * q + (steps - q)
+
+    def hopeless(n1: int, na: int, n5: int, nd: int, m: int) -> bool:
+        """Whether no candidate of the next ``m`` steps from (n1, na, n5, nd) fits."""
+        e1, ea = own(n1, na, amax, m - 1)
+        e5, ed = own(n5, nd, dmax, m - 1)
+        w1 = min(amax, jmax * e1 * ts) * ea * ts * (1.0 - 1e-13)  # the largest reaches
+        w2 = min(dmax, jmax * e5 * ts) * ed * ts * (1.0 - 1e-13)
+        lo = max(-vmax, vs - w1, ve - w2)  # the widest band
+        hi = min(vmax, vs + w1, ve + w2)
+        a0, a1 = 0.5 * (n1 + na) * ts, 0.5 * (e1 + ea) * ts  # eq. 12's terms
+        d0, d1 = 0.5 * (n5 + nd) * ts, 0.5 * (e5 + ed) * ts
+        top = dist - min(vs * a0, vs * a1) - min(ve * d0, ve * d1)
+        bottom = dist - max(vs * a0, vs * a1) - max(ve * d0, ve * d1)
+        up = max(0.0, top / (a0 + d0) if top > 0.0 else top / (a1 + d1))
+        down = min(0.0, bottom / (a0 + d0) if bottom < 0.0 else bottom / (a1 + d1))
+        margin = 1e-9 * (vmax + abs(up) + abs(down))
+        return lo > hi + margin or lo > up + margin or hi < down - margin
+
+    steps = 0
+    limit = 100_000 if best is None else 2_000
+    run = 1
+    while steps < limit:
+        if run > 1 and not hopeless(*_next(n1, na, n5, nd, ts, amax, dmax, jmax), run):
+            run //= 2
+            continue
+        # ``run`` candidates from here: all hopeless (run > 1), or the one to try
+        stop = math.inf if best is None else _cycles(best)
+        for _ in range(min(run, limit - steps)):  # _next, inline: the hot loop
+            w1 = min(amax, jmax * n1 * ts) * na
+            w2 = min(dmax, jmax * n5 * ts) * nd
+            if w1 <= w2:
+                n1, na = (n1 + 1, na + 2) if jmax * n1 * ts < amax else (n1, na + 1)
+            if w2 <= w1:
+                n5, nd = (n5 + 1, nd + 2) if jmax * n5 * ts < dmax else (n5, nd + 1)
+            steps += 1
+            if n1 + na + n5 + nd >= stop:
+                return best  # longer than what is found already
+        if run == 1:
+            if (n := fits(n1, na, n5, nd)) is not None:
+                return n if best is None or _cycles(n) < _cycles(best) else best
+            run = 2
+        else:
+            run *= 2
     return best
+
+
+def _next(n1: int, na: int, n5: int, nd: int, ts: float, amax: float, dmax: float,
+          jmax: float) -> tuple[int, int, int, int]:
+    """One growth step of :func:`_grow`: a longer ramp widens the band of peaks it can
+    meet; the narrower grows (a tiny velocity change cannot absorb the rounding)."""
+    w1 = min(amax, jmax * n1 * ts) * na
+    w2 = min(dmax, jmax * n5 * ts) * nd
+    if w1 <= w2:
+        n1, na = (n1 + 1, na + 2) if jmax * n1 * ts < amax else (n1, na + 1)
+    if w2 <= w1:
+        n5, nd = (n5 + 1, nd + 2) if jmax * n5 * ts < dmax else (n5, nd + 1)
+    return n1, na, n5, nd
 
 
 def _cruise_cycles(dist: float, vs: float, ve: float, n: list[int], ts: float, vmax: float,

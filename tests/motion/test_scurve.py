@@ -263,3 +263,22 @@ def test_cli_bad_input_is_one_line_exit_2(cli, extra: tuple[str, ...], said: str
     assert (code, out) == (2, "")
     assert err.count("\n") == 1 and "Traceback" not in err
     assert said in err, err
+
+
+def test_growth_search_skips_hopeless_candidates(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 26's slow request: the whole-cycle search used to try ~2000 ramp lengths one
+    by one (18-27 ms); the bound skips runs of them that cannot fit, same result."""
+    import lolacli.motion.scurve as scurve
+
+    calls = []
+    real = scurve._cruise_cycles
+
+    def counted(*args):  # noqa: ANN002, ANN202
+        calls.append(args)
+        return real(*args)
+
+    monkeypatch.setattr(scurve, "_cruise_cycles", counted)
+    case = (1.902982866011191, 5.27274686259056, 11.797667985002446, 6.462940400002711,
+            2.7161942478785157, 1.3415017171851702, 0.001)
+    check_profile(*case)
+    assert len(calls) < 500
