@@ -13,6 +13,8 @@ the rest (the master), and the ratio of simulated time to wall time:
                  ENI expects (no chain): the master's own cost
     engines      the defaults with the chain's C core and with its Python reference
                  (``c_over_python``: what the C twin is worth on this figure)
+    cli          ``lolacli bus simulate`` in a new process, as a user runs it: the factor
+                 it prints, and over the whole process's wall time (start-up included)
 
 The real-time factor is the report's (simulated time over the wall time of bring-up, run
 and report, as ``bus simulate`` prints it), and the same over CPU time. Since the host is
@@ -144,6 +146,28 @@ def engines(eni, args: argparse.Namespace) -> dict[str, object]:  # type: ignore
     }
 
 
+def cli(args: argparse.Namespace) -> dict[str, float]:
+    """``lolacli bus simulate`` as a user runs it (a new process, the defaults but for
+    ``--eni``/``--rate``/``--cycles``): the factor it prints, and simulated time over the
+    whole process's wall time (interpreter start-up and imports too); best of
+    ``--repeat``."""
+    import subprocess
+
+    command = [sys.executable, "-m", "lolacli", "bus", "simulate", "--eni", str(args.eni),
+               "--rate", str(args.rate), "--cycles", str(args.cycles), "--quiet",
+               "--format", "json"]
+    runs = []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, check=True)
+        wall = time.perf_counter() - t0
+        doc = json.loads(done.stdout)
+        runs.append({"realtime_factor": doc["realtime_factor"],
+                     "process_wall_s": round(wall, 3),
+                     "end_to_end_factor": round(doc["simulated_s"] / wall, 2)})
+    return best(runs)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--eni", type=Path, default=DEFAULT_ENI)
@@ -169,6 +193,7 @@ def main() -> None:
                 runs[name].append(run(eni, options))
         for name in configs:
             out[name] = best(runs[name])
+    out["cli"] = cli(args)
     out["engines"] = engines(eni, args)
     alone = master_only(eni, args.cycles)
     out["master-only"] = {
