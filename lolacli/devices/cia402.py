@@ -70,6 +70,8 @@ SUPPORTED_MODES_BITS = 0x0001 | 0x0080 | 0x0100 | 0x0200
 WINDOW_OFF = 0xFFFFFFFF
 #: 0x603F error code of a following error (CiA 402-2 Annex: "following error")
 ERROR_FOLLOWING = 0x8611
+#: 0x603F error codes this model raises or a test injects, with their CiA 402 / 301 names
+ERROR_NAMES = {0x8611: "following error", 0x8612: "reference limit", 0x7300: "sensor"}
 #: default quick stop option code: slow down on the quick-stop ramp, stay in quick stop
 #: active (transition 16 back to operation enabled allowed)
 QUICK_STOP_DEFAULT = 6

@@ -8,8 +8,8 @@ import struct
 from operator import itemgetter
 from typing import Any
 
-from lolacli.devices.cia402 import Cia402State
-from lolacli.errors import LinkError
+from lolacli.devices.cia402 import ERROR_CODE, Cia402State
+from lolacli.errors import LinkError, LolaError
 from lolacli.master.core import Master
 from lolacli.master.slaves import BusSlave, Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.variables import BusVariable, ProcessImage, variable_for
@@ -159,7 +159,9 @@ class Application:
             if has_field(master.image, slave.name, Cia402Drive.statusword) and has_field(
                 master.image, slave.name, Cia402Drive.target
             ):
-                self.drives.append(Cia402Drive(master.image, slave.name))
+                drive = Cia402Drive(master.image, slave.name)
+                drive.reset_faults = False  # a fault stands: a finding, with its 0x603F
+                self.drives.append(drive)
             elif has_field(master.image, slave.name, Imu.rate_x):
                 # on the image, not the master: they have no procData to run each cycle
                 self.sensors.append(Imu(master.image, slave.name))
@@ -208,6 +210,27 @@ class Application:
         if self.group is not None:
             self.group.enable()
         self.t_enable_ns = self.master.transport.now_ns()
+
+    def drive_faults(self) -> list[dict[str, Any]]:
+        """The drives that went to fault in the run: slave position and name, how often,
+        and the error code the drive holds in 0x603F (read by SDO; None where it cannot
+        be)."""
+        master = self.master
+        positions = {s.name: s.position for s in master.eni.slaves}
+        out: list[dict[str, Any]] = []
+        for drive in self.drives:
+            if not drive.faults:
+                continue
+            position = positions[drive.slave]
+            code: int | None
+            try:
+                code = int.from_bytes(master.sdo(position).upload(ERROR_CODE, 0)[:2], "little")
+            except LolaError:
+                code = None
+            out.append(
+                {"slave": position, "name": drive.slave, "faults": drive.faults, "error_code": code}
+            )
+        return out
 
     def _publish(self, master: Master) -> None:
         self.shm.publish(master.stats.cycles, master.transport.now_ns(), master.image.inputs)
