@@ -138,6 +138,7 @@ class Application:
         self._last_record_ns: int | None = None  # the /cycle message's time, last cycle
         self.homes: dict[int, int] = {}
         self.final_states: dict[int, str] = {}  # position -> AL state at the end
+        self.drive_faults: list[dict[str, Any]] = []  # read_drive_faults
         self.t_enable_ns = 0
         self.first_cycle = 0
         # the cycle count when the run's own cycles ended (a live run's closing reads of
@@ -211,17 +212,18 @@ class Application:
             self.group.enable()
         self.t_enable_ns = self.master.transport.now_ns()
 
-    def drive_faults(self) -> list[dict[str, Any]]:
-        """The drives that went to fault in the run: slave position and name, how often,
-        and the error code the drive holds in 0x603F (read by SDO; None where it cannot
-        be)."""
+    def read_drive_faults(self, states: dict[int, str]) -> list[dict[str, Any]]:
+        """The drives that went to fault in the run (:attr:`drive_faults`): slave position
+        and name, how often, and the error code the drive holds in 0x603F (read by SDO
+        after the run; None where it cannot be). Only drives still in OP count: the
+        statusword of a slave the frames no longer reach is no statusword."""
         master = self.master
         positions = {s.name: s.position for s in master.eni.slaves}
         out: list[dict[str, Any]] = []
         for drive in self.drives:
-            if not drive.faults:
-                continue
             position = positions[drive.slave]
+            if not drive.faults or states.get(position) != "OP":
+                continue
             code: int | None
             try:
                 code = int.from_bytes(master.sdo(position).upload(ERROR_CODE, 0)[:2], "little")
@@ -230,6 +232,7 @@ class Application:
             out.append(
                 {"slave": position, "name": drive.slave, "faults": drive.faults, "error_code": code}
             )
+        self.drive_faults = out
         return out
 
     def _publish(self, master: Master) -> None:

@@ -322,7 +322,7 @@ def report(
         "states": {s.name: states.get(s.position, "no answer") for s in eni.slaves},
         "drives": len(app.drives),
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
-        "drive_faults": app.drive_faults(),
+        "drive_faults": app.drive_faults,
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},
         "faults": {
             "drop_p": options.drop_probability,
