@@ -14,7 +14,10 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
   analog channels with their phases.
 
 ``None`` when the core does not follow the device: a class with its own step or mapping
-code, or a use the tables cannot hold without changing it (a value whose length the cycle
+code, a drive whose configuration needs what the core's mirror of its step lacks
+(``Cia402Drive.core_can_run``: a load other than the kinematic follower, the following-error
+monitor, software position limits, max motor speed, quick stop or fault reaction
+ramps), or a use the tables cannot hold without changing it (a value whose length the cycle
 would change, more than 64 bits where the core computes in 64). Python runs those.
 
 While the core holds a device's state, the entries' values and the device's scalars
@@ -41,7 +44,7 @@ KIND_DIGITAL_IO = 4
 KIND_ANALOG = 5
 
 #: bytes of the CiA 402 cyclic entries, in ``Cia402Drive._entries`` order
-CYCLIC_BYTES = (2, 2, 1, 1, 4, 4, 4, 4, 4, 2)
+CYCLIC_BYTES = (2, 2, 1, 1, 4, 4, 4, 4, 4, 2, 2, 2, 2, 4, 4, 4, 4, 4, 2)
 #: the core's arithmetic takes any state value below this in magnitude
 VALUE_LIMIT = 1 << 62
 
@@ -61,7 +64,7 @@ _BASE_METHODS = (
     "byte_layout_of",
 )
 _KIND_METHODS = {
-    KIND_CIA402: ("entries", "_move", "_update_status"),
+    KIND_CIA402: ("entries", "config", "ramp", "core_can_run", "at_rest", "_update_status"),
     KIND_DIGITAL_IO: ("channels",),
     KIND_ANALOG: ("channels",),
 }
@@ -118,6 +121,8 @@ class FlatDevice:
             vals[offset : offset + size] = value
         scalars = DeviceScalars(t_ns=device.t_ns)
         if isinstance(device, Cia402Drive):
+            if not device.core_can_run():
+                return None  # configured since it was flattened (an SDO write)
             scalars.power = int(device.power)
             scalars.previous_cw = device.previous_cw
             if scalars.power not in _POWER_STATES or not 0 <= scalars.previous_cw <= 0xFFFF:
@@ -205,6 +210,8 @@ class _Builder:
         period_ns, scale = 0, 0.0
         if self.kind == KIND_CIA402:
             assert isinstance(device, Cia402Drive)
+            if not device.core_can_run():
+                raise _NotFlat  # a load, monitor, limit or ramp the core lacks
             entries = device.entries()
             cyclic = tuple(
                 self.slot(entry, size)

@@ -35,7 +35,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 9
+#define ABI_VERSION 10
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -53,8 +53,10 @@ enum { K_NONE = 0, K_PYTHON = 1, K_GENERIC = 2, K_CIA402 = 3, K_DIGITAL_IO = 4, 
 
 /* CiA 402: the cyclic entries (Cia402Drive.entries order) and their sizes */
 enum { E_CW, E_SW, E_MODES, E_MODES_DISPLAY, E_TARGET, E_POSITION, E_VELOCITY,
-       E_TARGET_VELOCITY, E_MAX_VELOCITY, E_ERROR, N_CYCLIC };
-static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2};
+       E_TARGET_VELOCITY, E_MAX_VELOCITY, E_ERROR, E_TARGET_TORQUE, E_MAX_TORQUE, E_TORQUE,
+       E_DEMAND, E_PROFILE_VELOCITY, E_FOLLOWING_ERROR, E_POSITION_OFFSET, E_VELOCITY_OFFSET,
+       E_TORQUE_OFFSET, N_CYCLIC };
+static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2, 2, 2, 2, 4, 4, 4, 4, 4, 2};
 
 /* rows */
 #define MAP_WORDS 4     /* image bit, bits, value offset, value bytes */
@@ -237,7 +239,7 @@ static i64 next_state(i64 state, int command) {
         if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
         if (command == C_QUICK_STOP) return QUICK_STOP_ACTIVE;
         break;
-    case QUICK_STOP_ACTIVE:
+    case QUICK_STOP_ACTIVE: /* option codes 5-8: stays (core_can_run) */
         if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
         if (command == C_ENABLE_OPERATION) return OPERATION_ENABLED;
         break;
@@ -257,6 +259,11 @@ static i64 status_bits(i64 state) {
     return status;
 }
 
+static inline i128 tighter(i128 a, i128 b) { return a && b ? (a < b ? a : b) : (a ? a : b); }
+
+/* Cia402Drive.step with the kinematic Follower, for the configurations core_can_run
+ * admits (no following-error monitor, software limits or max motor speed; quick stop staying in quick
+ * stop active and fault reaction, both stopping at once) */
 static void cia402_step(slave_t *s, i64 t) {
     uint8_t *v = s->vals;
     const i64 *e = s->e;
@@ -268,33 +275,72 @@ static void cia402_step(slave_t *s, i64 t) {
     v[e[E_MODES_DISPLAY]] = v[e[E_MODES]];
     i64 dt = s->dev_t_ns ? t - s->dev_t_ns : 0;
     i64 mode = (int8_t)v[e[E_MODES]];
-    if (power != OPERATION_ENABLED) {
-        put_le(v + e[E_VELOCITY], 4, 0);
-    } else {
-        i128 actual = (int32_t)(uint32_t)get_le(v + e[E_POSITION], 4);
-        i128 target;
-        if (mode == 9) { /* CSV */
-            i128 velocity = (int32_t)(uint32_t)get_le(v + e[E_TARGET_VELOCITY], 4);
-            target = actual + floordiv(velocity * dt, NS_PER_S);
-        } else {
-            target = (int32_t)(uint32_t)get_le(v + e[E_TARGET], 4);
-            i128 limit = (i128)get_le(v + e[E_MAX_VELOCITY], 4);
-            if (limit && dt) {
-                i128 step = floordiv(limit * dt, NS_PER_S);
-                if (step < 1) step = 1;
-                i128 move = target - actual;
-                if (move > step) move = step;
-                if (move < -step) move = -step;
-                target = actual + move;
+    i128 actual = (int32_t)(uint32_t)get_le(v + e[E_POSITION], 4);
+    i128 target = actual, velocity = 0, demand = actual;
+    i64 torque = 0, reached = 0, limited = 0;
+    if (power == OPERATION_ENABLED) {
+        i128 limit = (i128)get_le(v + e[E_MAX_VELOCITY], 4);
+        if (mode == 8 || mode == 1) { /* CSP, PP */
+            if (mode == 8) {
+                demand = (i128)(int32_t)(uint32_t)get_le(v + e[E_TARGET], 4) +
+                         (int32_t)(uint32_t)get_le(v + e[E_POSITION_OFFSET], 4);
+            } else {
+                demand = (int32_t)(uint32_t)get_le(v + e[E_DEMAND], 4);
+                if ((cw & 0x10) && !(previous & 0x10)) {
+                    i128 goal = (int32_t)(uint32_t)get_le(v + e[E_TARGET], 4);
+                    demand = (cw & 0x40) ? demand + goal : goal;
+                }
+                limit = tighter((i128)get_le(v + e[E_PROFILE_VELOCITY], 4), limit);
             }
+            demand = wrap32(demand);
+            if (mode == 1 && (cw & 0x100)) {
+                target = actual; /* halt */
+            } else {
+                target = demand;
+                if (limit && dt) {
+                    i128 step = floordiv(limit * dt, NS_PER_S);
+                    if (step < 1) step = 1;
+                    i128 move = demand - actual;
+                    if (move > step) move = step;
+                    if (move < -step) move = -step;
+                    target = actual + move;
+                }
+                velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
+            }
+            reached = target == demand || (mode == 1 && (cw & 0x100));
+        } else {
+            if (mode == 9) { /* CSV */
+                i128 want = (i128)(int32_t)(uint32_t)get_le(v + e[E_TARGET_VELOCITY], 4) +
+                            (int32_t)(uint32_t)get_le(v + e[E_VELOCITY_OFFSET], 4);
+                if (limit) want = want > limit ? limit : (want < -limit ? -limit : want);
+                target = actual + floordiv(want * dt, NS_PER_S);
+                velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
+                reached = velocity == want;
+            } else if (mode == 10) { /* CST: the follower holds still */
+                i64 want = (i64)(int16_t)(uint16_t)get_le(v + e[E_TARGET_TORQUE], 2) +
+                           (int16_t)(uint16_t)get_le(v + e[E_TORQUE_OFFSET], 2);
+                i64 most = (i64)get_le(v + e[E_MAX_TORQUE], 2);
+                if (most && (want > most || want < -most)) {
+                    want = want > most ? most : -most;
+                    limited = 1;
+                }
+                torque = (int16_t)(uint16_t)(u64)want;
+                reached = 1;
+            }
+            target = demand = wrap32(target);
         }
-        i128 velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
-        put_le(v + e[E_POSITION], 4, (u64)wrap32(target));
-        put_le(v + e[E_VELOCITY], 4, (u64)wrap32(velocity));
     }
+    put_le(v + e[E_POSITION], 4, (u64)wrap32(target));
+    put_le(v + e[E_VELOCITY], 4, (u64)wrap32(velocity));
+    put_le(v + e[E_TORQUE], 2, (u64)torque);
+    put_le(v + e[E_DEMAND], 4, (u64)wrap32(demand));
+    put_le(v + e[E_FOLLOWING_ERROR], 4, (u64)wrap32(demand - target));
     i64 status = status_bits(power);
-    if (power == OPERATION_ENABLED && memcmp(v + e[E_POSITION], v + e[E_TARGET], 4) == 0)
-        status |= 0x0400;
+    if (power == OPERATION_ENABLED) {
+        if (mode == 1) status = (status & ~0x1000) | ((cw & 0x10) ? 0x1000 : 0);
+        if (reached) status |= 0x0400;
+    }
+    if (limited) status |= 0x0800;
     put_le(v + e[E_SW], 2, (u64)status);
 }
 

@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable
 from functools import lru_cache, partial
 from typing import TYPE_CHECKING, Any
 
-from lolacli.devices.flat import VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
+from lolacli.devices.flat import CYCLIC_BYTES, VALUE_LIMIT, DeviceScalars, FlatDevice, flatten
 from lolacli.emulator.esc import system_time_loop
 from lolacli.emulator.esc.counters import COUNTER_CLEAR_GROUPS
 from lolacli.emulator.esc.memory import register_classes
@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 9
+ABI_VERSION = 10
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -100,7 +100,7 @@ class SlaveTable(ctypes.Structure):
         ("has_last", _I64),
         ("period", _I64),
         ("scale", ctypes.c_double),
-        ("e", _I64 * 10),
+        ("e", _I64 * len(CYCLIC_BYTES)),
     ]
 
 

@@ -134,6 +134,8 @@ def has_field(image: ProcessImage, slave: str, spec: BusField) -> bool:
 
 
 _IN, _OUT = Direction.INPUT, Direction.OUTPUT
+CONTROLWORD_DISABLE_VOLTAGE = 0x0000
+CONTROLWORD_QUICK_STOP = 0x0002
 CONTROLWORD_SHUTDOWN = 0x0006
 CONTROLWORD_SWITCH_ON = 0x0007
 CONTROLWORD_ENABLE_OPERATION = 0x000F
@@ -161,24 +163,30 @@ _PATTERNS = (
 )
 #: masked statusword -> state, for every value the mask leaves
 _STATE_TABLE = {w: _state_of(w) for w in range(0x80) if w & ~_STATE_MASK == 0}
-#: the controlword that leads from a state towards operation enabled
+#: the controlword that leads from a state towards operation enabled (transitions 2, 3,
+#: 4; 16 from quick stop active, which drives whose quick stop option code is 5-8 take);
+#: fault is handled apart (a reset needs a rising edge of bit 7)
 _TOWARDS_ENABLED = {
-    Cia402State.FAULT: CONTROLWORD_FAULT_RESET,
-    Cia402State.FAULT_REACTION_ACTIVE: CONTROLWORD_FAULT_RESET,
     Cia402State.SWITCH_ON_DISABLED: CONTROLWORD_SHUTDOWN,
     Cia402State.NOT_READY_TO_SWITCH_ON: CONTROLWORD_SHUTDOWN,
     Cia402State.READY_TO_SWITCH_ON: CONTROLWORD_SWITCH_ON,
 }
+_FAULTED = (Cia402State.FAULT, Cia402State.FAULT_REACTION_ACTIVE)
 
 
 class Cia402Drive(BusSlave):
     """A CiA 402 servo drive in cyclic synchronous position (the seed's Elmo drive class).
 
     :meth:`enable` asks for *operation enabled*; every cycle :meth:`process` reads the
-    statusword and writes the controlword that leads there (fault reset, shutdown, switch
-    on, enable operation: CiA 402-2 Figure 4). :attr:`actual_position` and
-    :attr:`target_position` are the get/set of the seed; while not enabled the target
-    follows the actual position, so enabling never jumps.
+    statusword and writes the controlword that leads there (CiA 402-2 Figure 4: shutdown,
+    switch on, enable operation; from *fault* a fault reset, whose rising edge of bit 7
+    comes after a controlword without it: none is sent while the fault reaction runs, so
+    the edge lands in *fault*). :meth:`disable` leads back to *ready to switch on* (from
+    *quick stop active*, which takes no shutdown, by disable voltage). :meth:`quick_stop`
+    sends quick stop until released. ``reset_faults=False`` leaves a fault standing (the
+    application reads 0x603F and decides); :attr:`faults` counts the faults seen.
+    :attr:`actual_position` and :attr:`target_position` are the get/set of the seed; while
+    not enabled the target follows the actual position, so enabling never jumps.
     """
 
     statusword = bus_field(
@@ -201,6 +209,9 @@ class Cia402Drive(BusSlave):
     def __init__(self, image: ProcessImage | Master, slave: str | int) -> None:
         super().__init__(image, slave)
         self.want_enabled = False
+        self.want_quick_stop = False
+        self.reset_faults = True
+        self.faults = 0
         self.state: Cia402State | int = Cia402State.NOT_READY_TO_SWITCH_ON
         self._target: int | None = None
         self._controlword = -1
@@ -234,10 +245,27 @@ class Cia402Drive(BusSlave):
     def disable(self) -> None:
         self.want_enabled = False
 
+    def quick_stop(self, on: bool = True) -> None:
+        """Quick stop (transition 11) while ``on``; released, :meth:`enable` goes on."""
+        self.want_quick_stop = on
+
+    @property
+    def faulted(self) -> bool:
+        return self.state in _FAULTED
+
     def process(self) -> None:
+        before = self.state
         state = self.state = _STATE_TABLE[self.statusword.value & _STATE_MASK]
-        if not self.want_enabled:
-            cw = 0 if state is Cia402State.FAULT else CONTROLWORD_SHUTDOWN
+        if state in _FAULTED:
+            if before not in _FAULTED:
+                self.faults += 1
+            reset = state is Cia402State.FAULT and self.want_enabled and self.reset_faults
+            cw = CONTROLWORD_FAULT_RESET if reset else CONTROLWORD_DISABLE_VOLTAGE
+        elif self.want_quick_stop:
+            cw = CONTROLWORD_QUICK_STOP
+        elif not self.want_enabled:
+            quick = state is Cia402State.QUICK_STOP_ACTIVE
+            cw = CONTROLWORD_DISABLE_VOLTAGE if quick else CONTROLWORD_SHUTDOWN
         else:
             cw = _TOWARDS_ENABLED.get(state, CONTROLWORD_ENABLE_OPERATION)  # type: ignore[call-overload]
         if cw != self._controlword:

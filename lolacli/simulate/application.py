@@ -8,8 +8,8 @@ import struct
 from operator import itemgetter
 from typing import Any
 
-from lolacli.devices.cia402 import Cia402State
-from lolacli.errors import LinkError
+from lolacli.devices.cia402 import ERROR_CODE, Cia402State
+from lolacli.errors import LinkError, LolaError
 from lolacli.master.core import Master
 from lolacli.master.slaves import BusSlave, Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.variables import BusVariable, ProcessImage, variable_for
@@ -138,6 +138,7 @@ class Application:
         self._last_record_ns: int | None = None  # the /cycle message's time, last cycle
         self.homes: dict[int, int] = {}
         self.final_states: dict[int, str] = {}  # position -> AL state at the end
+        self.drive_faults: list[dict[str, Any]] = []  # read_drive_faults
         self.t_enable_ns = 0
         self.first_cycle = 0
         # the cycle count when the run's own cycles ended (a live run's closing reads of
@@ -159,7 +160,9 @@ class Application:
             if has_field(master.image, slave.name, Cia402Drive.statusword) and has_field(
                 master.image, slave.name, Cia402Drive.target
             ):
-                self.drives.append(Cia402Drive(master.image, slave.name))
+                drive = Cia402Drive(master.image, slave.name)
+                drive.reset_faults = False  # a fault stands: a finding, with its 0x603F
+                self.drives.append(drive)
             elif has_field(master.image, slave.name, Imu.rate_x):
                 # on the image, not the master: they have no procData to run each cycle
                 self.sensors.append(Imu(master.image, slave.name))
@@ -208,6 +211,29 @@ class Application:
         if self.group is not None:
             self.group.enable()
         self.t_enable_ns = self.master.transport.now_ns()
+
+    def read_drive_faults(self, states: dict[int, str]) -> list[dict[str, Any]]:
+        """The drives that went to fault in the run (:attr:`drive_faults`): slave position
+        and name, how often, and the error code the drive holds in 0x603F (read by SDO
+        after the run; None where it cannot be). Only drives still in OP count: the
+        statusword of a slave the frames no longer reach is no statusword."""
+        master = self.master
+        positions = {s.name: s.position for s in master.eni.slaves}
+        out: list[dict[str, Any]] = []
+        for drive in self.drives:
+            position = positions[drive.slave]
+            if not drive.faults or states.get(position) != "OP":
+                continue
+            code: int | None
+            try:
+                code = int.from_bytes(master.sdo(position).upload(ERROR_CODE, 0)[:2], "little")
+            except LolaError:
+                code = None
+            out.append(
+                {"slave": position, "name": drive.slave, "faults": drive.faults, "error_code": code}
+            )
+        self.drive_faults = out
+        return out
 
     def _publish(self, master: Master) -> None:
         self.shm.publish(master.stats.cycles, master.transport.now_ns(), master.image.inputs)

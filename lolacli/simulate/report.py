@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from lolacli.devices.cia402 import ERROR_NAMES
 from lolacli.emulator.line import ChainTiming
 from lolacli.eni.model import Eni
 from lolacli.errors import TransportError
@@ -12,7 +13,7 @@ from lolacli.interrupt import Stop
 from lolacli.master.core import SECTIONS, Master
 from lolacli.simulate.application import Application
 from lolacli.simulate.options import SimulateOptions, SimulationResult
-from lolacli.text import transition_text
+from lolacli.text import plural, transition_text
 from lolacli.timing.model import (
     INTER_FRAME_GAP_BYTES,
     LINK_100_MBIT_S,
@@ -110,6 +111,21 @@ def findings(
             warn,
             f"{doc['drives'] - doc['drives_enabled']} of {doc['drives']} drives were not "
             "enabled (CiA 402 state machine short of Operation enabled)",
+        )
+    for fault in doc["drive_faults"]:
+        code = fault["error_code"]
+        if code is None:
+            what = "its error code (0x603F) could not be read"
+        else:
+            named = ERROR_NAMES.get(code)
+            what = f"error code 0x{code:04X}" + (f" ({named})" if named else "") + " in 0x603F"
+        out.add(
+            "drive-fault",
+            fail,
+            f"drive at slave {fault['slave']} ({fault['name']}) went to fault "
+            f"{plural(fault['faults'], 'time')} (CiA 402): {what}",
+            slave=fault["slave"],
+            count=fault["faults"],
         )
     for name, value in doc["watch"].items():
         shown = f"{value:.6g}" if isinstance(value, float) else value
@@ -306,6 +322,7 @@ def report(
         "states": {s.name: states.get(s.position, "no answer") for s in eni.slaves},
         "drives": len(app.drives),
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
+        "drive_faults": app.drive_faults,
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},
         "faults": {
             "drop_p": options.drop_probability,

@@ -132,6 +132,7 @@ class Simulation:
             app.last_cycle, app.last_skipped = master.stats.cycles, master.stats.skipped_cycles
             master.drain()
             states = app.final_states = final_states(master)
+            app.read_drive_faults(states)
             wall_s = time.perf_counter() - wall0
             doc = report(eni, options, master, app, states, wall_s, start_ns, recorders)
             doc.update(NO_LIVE_KEYS)
@@ -244,6 +245,7 @@ def _live(
             cpu_s, run_s = time.process_time() - cpu0, time.perf_counter() - run0
             states = app.final_states = live_states(master)
             master.drain()
+            app.read_drive_faults(states)
         wall_s = time.perf_counter() - wall0
         doc = report(eni, options, master, app, states, wall_s, start_ns, recorders)
         doc.update(NO_LIVE_KEYS)

@@ -122,3 +122,112 @@ def test_lola_devices_by_kind() -> None:
     gpio = device_for(next(s for s in eni.slaves if s.name == "GPIO 8DI 8DO"))
     assert isinstance(gpio, DigitalIo)
     assert gpio.cycle(b"\x05", MS) == b"\x05"  # inputs echo the outputs
+
+
+def _enable(drive: Cia402Drive, mode: int = 8) -> None:
+    drive.od.set(0x6060, 0, mode)
+    for i, cw in enumerate((0x00, 0x06, 0x07, 0x0F)):
+        _run(drive, cw, (i + 1) * MS, target=drive.od.get_int(0x6064))
+    assert drive.power == Cia402State.OPERATION_ENABLED
+
+
+def test_profile_position_takes_a_set_point_on_the_rising_edge_of_bit_4(
+    drive: Cia402Drive,
+) -> None:
+    _enable(drive, mode=1)
+    drive.od.set(0x6081, 0, 2_000_000)  # profile velocity: 2000 increments a ms
+    _run(drive, 0x0F, 10 * MS, target=5000)  # no new set-point: the target waits
+    assert drive.od.get_int(0x6064) == 0 and drive.od.get_int(0x6041) & 0x1000 == 0
+    status = _run(drive, 0x1F, 11 * MS, target=5000)  # bit 4 rises: accepted
+    assert status & 0x1000  # set-point acknowledge while bit 4 stays high
+    assert drive.od.get_int(0x60FC) == 5000 and drive.od.get_int(0x6064) == 2000
+    _run(drive, 0x1F, 12 * MS, target=-7)  # held high: not a new set-point
+    assert drive.od.get_int(0x60FC) == 5000 and drive.od.get_int(0x6064) == 4000
+    status = _run(drive, 0x0F, 13 * MS, target=-7)
+    assert drive.od.get_int(0x6064) == 5000 and status & 0x0400  # target reached
+    _run(drive, 0x5F, 14 * MS, target=-1000)  # relative (bit 6): 5000 - 1000
+    assert drive.od.get_int(0x60FC) == drive.od.get_int(0x6064) == 4000
+    _run(drive, 0x0F, 15 * MS, target=9000)
+    status = _run(drive, 0x11F, 16 * MS, target=9000)  # a set-point, halted (bit 8)
+    assert drive.od.get_int(0x60FC) == 9000 and drive.od.get_int(0x6064) == 4000
+    assert drive.od.get_int(0x606C) == 0 and status & 0x0400  # halted: stands
+    assert drive.od.get_int(0x60F4) == 5000  # demand - actual
+    _run(drive, 0x1F, 17 * MS, target=9000)  # halt released: on its way
+    assert drive.od.get_int(0x6064) == 6000
+
+
+def test_cyclic_torque_is_clamped_to_max_torque_and_the_follower_holds(
+    drive: Cia402Drive,
+) -> None:
+    _enable(drive, mode=10)
+    drive.od.set(0x6072, 0, 800)  # ‰ of rated torque
+    drive.od.set(0x6071, 0, 500)
+    drive.od.set(0x60B2, 0, 100)
+    status = _run(drive, 0x0F, 10 * MS)
+    assert drive.od.get_int(0x6077) == 600 and not status & 0x0800
+    drive.od.set(0x6071, 0, -1200)
+    status = _run(drive, 0x0F, 11 * MS)
+    assert drive.od.get_int(0x6077) == -800 and status & 0x0800  # internal limit active
+    assert drive.od.get_int(0x606C) == 0  # the kinematic follower has no inertia
+
+
+def test_csv_velocity_with_offset_limited_by_max_motor_speed(drive: Cia402Drive) -> None:
+    _enable(drive, mode=9)
+    drive.od.set(0x60FF, 0, 30_000)
+    drive.od.set(0x60B1, 0, 5_000)
+    _run(drive, 0x0F, 10 * MS)
+    _run(drive, 0x0F, 11 * MS)
+    assert drive.od.get_int(0x606C) == 35_000
+    drive.od.set(0x6080, 0, 20_000)  # max motor speed
+    _run(drive, 0x0F, 12 * MS)
+    assert drive.od.get_int(0x606C) == 20_000
+
+
+def test_software_position_limits_clip_the_demand(drive: Cia402Drive) -> None:
+    _enable(drive)
+    drive.od.set(0x607D, 1, -100)
+    drive.od.set(0x607D, 2, 300)
+    status = _run(drive, 0x0F, 10 * MS, target=1000)
+    assert drive.od.get_int(0x6064) == 300 and status & 0x0800
+    status = _run(drive, 0x0F, 11 * MS, target=-1000)
+    assert drive.od.get_int(0x6064) == -100 and status & 0x0800
+    status = _run(drive, 0x0F, 12 * MS, target=50)
+    assert drive.od.get_int(0x6064) == 50 and not status & 0x0800
+
+
+def test_following_error_window_and_timeout(drive: Cia402Drive) -> None:
+    drive.od.set(0x607F, 0, 100_000)  # 100 increments a ms
+    drive.od.set(0x6065, 0, 500)
+    drive.od.set(0x6066, 0, 3)  # ms
+    _enable(drive)
+    statuses = [_run(drive, 0x0F, (10 + k) * MS, target=10_000) for k in range(10)]
+    errors_over = [bool(s & 0x2000) for s in statuses]
+    first = errors_over.index(True)  # 10000 - 100 k > 500 from the start
+    assert first == 0
+    states = [s & 0x4F for s in statuses]
+    # over the window from 10 ms: still enabled at 10..12 ms, fault reaction at 13 ms
+    assert [s & 0x6F for s in statuses[:3]] == [0x27] * 3
+    assert states[3] == 0x0F and states[4] == 0x08  # fault reaction active, then fault
+    assert drive.od.get_int(0x603F) == 0x8611
+
+
+def test_the_load_is_a_seam_and_a_plant_keeps_the_drive_in_python() -> None:
+    from lolacli.devices.cia402 import Follower, Load
+    from lolacli.devices.flat import flatten
+
+    drive = device_for(load_eni(EXAMPLES / "single_drive.xml").slaves[0])
+    assert isinstance(drive, Cia402Drive) and isinstance(drive.load, Follower)
+    assert flatten(drive) is not None and drive.core_can_run()
+
+    class Half(Load):  # a plant that covers half the way each step
+        def follow(self, kind, demand, position, velocity, limit, dt_ns):  # type: ignore[no-untyped-def]
+            return position + (demand - position) // 2, 0
+
+    drive.load = Half()
+    assert flatten(drive) is None  # the C core mirrors only the Follower
+    _enable(drive)
+    _run(drive, 0x0F, 10 * MS, target=1000)
+    assert drive.od.get_int(0x6064) == 500
+    drive.load = Follower()
+    drive.od.set(0x6065, 0, 100)  # the monitor on: Python runs it too
+    assert not drive.core_can_run() and flatten(drive) is None

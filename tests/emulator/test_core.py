@@ -391,8 +391,12 @@ class Script:
         for cw in (0x06, 0x07, 0x0F):
             self.move(1, controlword=cw)
         self.move(20)
+        # profile position: a set-point, a relative one, a halt; then cyclic torque
+        for cw in (0x0F, 0x1F, 0x0F, 0x5F, 0x15F, 0x0F):
+            self.move(1, controlword=cw, mode=1)
+        self.move(2, controlword=0x0F, mode=10)
         for _ in range(40):  # random controlwords and modes
-            self.move(1, controlword=rng.randrange(0x10000), mode=rng.choice([8, 9, 1, -3]))
+            self.move(1, controlword=rng.randrange(0x10000), mode=rng.choice([8, 9, 1, 10, -3]))
         for cw in (0x00, 0x06, 0x07, 0x0F):
             self.move(1, controlword=cw)
         self.al_changes()

@@ -1022,3 +1022,84 @@ def test_pysoem_sees_the_line_shorten_when_the_scheduled_link_loss_comes(
         assert _read_counter(master.slaves[2], pysoem, 0x0311) == 1  # lost link, port 1
     finally:
         master.close()
+
+
+def test_pysoem_drives_every_cia402_transition(emulate, veth, pysoem) -> None:
+    """SOEM (pysoem) writes the controlword into the process data of `bus emulate`'s
+    drive and reads the statusword back: every commanded transition of CiA 402-2
+    Figure 4, a following error past its window (fault, 0x8611 in 0x603F read by SDO), the
+    fault reset on the rising edge of bit 7 and quick stop by its option code, against
+    the standard's statusword patterns (tests/devices/cia402_tables.py)."""
+    from tests.devices import cia402_tables as t
+
+    eni_path = EXAMPLES / "single_drive.xml"
+    emulate(eni_path)
+    master = pysoem.Master()
+    try:
+        master.open(veth[0])
+        assert master.config_init() == 1
+        slave = master.slaves[0]
+        assert master.config_map() > 0
+        _to_op(master, pysoem)
+        held = {"target": 0}
+
+        def send(cw: int, goal: str | None = None, allowed: tuple[str, ...] = ()) -> str:
+            """``cw`` each 1 ms cycle until the statusword shows ``goal`` (or 3 cycles
+            when None); every state shown meanwhile is one of ``allowed`` or the goal."""
+            until = time.perf_counter() + 0.5
+            n = 0
+            while True:
+                slave.output = struct.pack("<HbiI", cw, 8, held["target"], 0)
+                master.send_processdata()
+                assert master.receive_processdata(2000) == master.expected_wkc
+                n += 1
+                status, _mode, actual = struct.unpack_from("<Hbi", slave.input)
+                states = t.states_of(status)
+                assert len(states) == 1, hex(status)
+                if states[0] == goal or goal is None and n >= 3:
+                    return states[0]
+                assert goal is None or states[0] in allowed, (hex(cw), hex(status), goal)
+                assert time.perf_counter() < until, (hex(cw), hex(status), goal)
+                time.sleep(0.001)
+
+        def home() -> None:
+            state = send(t.DISABLE_VOLTAGE)
+            if state == "Fault":
+                send(t.FAULT_RESET, "Switch on disabled", ("Fault",))
+            send(t.DISABLE_VOLTAGE, "Switch on disabled")
+
+        def reach(state: str) -> None:
+            home()
+            now = "Switch on disabled"
+            for cw in t.PATH[state]:
+                goal = next(g for _n, s, c, g in t.TRANSITIONS if s == now and c == cw)
+                now = send(cw, goal, (now,))
+
+        for number, source, cw, goal in t.TRANSITIONS:
+            reach(source)
+            assert send(cw, goal, (source,)) == goal, number
+        # following error: window 50, timeout 3 ms, the follower limited to 10 increments/ms
+        for index, fmt, value in ((0x6065, "<I", 50), (0x6066, "<H", 3), (0x607F, "<I", 10_000)):
+            slave.sdo_write(index, 0, struct.pack(fmt, value))
+        reach("Operation enabled")
+        actual = struct.unpack_from("<Hbi", slave.input)[2]
+        held["target"] = actual + 100_000
+        reaction = ("Operation enabled", "Fault reaction active")  # transitions 13, 14
+        send(t.ENABLE_OPERATION | t.FAULT_RESET, "Fault", reaction)
+        send(t.FAULT_RESET)
+        assert t.states_of(struct.unpack_from("<H", slave.input)[0]) == ["Fault"]  # no edge
+        assert struct.unpack("<H", slave.sdo_read(0x603F, 0))[0] == 0x8611
+        held["target"] = struct.unpack_from("<Hbi", slave.input)[2]
+        send(t.DISABLE_VOLTAGE)
+        send(t.FAULT_RESET, "Switch on disabled", ("Fault",))  # the rising edge
+        assert struct.unpack("<H", slave.sdo_read(0x603F, 0))[0] == 0
+        slave.sdo_write(0x6065, 0, struct.pack("<I", 0xFFFFFFFF))
+        # quick stop, option code 2: stop, then switch on disabled on its own
+        slave.sdo_write(0x605A, 0, struct.pack("<h", 2))
+        reach("Operation enabled")
+        send(t.QUICK_STOP, "Switch on disabled", ("Operation enabled", "Quick stop active"))
+        slave.sdo_write(0x605A, 0, struct.pack("<h", 6))
+        master.state = pysoem.INIT_STATE
+        master.write_state()
+    finally:
+        master.close()

@@ -120,7 +120,7 @@ def test_sdo_upload_download_expedited_segmented_and_abort() -> None:
     name = sdo.upload(0x1008, 0)  # longer than a mailbox: segmented
     assert name.decode().startswith("lolacli emulated CiA 402 servo drive")
     assert len(name) > 140 - 16  # more than an initiate response carries
-    assert sdo.upload(0x6502, 0) == struct.pack("<I", 0x0380)  # expedited
+    assert sdo.upload(0x6502, 0) == struct.pack("<I", 0x0381)  # expedited: PP, CSP, CSV, CST
     sdo.download(0x607F, 0, struct.pack("<I", 123456))  # expedited
     assert struct.unpack("<I", sdo.upload(0x607F, 0))[0] == 123456
     with pytest.raises(SdoAbortError) as info:

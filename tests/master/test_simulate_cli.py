@@ -40,6 +40,7 @@ def test_acceptance_lola_10s_at_2khz_matches_bus_timing() -> None:
     assert doc["wire_time_us"] == 67.68
     assert doc["wkc_mismatches"] == 0 and doc["lost_frames"] == 0
     assert doc["drives_enabled"] == doc["drives"] == 21
+    assert doc["drive_faults"] == []
     timing = json.loads(run("bus", "timing", "--format", "json").stdout)
     assert (
         doc["round_trip_us"]["mean"] == doc["round_trip_us"]["max"] == timing["predicted_total_us"]
