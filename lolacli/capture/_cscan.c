@@ -69,6 +69,7 @@
 #define S_CYC_BYTES 48
 #define S_BRD_MAX 49
 #define S_RT_EST 50
+#define S_N_CTR 51
 #define S_SIZE 64
 
 /* return codes */
@@ -95,6 +96,7 @@
 #define MBX_COLS 8
 #define CFG_COLS 6
 #define EVICT_COLS 2
+#define CTR_COLS 8
 #define OCOLS 10
 #define BACK_KEEP 3
 #define KIND_WKC 1
@@ -123,6 +125,8 @@
 #define REG_DC_SYSTIME 0x0910
 #define REG_DC_SYSTIME_DIFF 0x092C
 #define MBX_AREA 0x1000
+#define REG_RX_ERROR_COUNTER 0x0300
+#define ERROR_COUNTER_BYTES 20
 
 typedef int64_t i64;
 
@@ -131,7 +135,7 @@ typedef struct {
     i64 *st, *cmd_counts;
     i64 *pk, *pn, *pv;
     i64 *sk, *sc, *wk, *wn, *wv;
-    i64 *o_rt, *o_rtts, *o_rtfr, *o_period, *o_burst, *o_dc, *o_mbx, *o_cfg, *o_evict;
+    i64 *o_rt, *o_rtts, *o_rtfr, *o_period, *o_burst, *o_dc, *o_mbx, *o_cfg, *o_evict, *o_ctr;
     const i64 *ifs;
     i64 n_if, p_len, s_len, w_len, o_len;
 } Tables;
@@ -337,6 +341,25 @@ static inline void config_write(const uint8_t *buf, i64 q, i64 cmd, i64 ado, i64
     }
 }
 
+/* Flag an APRD/FPRD of the error counters (0x0300, 20 bytes), out (ret 0) or back (1);
+ * see scan.py. */
+static inline void counter_read(const uint8_t *buf, i64 q, i64 j, i64 cmd, i64 ado, i64 ln,
+                                i64 ret, Tables *t) {
+    if ((cmd == 1 || cmd == 4) && ado == REG_RX_ERROR_COUNTER && ln == ERROR_COUNTER_BYTES) {
+        i64 *st = t->st;
+        i64 r = st[S_N_CTR] * CTR_COLS;
+        t->o_ctr[r] = st[S_FRAMES];
+        t->o_ctr[r + 1] = q;
+        t->o_ctr[r + 2] = cmd;
+        t->o_ctr[r + 3] = u16le(buf, q + 2);
+        t->o_ctr[r + 4] = buf[q + 1];
+        t->o_ctr[r + 5] = j;
+        t->o_ctr[r + 6] = u16le(buf, q + 10 + ln);
+        t->o_ctr[r + 7] = ret;
+        st[S_N_CTR] += 1;
+    }
+}
+
 static inline void drift(i64 ts, Tables *t) {
     i64 *st = t->st;
     st[S_DC_DGRAMS] += 1;
@@ -447,7 +470,9 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
             i64 cmd = buf[q];
             i64 ado = u16le(buf, q + 4);
             if ((cmd == 13 || cmd == 14) && ado == REG_DC_SYSTIME) drift(ts, t);
-            config_write(buf, q, cmd, ado, u16le(buf, q + 6) & 0x7FF, t);
+            i64 ln = u16le(buf, q + 6) & 0x7FF;
+            config_write(buf, q, cmd, ado, ln, t);
+            counter_read(buf, q, j, cmd, ado, ln, 0, t);
         }
         return 1;
     }
@@ -483,6 +508,7 @@ static int ecat(const uint8_t *buf, i64 p, i64 limit, i64 ret, i64 ts, Tables *t
             observe(t, KIND_WKC, cmd, addr_key(cmd, u32le(buf, q + 2)), ln, wkc, 0, frame);
         }
         returned_extras(buf, q, cmd, ado, ln, wkc, ts, t);
+        counter_read(buf, q, j, cmd, ado, ln, 1, t);
     }
     return 1;
 }
@@ -581,7 +607,8 @@ static int full(Tables *t, i64 cap) {
     i64 *st = t->st;
     i64 lim = cap - MAX_DGRAMS - 2;
     if (st[S_N_RT] >= lim || st[S_N_PERIOD] >= lim || st[S_N_BURST] >= lim ||
-        st[S_N_DC] >= lim || st[S_N_MBX] >= lim || st[S_N_CFG] >= lim || st[S_N_EVICT] >= lim)
+        st[S_N_DC] >= lim || st[S_N_MBX] >= lim || st[S_N_CFG] >= lim || st[S_N_EVICT] >= lim ||
+        st[S_N_CTR] >= lim)
         return ST_FLUSH;
     if (st[S_P_USED] * 2 > t->p_len || st[S_S_USED] * 2 > t->s_len || st[S_W_USED] * 2 > t->w_len)
         return ST_GROW;

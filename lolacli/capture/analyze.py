@@ -26,13 +26,14 @@ import dataclasses
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from lolacli.capture import scan as S
-from lolacli.capture.counters import CounterReads, error_counter_reads
+from lolacli.capture.counters import CounterReads, CounterTracker
 from lolacli.capture.fast import choose_engine, kernels
 from lolacli.capture.layout import AlStatusRead, MasterLayout, last_al_status
 from lolacli.capture.reader import (
@@ -329,8 +330,7 @@ def analyze_file(
         stopped_at = run.stopped_by_signal_at
     report = run.report(eni, timeout_ns, max_lost, max_wkc_mismatches, stopped_at)
     if stopped_at is None:
-        report = _counter_findings(report, error_counter_reads(reader.path, eni=eni,
-                                                               should_stop=should_stop))
+        report = _counter_findings(report, run.counters.result(eni))
     return report
 
 
@@ -460,6 +460,7 @@ class _Pass:
         self.o_mbx = _zeros(OUT_ROWS * S.MBX_COLS, py)
         self.o_cfg = _zeros(OUT_ROWS * S.CFG_COLS, py)
         self.o_evict = _zeros(OUT_ROWS * S.EVICT_COLS, py)
+        self.o_ctr = _zeros(OUT_ROWS * S.CTR_COLS, py)
         self.ifs = _zeros(5 * 64, py)
         self.n_if = 0
         self.interfaces: list[Interface] = []
@@ -481,6 +482,7 @@ class _Pass:
         self.evicted: list[np.ndarray] = []  # (frame << 1 | cyclic, ts)
         self.layout = MasterLayout()
         self.sdo = SdoTracker()
+        self.counters = CounterTracker()
         self.stopped_at: int | None = None
         self.cut_short = False
         self.on_pairs: OnPairs | None = None
@@ -539,7 +541,7 @@ class _Pass:
                     self.ifs, self.n_if, self.st, self.cmd_counts, self.dg,
                     self.pk, self.pn, self.pv, self.sk, self.sc, self.wk, self.wn, self.wv,
                     self.o_rt, self.o_rtts, self.o_rtfr, self.o_period, self.o_burst,
-                    self.o_dc, self.o_mbx, self.o_cfg, self.o_evict,
+                    self.o_dc, self.o_mbx, self.o_cfg, self.o_evict, self.o_ctr,
                 )
                 self._drain(src)
                 if self.progress is not None:
@@ -696,8 +698,15 @@ class _Pass:
             assert src is not None
             data = src.bytes_at(q + 10, ln)
             self.sdo.feed(frame, ts, cmd, address, data)
+        n = int(st[S.S_N_CTR])
+        if n:
+            assert src is not None
+            rows = _rows(self.o_ctr, n * S.CTR_COLS).reshape(n, S.CTR_COLS).tolist()
+            for _, q, cmd, adp, index, place, wkc, _ in rows:
+                self.counters.feed(cmd, adp, index, place, wkc,
+                                   partial(src.bytes_at, q + 10, S.ERROR_COUNTER_BYTES))
         for i in (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
-                  S.S_N_EVICT):
+                  S.S_N_EVICT, S.S_N_CTR):
             st[i] = 0
 
     # --- what the pass saw -------------------------------------------------------------

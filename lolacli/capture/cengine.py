@@ -30,7 +30,7 @@ class _Tables(ctypes.Structure):
         for name in (
             "st", "cmd_counts", "pk", "pn", "pv", "sk", "sc", "wk", "wn", "wv",
             "o_rt", "o_rtts", "o_rtfr", "o_period", "o_burst", "o_dc", "o_mbx", "o_cfg",
-            "o_evict", "ifs",
+            "o_evict", "o_ctr", "ifs",
         )
     ] + [(name, ctypes.c_int64) for name in ("n_if", "p_len", "s_len", "w_len", "o_len")]
 
@@ -86,7 +86,7 @@ def _pow2(n: int) -> bool:
 
 #: st counters the kernel uses as row indices into the outputs (it bounds them above)
 _ROW_COUNTERS = (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
-                 S.S_N_EVICT)
+                 S.S_N_EVICT, S.S_N_CTR)
 
 
 def _check_state(st: np.ndarray, pn: np.ndarray, ifs: np.ndarray, n_if: int) -> None:
@@ -124,11 +124,12 @@ class CKernels:
         ifs: Any, n_if: int, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pv: Any,
         sk: Any, sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any,
         o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any,
+        o_ctr: Any,
     ) -> tuple[int, int]:
         if buf.dtype != np.uint8 or not buf.flags.c_contiguous or not 0 <= pos <= end <= buf.size:
             raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
         arrays = (st, cmd_counts, pk, pn, pv, sk, sc, wk, wn, wv, o_rt, o_rtts, o_rtfr,
-                  o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, ifs)
+                  o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, o_ctr, ifs)
         t = self._tables
         if t is None or t.n_if != int(n_if) or len(arrays) != len(self._arrays) or not all(
             a is b for a, b in zip(arrays, self._arrays, strict=True)
@@ -146,7 +147,7 @@ class CKernels:
     def _checked(
         self, st: Any, cmd_counts: Any, pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any,
         wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any,
-        o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any, ifs: Any, n_if: int,
+        o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any, o_ctr: Any, ifs: Any, n_if: int,
     ) -> _Tables:
         """The kernel's table of array pointers, after checking every array's type and
         size (the arrays' sizes and places never change: a grown table is a new array)."""
@@ -165,6 +166,7 @@ class CKernels:
             _ptr(o_rt), _ptr(o_rtts, rows), _ptr(o_rtfr, rows), _ptr(o_period, rows),
             _ptr(o_burst, rows), _ptr(o_dc, rows), _ptr(o_mbx, rows * S.MBX_COLS),
             _ptr(o_cfg, rows * S.CFG_COLS), _ptr(o_evict, rows * S.EVICT_COLS),
+            _ptr(o_ctr, rows * S.CTR_COLS),
             _ptr(ifs, 5 * int(n_if)),
             int(n_if), p_len, s_len, w_len, rows,
         )

@@ -17,28 +17,20 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from lolacli.capture.reader import CaptureReader
 from lolacli.eni.model import Eni
-from lolacli.errors import WireError
 from lolacli.wire.commands import Command
 from lolacli.wire.error_counters import (
     ERROR_COUNTERS_BYTES,
     ErrorCounters,
+    Hop,
     PortRise,
     SuspectLink,
     decode_error_counters,
-    frame_path,
     locate,
     rises,
 )
-from lolacli.wire.frame import decode_frame
-from lolacli.wire.registers import Register
-
-#: a datagram header's ADO 0x0300 and length 20 (the M flag may follow), as bytes
-_MARK = int(Register.RX_ERROR_COUNTER).to_bytes(2, "little") + bytes([ERROR_COUNTERS_BYTES])
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,52 +55,56 @@ class CounterReads:
         }
 
 
-def error_counter_reads(
-    path: str | Path, *, eni: Eni | None = None, should_stop: Callable[[], bool] | None = None
-) -> CounterReads | None:
-    """The error counter reads of the capture at ``path`` (module docstring); ``None``
-    when it has none answered."""
-    if not _mentions(Path(path), _MARK):
-        return None  # the common case, at the speed of reading the file
-    requests: dict[tuple[int, int], int] = {}  # (frame index, datagram) -> address
-    seen: dict[tuple[str, int], list[ErrorCounters]] = {}
-    reads = 0
-    for n, frame in enumerate(CaptureReader(path)):
-        if should_stop is not None and n % 4096 == 0 and should_stop():
-            break
-        if _MARK not in frame.data:
-            continue
-        try:
-            datagrams = decode_frame(frame.data).datagrams
-        except WireError:
-            continue
-        for i, d in enumerate(datagrams):
-            if (d.cmd not in (Command.APRD, Command.FPRD) or d.ado != Register.RX_ERROR_COUNTER
-                    or len(d.data) != ERROR_COUNTERS_BYTES):  # fmt: skip
-                continue
-            key = (d.index, i)
-            if d.wkc == 0:
-                requests[key] = d.adp  # the request: APRD's address before the slaves add to it
-                continue
-            address = requests.pop(key, None)
-            if d.wkc != 1 or address is None:
-                continue
-            kind = "aprd" if d.cmd == Command.APRD else "fprd"
-            seen.setdefault((kind, address), []).append(decode_error_counters(d.data))
-            reads += 1
-    if not seen:
-        return None
-    positions, source = _positions(seen, eni)
-    first = {positions[k]: v[0] for k, v in seen.items() if k in positions}
-    last = {positions[k]: v[-1] for k, v in seen.items() if k in positions}
-    ports = tuple(r for p in sorted(last) for r in rises(p, first[p], last[p]))
-    n = max(last)
-    suspect = locate(ports, frame_path(list(range(n))))
-    return CounterReads(reads, first, last, ports, suspect, source)
+class CounterTracker:
+    """The error counter reads of one scan (module docstring), fed in file order with the
+    datagrams the scanner flags (:func:`lolacli.capture.scan._counter_read`): no second
+    pass over the file. A datagram with WKC 0 is a request (APRD's address before the
+    slaves add to it); the next one with its (index, place in the frame) and WKC 1 is its
+    answer. Bounded: a pending request per (index, place), the first and the last
+    answer's 20 bytes per address."""
+
+    def __init__(self) -> None:
+        self.reads = 0
+        self._requests: dict[tuple[int, int], int] = {}  # (index, datagram) -> address
+        self._first: dict[tuple[str, int], bytes] = {}
+        self._last: dict[tuple[str, int], bytes] = {}
+
+    def feed(self, cmd: int, adp: int, index: int, place: int, wkc: int,
+             data: Callable[[], bytes]) -> None:
+        """One flagged datagram; ``data()`` gives its 20 bytes (read only for answers)."""
+        key = (index, place)
+        if wkc == 0:
+            self._requests[key] = adp
+            return
+        address = self._requests.pop(key, None)
+        if wkc != 1 or address is None:
+            return
+        at = ("aprd" if cmd == Command.APRD else "fprd", address)
+        raw = data()
+        if len(raw) != ERROR_COUNTERS_BYTES:
+            return  # a mapped file that shrank under the scan (that pass is read again)
+        self._first.setdefault(at, raw)
+        self._last[at] = raw
+        self.reads += 1
+
+    def result(self, eni: Eni | None = None) -> CounterReads | None:
+        """What the reads say; ``None`` when the capture has no answered read."""
+        if not self._last:
+            return None
+        positions, source = _positions(list(self._last), eni)
+        first = {positions[k]: decode_error_counters(v) for k, v in self._first.items()
+                 if k in positions}
+        last = {positions[k]: decode_error_counters(v) for k, v in self._last.items()
+                if k in positions}
+        if not last:
+            return None  # FPRDs of stations the ENI does not have: no position
+        ports = tuple(r for p in sorted(last) for r in rises(p, first[p], last[p]))
+        suspect = locate(ports, line_path(max(last)))
+        return CounterReads(self.reads, first, last, ports, suspect, source)
 
 
 def _positions(
-    seen: dict[tuple[str, int], list[ErrorCounters]], eni: Eni | None
+    seen: list[tuple[str, int]], eni: Eni | None
 ) -> tuple[dict[tuple[str, int], int], str]:
     """1-based positions of the addresses read."""
     aprd = {k: ((-k[1]) & 0xFFFF) + 1 for k in seen if k[0] == "aprd"}
@@ -123,13 +119,9 @@ def _positions(
         "station order"
 
 
-def _mentions(path: Path, mark: bytes, chunk_bytes: int = 1 << 20) -> bool:
-    """Whether the file's bytes contain ``mark`` anywhere (a quick test before decoding
-    every frame)."""
-    tail = b""
-    with path.open("rb") as f:
-        while block := f.read(chunk_bytes):
-            if mark in tail + block[: len(mark)] or mark in block:
-                return True
-            tail = block[-len(mark) + 1 :]
-    return False
+def line_path(n: int) -> list[Hop]:
+    """The hops of a frame through a line of ``n`` slaves: what
+    :func:`lolacli.wire.error_counters.frame_path` gives for ``list(range(n))``, without
+    its recursion (a damaged capture may read the counters of position 40,000)."""
+    out = [Hop(p, 0, p - 1) for p in range(1, n + 1)]
+    return out + [Hop(p, 1, p + 1) for p in range(n - 1, 0, -1)]

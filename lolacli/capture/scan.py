@@ -24,7 +24,10 @@ Everything lives in flat integer arrays (lists in plain-Python mode):
   (:mod:`lolacli.capture.verdict`), when references are known;
 * output rows ``o_*`` that the driver drains whenever :data:`ST_FLUSH` is returned;
   ``o_cfg`` flags the master's writes of station addresses, AL control and FMMUs, which
-  the driver decodes from the buffer (:mod:`lolacli.capture.layout`).
+  the driver decodes from the buffer (:mod:`lolacli.capture.layout`); ``o_ctr`` every
+  APRD/FPRD of the ESC error counters (ADO 0x0300, 20 bytes), out or back, whose answers
+  the driver decodes (:mod:`lolacli.capture.counters`) — so that no second pass over the
+  file looks for them.
 
 Direction (docs/architecture.md "Direction"): ``st[S_DIRMODE]`` 0 takes the packet type of Linux
 cooked captures (SLL/SLL2: 4 = sent by this host) and the locally administered bit of the
@@ -93,6 +96,7 @@ S_MALF_F0 = 45  # frame numbers of the first BACK_KEEP malformed frames
 S_CYC_BYTES = 48  # the longest cyclic outgoing frame, bytes on the wire (docs/architecture.md)
 S_BRD_MAX = 49  # the highest WKC a BRD/BWR came back with: the slaves on the line
 S_RT_EST = 50  # running average of round trips (direction inference: the echo window)
+S_N_CTR = 51  # rows in o_ctr: reads of the ESC error counters (0x0300, 20 bytes)
 S_SIZE = 64
 
 # --- kernel return codes -----------------------------------------------------------------
@@ -126,6 +130,7 @@ CHECK_EVERY = 64
 MBX_COLS = 8
 CFG_COLS = 6
 EVICT_COLS = 2
+CTR_COLS = 8
 OCOLS = 10
 BACK_KEEP = 3
 KIND_WKC = 1
@@ -166,6 +171,8 @@ REG_FMMU_END = 0x0700
 REG_DC_SYSTIME = 0x0910
 REG_DC_SYSTIME_DIFF = 0x092C
 MBX_AREA = 0x1000
+REG_RX_ERROR_COUNTER = 0x0300
+ERROR_COUNTER_BYTES = 20
 
 
 def _byte(buf: Any, p: Any) -> Any:
@@ -375,6 +382,25 @@ def _config_write(buf: Any, q: Any, cmd: Any, ado: Any, ln: Any, st: Any, o_cfg:
         st[S_N_CFG] += 1
 
 
+def _counter_read(
+    buf: Any, q: Any, j: Any, cmd: Any, ado: Any, ln: Any, ret: Any, st: Any, o_ctr: Any,
+) -> Any:
+    """Flag an APRD/FPRD of the error counters (0x0300, 20 bytes), out (``ret`` 0) or back
+    (1): frame, the datagram's offset, command, ADP, index, place ``j`` in the frame, WKC,
+    direction. The driver pairs them and reads the answers' data from the buffer."""
+    if (cmd == 1 or cmd == 4) and ado == REG_RX_ERROR_COUNTER and ln == ERROR_COUNTER_BYTES:
+        r = st[S_N_CTR] * CTR_COLS
+        o_ctr[r] = st[S_FRAMES]
+        o_ctr[r + 1] = q
+        o_ctr[r + 2] = cmd
+        o_ctr[r + 3] = _u16(buf, q + 2, False)
+        o_ctr[r + 4] = _byte(buf, q + 1)
+        o_ctr[r + 5] = j
+        o_ctr[r + 6] = _u16(buf, q + 10 + ln, False)
+        o_ctr[r + 7] = ret
+        st[S_N_CTR] += 1
+
+
 def _drift(ts: Any, st: Any, o_burst: Any) -> Any:
     st[S_DC_DGRAMS] += 1
     if st[S_DC_BURST] > 0 and ts - st[S_DC_LAST_TS] > BURST_GAP_NS:
@@ -389,7 +415,7 @@ def _ecat(
     buf: Any, p: Any, limit: Any, ret: Any, ts: Any, st: Any, cmd_counts: Any, dg: Any,
     pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any,
     o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any,
-    o_cfg: Any, o_evict: Any,
+    o_cfg: Any, o_evict: Any, o_ctr: Any,
 ) -> Any:
     """One EtherCAT payload at ``p`` (captured bytes end at ``limit``); ``ret`` 0 sent by
     the master, 1 returned, -1 to infer.
@@ -498,7 +524,9 @@ def _ecat(
             ado = _u16(buf, q + 4, False)
             if (cmd == 13 or cmd == 14) and ado == REG_DC_SYSTIME:
                 _drift(ts, st, o_burst)
-            _config_write(buf, q, cmd, ado, _u16(buf, q + 6, False) & 0x7FF, st, o_cfg)
+            ln = _u16(buf, q + 6, False) & 0x7FF
+            _config_write(buf, q, cmd, ado, ln, st, o_cfg)
+            _counter_read(buf, q, j, cmd, ado, ln, 0, st, o_ctr)
         return True
     st[S_RET] += 1
     i = _slot(pk, hp)
@@ -532,6 +560,7 @@ def _ecat(
             _observe(wk, wn, wv, st, KIND_WKC, cmd, addr_key(cmd, _u32(buf, q + 2, False)),
                      ln, wkc, 0, frame)
         _returned_extras(buf, q, cmd, ado, ln, wkc, ts, st, wk, wn, wv, o_dc, o_mbx)
+        _counter_read(buf, q, j, cmd, ado, ln, 1, st, o_ctr)
     return True
 
 
@@ -539,7 +568,7 @@ def _packet(
     buf: Any, d: Any, cap: Any, orig: Any, ts: Any, link: Any, st: Any, cmd_counts: Any,
     dg: Any, pk: Any, pn: Any, pv: Any, sk: Any, sc: Any, wk: Any, wn: Any, wv: Any,
     o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any,
-    o_cfg: Any, o_evict: Any,
+    o_cfg: Any, o_evict: Any, o_ctr: Any,
 ) -> Any:
     """One link-layer frame (Ethernet, SLL or SLL2) of ``cap`` captured bytes at ``d``."""
     st[S_FRAMES] += 1
@@ -607,7 +636,7 @@ def _packet(
     if st[S_DIRMODE] == DIR_INFER:
         ret = -1
     ok = _ecat(buf, p, limit, ret, ts, st, cmd_counts, dg, pk, pn, pv, sk, sc, wk, wn, wv,
-               o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict)
+               o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, o_ctr)
     if not ok:
         _bad(st)
         return
@@ -622,7 +651,7 @@ def _full(st: Any, cap: Any, pk: Any, sk: Any, wk: Any) -> Any:
     lim = cap - MAX_DGRAMS - 2
     if (st[S_N_RT] >= lim or st[S_N_PERIOD] >= lim or st[S_N_BURST] >= lim
             or st[S_N_DC] >= lim or st[S_N_MBX] >= lim or st[S_N_CFG] >= lim
-            or st[S_N_EVICT] >= lim):
+            or st[S_N_EVICT] >= lim or st[S_N_CTR] >= lim):
         return ST_FLUSH
     if st[S_P_USED] * 2 > len(pk) or st[S_S_USED] * 2 > len(sk) or st[S_W_USED] * 2 > len(wk):
         return ST_GROW
@@ -633,7 +662,7 @@ def scan(
     buf: Any, pos: Any, end: Any, eof: Any, fmt: Any, big: Any, ns_res: Any, ifs: Any,
     n_if: Any, st: Any, cmd_counts: Any, dg: Any, pk: Any, pn: Any, pv: Any, sk: Any,
     sc: Any, wk: Any, wn: Any, wv: Any, o_rt: Any, o_rtts: Any, o_rtfr: Any, o_period: Any,
-    o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any,
+    o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any, o_ctr: Any,
 ) -> Any:
     """Walk records from ``pos`` until the buffer ends or the driver must act.
 
@@ -690,7 +719,7 @@ def scan(
                 pos += size
                 continue
         _packet(buf, d, incl, orig, ts, link, st, cmd_counts, dg, pk, pn, pv, sk, sc, wk, wn,
-                wv, o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict)
+                wv, o_rt, o_rtts, o_rtfr, o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, o_ctr)
         pos += size
     if eof:
         if pos == end:

@@ -165,13 +165,15 @@ def test_c_kernel_refuses_state_it_would_index_out_of_bounds_with():
                       z(256), z(S.MAX_DGRAMS), z(slots), pn, z(slots * S.DEPTH * S.PCOLS),
                       z(slots), z(slots), z(obs), z(obs), z(obs * S.OCOLS), z(rows),
                       z(rows), z(rows), z(rows), z(rows), z(rows), z(rows * S.MBX_COLS),
-                      z(rows * S.CFG_COLS), z(rows * S.EVICT_COLS))
+                      z(rows * S.CFG_COLS), z(rows * S.EVICT_COLS), z(rows * S.CTR_COLS))
 
     assert call()[1] == S.ST_CORRUPT  # 8 zero bytes: a block of length 0
     negative_row = z(S.S_SIZE)
     negative_row[S.S_N_DC] = -1
     negative_counts = [z(S.S_SIZE) for _ in range(3)]
-    for st, i in zip(negative_counts, (S.S_N_CFG, S.S_BACKWARDS, S.S_MALFORMED), strict=True):
+    negative_counts.append(z(S.S_SIZE))
+    for st, i in zip(negative_counts, (S.S_N_CFG, S.S_BACKWARDS, S.S_MALFORMED, S.S_N_CTR),
+                     strict=True):
         st[i] = -1  # these index st and the output rows
     deep = z(slots)
     deep[7] = S.DEPTH + 1
@@ -271,6 +273,18 @@ def _rich_capture(cooked: bool) -> bytes:
             emit([P(Command.FPWR, station, 0x0600, fmmu, index=k + 8, wkc=int(ret))], ret)
     for ret in (False, True):
         emit([P(Command.BWR, 3 if ret else 0, 0x0120, b"\x08\x00", index=20, wkc=3 * ret)], ret)
+    # the error counters (0x0300, 20 bytes) read twice, three APRDs in one frame: slave 2
+    # counts invalid frames on port 0 in between (errors enter between slaves 1 and 2);
+    # an FPRD of station 0x1003, once unanswered (WKC 0 back), then answered
+    for rise in (0, 5):
+        for ret in (False, True):
+            emit([P(Command.APRD, -k + 3 * ret, 0x0300,
+                    bytes([rise if k == 1 else 0]) + bytes(19) if ret else 20,
+                    index=24, wkc=int(ret)) for k in range(3)], ret)
+    emit([P(Command.FPRD, 0x1003, 0x0300, 20, index=25)], False)
+    emit([P(Command.FPRD, 0x1003, 0x0300, 20, index=25)], True)
+    emit([P(Command.FPRD, 0x1003, 0x0300, 20, index=25)], False, 40_000_000)
+    emit([P(Command.FPRD, 0x1003, 0x0300, bytes(20), index=25, wkc=1)], True)
     lost = P(Command.FPRD, 0x1002, 0x0130, 2, index=21)
     emit([lost], False)
     emit([lost], False, 40_000_000)  # resent 40 ms later, answered
@@ -301,8 +315,42 @@ def test_engines_agree_on_every_path_and_its_damage(tmp_path, fast, cooked):
     assert {"lost", "wkc-mismatch", "not-op", "timestamps-backwards"} <= set(kinds), kinds
     lrw = [g for g in whole["wkc"]["datagrams"] if g["cmd"] == "LRW"]
     assert lrw[0]["expected"] == 9  # 3 slaves x (2 + 1), from the FMMU writes
+    # the scanner's rows of the error counter reads (o_ctr), decoded by the driver
+    counters = whole["error_counters"]
+    assert counters["reads"] == 7 and counters["positions_from"] == "station order"
+    link = counters["suspect_link"]
+    assert (link["upstream"], link["downstream"], link["port"]) == (1, 2, 0)
+    assert "bad-link" in kinds
     rnd = random.Random(7 + cooked)
     for k in range(VARIANTS * 2):
         damaged = tmp_path / f"{k}.pcapng"
         damaged.write_bytes(_mutate(data, rnd))
         assert _outcome(damaged, fast) == _outcome(damaged, "python"), k
+
+
+def test_counter_reads_of_a_far_position_do_not_recurse(tmp_path, fast):
+    """An APRD of 0x0300 whose address says position 40,000 (damage, or a long line): the
+    line's frame path is built without recursion, and both engines name the same link."""
+    import struct
+
+    from lolacli.capture import writer as w
+    from lolacli.capture.counters import line_path
+    from lolacli.wire.error_counters import frame_path
+
+    assert all(line_path(n) == frame_path(list(range(n))) for n in range(60))
+    far = (-(40_000 - 1)) & 0xFFFF
+    frames = []
+    for rise in (0, 3):
+        for ret in (False, True):
+            data = (bytes([rise]) + bytes(19)) if ret else bytes(20)
+            frames.append(b"\xff" * 6 + (b"\x02" if ret else b"\x00") * 6
+                          + struct.pack(">H", 0x88A4) + struct.pack("<H", 0x1000 | 32)
+                          + _datagram(1, (0x0300 << 16) | far, data, False, int(ret)))
+    path = tmp_path / "far.pcap"
+    path.write_bytes(w.pcap_header() + b"".join(
+        w.pcap_record(i * 1000, f) for i, f in enumerate(frames)))
+    got = _outcome(path, fast)
+    assert got == _outcome(path, "python")
+    assert got["error_counters"]["reads"] == 2
+    link = got["error_counters"]["suspect_link"]
+    assert (link["upstream"], link["downstream"], link["port"]) == (39_999, 40_000, 0)

@@ -368,7 +368,8 @@ def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
                 pv=z(pv), sk=z(128), sc=z(128), wk=z(512), wn=z(512), wv=z(512 * S.OCOLS),
                 o_rt=z(rows), o_rtts=z(rows), o_rtfr=z(rows), o_period=z(rows),
                 o_burst=z(rows), o_dc=z(rows), o_mbx=z(rows * S.MBX_COLS),
-                o_cfg=z(rows * S.CFG_COLS), o_evict=z(rows * S.EVICT_COLS))
+                o_cfg=z(rows * S.CFG_COLS), o_evict=z(rows * S.EVICT_COLS),
+                o_ctr=z(rows * S.CTR_COLS))
     buf = np.zeros(100, np.uint8)
 
     def call(**change):
@@ -383,7 +384,7 @@ def test_c_kernel_refuses_arrays_it_would_overrun(tmp_path):
                 dict(pk=z(64), pn=z(64), pv=z(64 * S.DEPTH * S.PCOLS)),
                 dict(wk=z(256), wn=z(256), wv=z(256 * S.OCOLS)), dict(wv=z(512)),
                 dict(sk=z(64), sc=z(64)), dict(o_dc=z(5)), dict(o_cfg=z(rows)),
-                dict(o_evict=z(rows)), dict(st=z(3)), dict(o_mbx=z(rows)),
+                dict(o_evict=z(rows)), dict(st=z(3)), dict(o_mbx=z(rows)), dict(o_ctr=z(rows)),
                 dict(buf=np.zeros(100, np.int64)), dict(st=np.zeros(S.S_SIZE, np.int32))):
         with pytest.raises(ValueError):
             call(**bad)
