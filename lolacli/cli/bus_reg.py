@@ -75,9 +75,8 @@ def write_cmd(
 ) -> None:
     """Write VALUE to SLAVE's ESC at ADDR and read it back (lolacli.reg/1: ``verified``
     false when it reads back otherwise, as read-only and self-clearing registers do). A
-    write into
-    what a master configures while the slave runs process data (SAFEOP, OP) needs
-    --force. Exit 2 for bad input (nothing written), 4 when the slave does not answer."""
+    write into what a master configures while the slave runs process data (SAFEOP, OP)
+    needs --force. Exit 2 for bad input (nothing written), 4 when the slave does not answer."""
     from lolacli.cli.bench_common import bench_bus, resolve
     from lolacli.master.bench import register_fields, write_register
     from lolacli.wire.registers import parse_register
