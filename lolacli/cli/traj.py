@@ -34,9 +34,10 @@ def plan_cmd(
     v_end: Annotated[float, typer.Option(
         "--v-end", min=0.0, callback=not_nan,
         help="End speed in the direction of the move, UNIT/s.")] = 0.0,
-    cycle: Annotated[float | None, _number(
-        "--cycle", "Cycle time, s: every phase lasts whole cycles. Default: continuous "
-        "time.")] = None,
+    cycle_text: Annotated[str | None, typer.Option(
+        "--cycle", metavar="TIME", show_default=False,
+        help="Cycle time (1ms, 500us, 0.001s): every phase lasts whole cycles. Default: "
+        "continuous time.")] = None,
     unit: Annotated[str, typer.Option("--unit", help="Unit of position (for the output).")]
     = "m",
     plot: Annotated[Path | None, typer.Option(
@@ -55,6 +56,14 @@ def plan_cmd(
     """
     from lolacli.errors import UsageError
     from lolacli.motion.scurve import plan
+    from lolacli.timing.model import parse_duration_ns
+
+    cycle = None
+    if cycle_text is not None:
+        cycle_ns = parse_duration_ns(cycle_text, None, what="--cycle")
+        if cycle_ns <= 0:
+            raise UsageError(f"--cycle {cycle_text}: a cycle lasts more than 0 s")
+        cycle = cycle_ns / 1e9
 
     if plot is not None and plot.is_dir():
         raise UsageError(f"--plot {plot} is a folder; give a PNG file name")

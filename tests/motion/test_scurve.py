@@ -211,7 +211,7 @@ ARGS = ("traj", "plan", "--distance", "160", "--vmax", "90", "--amax", "400",
 
 
 def test_cli_json(cli) -> None:
-    code, out, err = cli(*ARGS, "--v-end", "10", "--cycle", "0.001", "--unit", "deg",
+    code, out, err = cli(*ARGS, "--v-end", "10", "--cycle", "1ms", "--unit", "deg",
                          "-f", "json")
     assert code == 0, err
     doc = json.loads(out)
@@ -229,7 +229,7 @@ def test_cli_human_fits_80_columns_with_units(tmp_path: Path) -> None:
     from lolacli.cli.main import app
 
     png = tmp_path / "s.png"
-    result = CliRunner().invoke(app, [*ARGS, "--cycle", "0.001", "--unit", "deg",
+    result = CliRunner().invoke(app, [*ARGS, "--cycle", "1ms", "--unit", "deg",
                                       "--plot", str(png)], env={"COLUMNS": "80"})
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
@@ -247,7 +247,7 @@ def test_cli_human_fits_80_columns_with_units(tmp_path: Path) -> None:
         (("--vmax", "nan"), "'--vmax'"),
         (("--distance", "1e300"), "out of range"),
         (("--distance", "inf"), "finite"),
-        (("--cycle", "0"), "cycle must be greater than 0"),
+        (("--cycle", "0s"), "a cycle lasts more than 0 s"),
         (("--distance", "1", "--v-end", "90"), "without reversing"),
         (("--v-start", "-1"), "'--v-start'"),
     ],
