@@ -57,7 +57,7 @@ class _LolaGroup(TyperGroup):
                 raise typer.Exit(2) from None  # its help, as the root's (no_args_is_help)
             path = usage_ctx.command_path if usage_ctx is not None else "lolacli"
             message = " ".join(exc.format_message().split())
-            sys.stderr.write(f"{path}: error: {message} (see {path} --help)\n")
+            sys.stderr.write(f"{path}: error: {message} (see --help)\n")
             raise typer.Exit(2) from None
 
 
