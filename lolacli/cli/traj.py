@@ -56,14 +56,8 @@ def plan_cmd(
     """
     from lolacli.errors import UsageError
     from lolacli.motion.scurve import plan
-    from lolacli.timing.model import parse_duration_ns
 
-    cycle = None
-    if cycle_text is not None:
-        cycle_ns = parse_duration_ns(cycle_text, None, what="--cycle")
-        if cycle_ns <= 0:
-            raise UsageError(f"--cycle {cycle_text}: a cycle lasts more than 0 s")
-        cycle = cycle_ns / 1e9
+    cycle = _cycle_s(cycle_text)
 
     if plot is not None and plot.is_dir():
         raise UsageError(f"--plot {plot} is a folder; give a PNG file name")
@@ -159,3 +153,16 @@ def write_plot(series: dict[str, Any], path: Path, unit: str, title: str,
     finally:
         plt.close(fig)
     return path
+
+
+def _cycle_s(text: str | None) -> float | None:
+    """--cycle in seconds (None: continuous time)."""
+    from lolacli.errors import UsageError
+    from lolacli.timing.model import parse_duration_ns
+
+    if text is None:
+        return None
+    cycle_ns = parse_duration_ns(text, None, what="--cycle")
+    if cycle_ns <= 0:
+        raise UsageError(f"--cycle {text}: a cycle lasts more than 0 s")
+    return cycle_ns / 1e9
