@@ -377,31 +377,39 @@ def _write_atomically(path: Path, data: bytes) -> None:
             os.unlink(tmp)
 
 
+_GenIface = Annotated[
+    str,
+    typer.Option("--iface", "-i", metavar="IF",
+                 help="EtherCAT: the network interface of the bus to scan."),
+]
+_GenOutput = Annotated[
+    Path, typer.Option("--output", "-o", help="The ENI file to write.", show_default=False)
+]
+_GenEsi = Annotated[
+    list[Path] | None,
+    typer.Option("--esi", help="ESI file or folder of ESI files: slaves it describes take "
+                 "their PDOs, sync managers and DC from it. Repeatable."),
+]
+_GenCycle = Annotated[
+    str, typer.Option("--cycle-time", help="Cycle time written in the ENI (e.g. 1ms, 500us).")
+]
+_GenNoCoe = Annotated[
+    bool, typer.Option("--no-coe", help="Take the PDOs from the SII, not from CoE "
+                       "0x1C12/0x1C13.")
+]
+_GenTimeout = Annotated[
+    str, typer.Option("--timeout", help="Wait this long for each frame (e.g. 20ms).")
+]
+
+
 @app.command("generate")
 def generate_cmd(
-    iface: Annotated[
-        str,
-        typer.Option("--iface", "-i", metavar="IF",
-                     help="EtherCAT: the network interface of the bus to scan."),
-    ],
-    output: Annotated[
-        Path, typer.Option("--output", "-o", help="The ENI file to write.", show_default=False)
-    ],
-    esi: Annotated[
-        list[Path] | None,
-        typer.Option("--esi", help="ESI file or folder of ESI files: slaves it describes take "
-                     "their PDOs, sync managers and DC from it. Repeatable."),
-    ] = None,
-    cycle_time: Annotated[
-        str, typer.Option("--cycle-time", help="Cycle time written in the ENI (e.g. 1ms, 500us).")
-    ] = "1ms",
-    no_coe: Annotated[
-        bool, typer.Option("--no-coe", help="Take the PDOs from the SII, not from CoE "
-                           "0x1C12/0x1C13.")
-    ] = False,
-    timeout: Annotated[
-        str, typer.Option("--timeout", help="Wait this long for each frame (e.g. 20ms).")
-    ] = "20ms",
+    iface: _GenIface,
+    output: _GenOutput,
+    esi: _GenEsi = None,
+    cycle_time: _GenCycle = "1ms",
+    no_coe: _GenNoCoe = False,
+    timeout: _GenTimeout = "20ms",
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Scan the bus on IF and write its ENI (lolacli.eni-generate/1): identities and
@@ -412,22 +420,12 @@ def generate_cmd(
     are left in INIT. Exit 0 when written, 3 for an unreadable ESI or an output that cannot
     be written, 4 when the bus does not answer."""
     from lolacli.eni.writer import write_eni
-    from lolacli.errors import InputError
     from lolacli.master.generate import GenerateOptions, generate
     from lolacli.master.transport import RawSocketTransport
-    from lolacli.timing.model import parse_duration_ns
 
-    cycle_ns = parse_duration_ns(cycle_time, None, "--cycle-time")
-    timeout_ns = parse_duration_ns(timeout, None, "--timeout")
-    for value, name, raw in ((cycle_ns, "--cycle-time", cycle_time), (timeout_ns, "--timeout",
-                                                                      timeout)):
-        if value <= 0:
-            raise typer.BadParameter(f"{raw!r} is not a positive duration", param_hint=name)
-    folder = output.parent if str(output.parent) else Path(".")
-    if output.is_dir():
-        raise InputError("is a directory; give the ENI's file name", path=str(output))
-    if not folder.is_dir():
-        raise InputError("no such folder for the ENI", path=str(output))
+    cycle_ns = _positive_duration(cycle_time, "--cycle-time")
+    timeout_ns = _positive_duration(timeout, "--timeout")
+    _check_output(output)
     esi_files = _esi_files(list(esi or ()))
     options = GenerateOptions(cycle_time_ns=cycle_ns, frame_timeout_ns=timeout_ns,
                               coe=not no_coe)
@@ -442,6 +440,26 @@ def generate_cmd(
         emit_json(doc)
     else:
         _render_generate(doc)
+
+
+def _positive_duration(raw: str, name: str) -> int:
+    from lolacli.timing.model import parse_duration_ns
+
+    value = parse_duration_ns(raw, None, name)
+    if value <= 0:
+        raise typer.BadParameter(f"{raw!r} is not a positive duration", param_hint=name)
+    return value
+
+
+def _check_output(output: Path) -> None:
+    """InputError (exit 3) before the bus is touched when the ENI cannot go there."""
+    from lolacli.errors import InputError
+
+    folder = output.parent if str(output.parent) else Path(".")
+    if output.is_dir():
+        raise InputError("is a directory; give the ENI's file name", path=str(output))
+    if not folder.is_dir():
+        raise InputError("no such folder for the ENI", path=str(output))
 
 
 def _render_generate(doc: dict[str, Any]) -> None:

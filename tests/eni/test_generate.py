@@ -188,3 +188,39 @@ def test_cli_output_into_a_missing_folder(cli, tmp_path: Path) -> None:
     out = tmp_path / "nope" / "bus.xml"
     got, _out, err = cli("eni", "generate", "--iface", "nosuchif0", "-o", str(out))
     assert got == 3 and "no such folder" in err
+
+
+def test_esi_gives_pdos_sync_managers_and_dc(corpus: Path) -> None:
+    """The rocos Elmo drive emulated with the Elmo ESI's SII: with the ESI, the generated
+    ENI takes the ESI's default PDO assignment (0x1600/0x1A00, 10 bytes each way: the
+    rocos ENI assigns other PDOs), its sync managers, its DC op mode, CoE InitCmds that
+    write that assignment, and the bus reaches OP with it."""
+    from lolacli.files import load_esi
+
+    source = load_eni(corpus / "eni" / "rocos-ethercat__eni.xml")
+    esi = load_esi(corpus / "esi" / "elmo_ethercat_sdk__Elmo_ECAT_00010420_V11.xml")
+    device = esi.find(0x9A, 0x30924, 0x10420)
+    assert device is not None
+    result = generate(VirtualBus(source, esi=[esi]).transport, esi=[esi])
+    [origin] = result.slaves
+    assert (origin.pdo_source, origin.dc) == ("esi", True)
+    [slave] = parse_eni(write_eni(result.eni), "generated.xml").slaves
+    assert [(p.index, p.sync_manager) for p in slave.pdos] == [
+        (p.index, p.sync_manager) for p in device.assigned_pdos
+    ]
+    assert (slave.inputs_bits, slave.outputs_bits) == (80, 80)
+    esi_sms = {s.index: (s.start_address, s.control) for s in device.sync_managers}
+    for m in slave.sync_managers:
+        assert (m.sync_manager.physical_start, m.sync_manager.control) == esi_sms[m.index]
+    dc_mode = next(m for m in device.dc_op_modes if m.assign_activate)
+    assert slave.dc is not None and slave.dc.assign_activate == dc_mode.assign_activate
+    assert slave.mailbox is not None
+    coe = slave.mailbox.coe_init_cmds
+    assigned = [c for c in coe if c.index in (0x1C12, 0x1C13) and c.subindex]
+    assert [int.from_bytes(c.data, "little") for c in assigned] == [0x1600, 0x1A00]
+    bus = VirtualBus(source, esi=[esi])
+    master = Master(result.eni, bus.transport, options=MasterOptions(dc_drift_frames=50))
+    assert master.bring_up() == []
+    master.run(50)
+    master.drain()
+    assert master.stats.wkc_mismatches == 0 and master.stats.cyclic_lost == 0
