@@ -94,6 +94,7 @@ def _commands():  # type: ignore[no-untyped-def]
 #: flags that mean different things in different commands (so their help differs)
 _MEANS_MORE_THAN_ONE_THING = {
     "--bad-link": "the same fault, said of a chain on a wire (bus emulate) or in virtual time",
+    "--esi": "eni generate takes folders of ESI files too, and their PDOs, SMs and DC",
     "--plot": "a folder of PNGs (capture analyze) or one PNG (traj plan, joint track/bode)",
     "--mcap": "the same channels, from a capture (capture export) or a run (bus simulate)",
     "--eni": "the chain itself; a reference to check against; bus timing's frame source",

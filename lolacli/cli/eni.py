@@ -1,4 +1,4 @@
-"""`lolacli eni …` commands: inspect, vars, validate, diff.
+"""`lolacli eni …` commands: inspect, vars, validate, diff, generate.
 
 Each command: an ``Annotated`` signature, one library call, rendering. The library
 (``lolacli.files``, ``lolacli.eni.*``) and rich are imported inside the commands.
@@ -331,3 +331,174 @@ def _render_diff(a: Any, b: Any, changes: Any) -> None:
     counts = {area: sum(c.area == area for c in changes) for area in AREAS}
     parts = [plural(n, _AREA_NOUNS[area]) for area, n in counts.items() if n]
     say(console, f"{plural(len(changes), 'difference')}: {', '.join(parts)}")
+
+
+# ------------------------------------------------------------------------- generate
+
+
+def _esi_files(paths: list[Path]) -> list[Any]:
+    """Every ESI given: a file, or each ``*.xml`` of a folder (files that are no ESI are
+    skipped in a folder, an error when named)."""
+    from lolacli.errors import EniError, InputError
+    from lolacli.files import load_esi
+
+    out = []
+    for p in paths:
+        if p.is_dir():
+            for f in sorted(p.glob("*.xml")):
+                try:
+                    out.append(load_esi(f))
+                except EniError:
+                    continue
+        elif p.exists():
+            out.append(load_esi(p))
+        else:
+            raise InputError("no such file or folder", path=str(p))
+    return out
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    """``data`` to ``path`` through a temporary file beside it: never a half-written ENI."""
+    import os
+    import tempfile
+
+    from lolacli.errors import InputError
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", path=str(path)) from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+_GenIface = Annotated[
+    str,
+    typer.Option("--iface", "-i", metavar="IF",
+                 help="EtherCAT: the network interface of the bus to scan."),
+]
+_GenOutput = Annotated[
+    Path, typer.Option("--output", "-o", help="The ENI file to write.", show_default=False)
+]
+_GenEsi = Annotated[
+    list[Path] | None,
+    typer.Option("--esi", help="ESI file or folder of ESI files: slaves it describes take "
+                 "their PDOs, sync managers and DC from it. Repeatable."),
+]
+_GenCycle = Annotated[
+    str, typer.Option("--cycle-time", help="Cycle time written in the ENI (e.g. 1ms, 500us).")
+]
+_GenNoCoe = Annotated[
+    bool, typer.Option("--no-coe", help="Take the PDOs from the SII, not from CoE "
+                       "0x1C12/0x1C13.")
+]
+_GenTimeout = Annotated[
+    str, typer.Option("--timeout", help="Wait this long for each frame (e.g. 20ms).")
+]
+
+
+@app.command("generate")
+def generate_cmd(
+    iface: _GenIface,
+    output: _GenOutput,
+    esi: _GenEsi = None,
+    cycle_time: _GenCycle = "1ms",
+    no_coe: _GenNoCoe = False,
+    timeout: _GenTimeout = "20ms",
+    fmt: FormatOption = OutputFormat.human,
+) -> None:
+    """Scan the bus on IF and write its ENI (lolacli.eni-generate/1): identities and
+    names from the SII; PDO assignment from an ESI where given, else over CoE (0x1C12/
+    0x1C13 and the mapping objects, as SOEM reads them), else from the SII; sync managers,
+    FMMUs, one logical image (one LRW with its expected working counter), InitCmds per
+    transition, DC of the ESI. Station addresses 1001, 1002, … in line order. The slaves
+    are left in INIT. Exit 0 when written, 3 for an unreadable ESI or an output that cannot
+    be written, 4 when the bus does not answer."""
+    from lolacli.eni.writer import write_eni
+    from lolacli.master.generate import GenerateOptions, generate
+    from lolacli.master.transport import RawSocketTransport
+
+    cycle_ns = _positive_duration(cycle_time, "--cycle-time")
+    timeout_ns = _positive_duration(timeout, "--timeout")
+    _check_output(output)
+    esi_files = _esi_files(list(esi or ()))
+    options = GenerateOptions(cycle_time_ns=cycle_ns, frame_timeout_ns=timeout_ns,
+                              coe=not no_coe)
+    transport = RawSocketTransport(iface)
+    try:
+        result = generate(transport, esi=esi_files, options=options, where=iface)
+    finally:
+        transport.close()
+    _write_atomically(output, write_eni(result.eni))
+    doc = result.to_dict(str(output))
+    if fmt is OutputFormat.json:
+        emit_json(doc)
+    else:
+        _render_generate(doc)
+
+
+def _positive_duration(raw: str, name: str) -> int:
+    from lolacli.timing.model import parse_duration_ns
+
+    value = parse_duration_ns(raw, None, name)
+    if value <= 0:
+        raise typer.BadParameter(f"{raw!r} is not a positive duration", param_hint=name)
+    return value
+
+
+def _check_output(output: Path) -> None:
+    """InputError (exit 3) before the bus is touched when the ENI cannot go there."""
+    from lolacli.errors import InputError
+
+    folder = output.parent if str(output.parent) else Path(".")
+    if output.is_dir():
+        raise InputError("is a directory; give the ENI's file name", path=str(output))
+    if not folder.is_dir():
+        raise InputError("no such folder for the ENI", path=str(output))
+
+
+def _render_generate(doc: dict[str, Any]) -> None:
+    from lolacli.text import number, plural, station
+
+    console = _console()
+    table = data_table("Generated ENI")
+    for column in ("#", "station", "name", "PDOs from", "in", "out"):
+        table.add_column(column, justify="right" if column in ("#", "in", "out") else "left")
+    for s in doc["slaves"]:
+        table.add_row(
+            str(s["position"]),
+            station(s["station_address"]),
+            _text(" ".join(s["name"].split())),
+            s["pdo_source"] + (" DC" if s["dc"] else ""),
+            number(s["inputs_bits"] / 8, "B", 0),
+            number(s["outputs_bits"] / 8, "B", 0),
+        )
+    console.print(table)
+    for s in doc["slaves"]:
+        for note in s["notes"]:
+            say(console, f"note: slave {s['position']}: {note}")
+    pi = doc["process_image"]
+    for frame in doc["cyclic_frames"]:
+        cmds = ", ".join(
+            f"{c['cmd']} {number(c['length_bytes'], 'B', 0)} WKC {c['expected_wkc']}"
+            for c in frame["commands"]
+        )
+        say(console, f"cyclic frame: {cmds}")
+    say(
+        console,
+        f"{plural(doc['slave_count'], 'slave')}; process image "
+        f"{number(pi['inputs_bytes'], 'B', 0)} in, {number(pi['outputs_bytes'], 'B', 0)} out, "
+        f"{plural(pi['variables'], 'variable')}; cycle time "
+        f"{number(doc['cycle_time_us'], 'µs')}; written to {doc['output']}",
+    )
+
+
+def _text(value: str) -> Any:
+    from rich.text import Text
+
+    return Text(value)  # names are data, not rich markup

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Generator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from lolacli.errors import TransportError, WireError
 from lolacli.master.core import Master
@@ -38,6 +38,7 @@ from lolacli.wire.sii import (
     MAX_WORDS,
     SiiInfo,
     SiiWords,
+    decode_category_header,
     read_sii_header,
     read_sii_names,
 )
@@ -61,6 +62,8 @@ class SiiRead:
 
     info: SiiInfo | None = None
     error: str | None = None
+    #: the data of every category (by type, the first of each), where asked for
+    categories: dict[int, bytes] = field(default_factory=dict)
 
 
 _Walk = Generator[int, bytes, None]
@@ -72,9 +75,26 @@ def _walk(result: SiiRead, words: SiiWords) -> _Walk:
     result.info = SiiInfo(result.info.header, strings, general, categories)
 
 
-def read_sii(master: Master, addresses: Sequence[int], *, auto_increment: bool) -> list[SiiRead]:
+def _whole_walk(result: SiiRead, words: SiiWords) -> _Walk:
+    """:func:`_walk`, then every category's data up to the end marker (FMMU, SYNCM,
+    TXPDO, RXPDO, DC, …: what a master configuring from the SII needs)."""
+    yield from _walk(result, words)
+    address = HEADER_WORDS
+    while address < MAX_WORDS:
+        kind, length = decode_category_header((yield from words.read(address, 2)))
+        if kind == CATEGORY_END or length == 0xFFFF:
+            break
+        data = yield from words.read(address + 2, length)
+        result.categories.setdefault(kind, data)
+        address += 2 + length
+
+
+def read_sii(
+    master: Master, addresses: Sequence[int], *, auto_increment: bool, categories: bool = False
+) -> list[SiiRead]:
     """The SII of the slaves at ``addresses`` (auto-increment ADPs ``0, 0xFFFF, ...`` or
-    station addresses), in their order. Errors are per slave (:class:`SiiRead`); only the
+    station addresses), in their order; with ``categories`` every category's data too
+    (:attr:`SiiRead.categories`). Errors are per slave (:class:`SiiRead`); only the
     transport's own failures raise."""
     write, read = _commands(auto_increment)
     configs = master.exchange_many(
@@ -88,7 +108,8 @@ def read_sii(master: Master, addresses: Sequence[int], *, auto_increment: bool) 
     results = [SiiRead() for _ in addresses]
     _owner(master, write, held, to_pdi=False)
     try:
-        walks = {i: _walk(results[i], SiiWords()) for i in range(len(addresses))}
+        walk = _whole_walk if categories else _walk
+        walks = {i: walk(results[i], SiiWords()) for i in range(len(addresses))}
         pending = {i: next(walk) for i, walk in walks.items()}
         while pending:
             asks = [(i, addresses[i], word) for i, word in pending.items()]
