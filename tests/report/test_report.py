@@ -313,15 +313,9 @@ def test_stop_exits_130_and_writes_nothing(tmp_path):
     assert _left_behind(tmp_path) == []
 
 
-def test_report_costs_less_than_the_simulation(lola, tmp_path):
-    """`report --simulate` takes at most twice the simulation alone (10 s at 2 kHz): the
-    report's own part — sections, figures, writing — takes less than the simulation; and
-    the page stays under 3 MB."""
-    start = time.perf_counter()
+def test_the_page_of_a_10_s_simulation_stays_under_3_mb(lola, tmp_path):
+    """The page of `report --simulate` at its defaults (10 s at 2 kHz): under 3 MB. What it
+    costs against the simulation alone is measured by benchmarks/report_cost.py."""
     result = simulate(lola, SimulateOptions(rate_hz=2000.0, cycles=20_000))
-    simulated = time.perf_counter() - start
-    start = time.perf_counter()
     written = write_report(build_report(eni=lola, simulation=result), tmp_path / "r.html")
-    reported = time.perf_counter() - start
-    assert reported < simulated, (reported, simulated)
     assert written[0].stat().st_size < 3_000_000
