@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError, UsageError
-from lolacli.findings import Severity
+from lolacli.findings import Finding, Severity
 from lolacli.text import number
 
 if TYPE_CHECKING:
@@ -100,10 +100,8 @@ def apply_gate(
     for r in regressions:
         shown = "" if r["change_percent"] is None else f" ({r['change_percent']:+.1f} %)"
         before, after = (number(v, units[r["figure"]], 1) for v in (r["baseline"], r["value"]))
-        report.findings.insert(0, {
-            "kind": "regression", "severity": Severity.FAILURE.value,
-            "message": f"{r['figure']} got worse: {before} → {after}{shown}, "
-                       f"tolerance {tolerance_percent:g} %",
-            "frames": [], "cycles": [], "slave": None, "count": 0,
-            "source": "regression gate", "section": section,
-        })
+        found = Finding("regression", Severity.FAILURE,
+                        f"{r['figure']} got worse: {before} → {after}{shown}, "
+                        f"tolerance {tolerance_percent:g} %")
+        report.findings.insert(0, {**found.to_dict(), "source": "regression gate",
+                                   "section": section})

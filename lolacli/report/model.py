@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import LolaError
-from lolacli.findings import Severity
+from lolacli.findings import Finding, Severity
 from lolacli.text import number, plural, station
 
 if TYPE_CHECKING:
@@ -553,8 +553,7 @@ def _findings(sources: list[Source], timing: Section | None, present: set[str]
             out.append({**f, "source": s.label, "section": _section_of(f["kind"], present)})
     if timing is not None:
         for w in timing.data["warnings"]:
-            out.append({"kind": "calibration", "severity": Severity.WARNING.value,
-                        "message": w, "frames": [], "cycles": [], "slave": None, "count": 0,
+            out.append({**Finding("calibration", Severity.WARNING, w).to_dict(),
                         "source": "timing model", "section": "timing"})
     order = {"failure": 0, "warning": 1, "info": 2}
     return sorted(out, key=lambda f: order.get(f["severity"], 3))
