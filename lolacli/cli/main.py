@@ -11,6 +11,7 @@ from typer.core import TyperGroup
 from lolacli import __version__
 from lolacli.cli import (  # noqa: F401
     bus,
+    bus_data,
     bus_diag,
     bus_emulate,
     bus_reg,
