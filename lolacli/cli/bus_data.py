@@ -25,28 +25,42 @@ def data_cmd(
     eni: EniOption = None,
     filters: Annotated[
         list[str] | None,
-        typer.Option("--filter", metavar="GLOB",
-                      help="Only variables whose names match (shell wildcards, any case; "
-                      "no wildcard: a part of the name); repeatable."),
+        typer.Option(
+            "--filter",
+            metavar="GLOB",
+            help="Only variables whose names match (shell wildcards, any case; "
+            "no wildcard: a part of the name); repeatable.",
+        ),
     ] = None,  # fmt: skip
     set_values: Annotated[
         list[str] | None,
-        typer.Option("--set", metavar="NAME=VALUE",
-                     help="Write this output variable (typed as the ENI says); repeatable."),
+        typer.Option(
+            "--set",
+            metavar="NAME=VALUE",
+            help="Write this output variable (typed as the ENI says); repeatable.",
+        ),
     ] = None,  # fmt: skip
     watch: Annotated[
         float | None,
-        typer.Option("--watch", metavar="HZ", min=0.01, max=1000.0,
-                     help="Print a JSON line (lolacli.data/1) this often until Ctrl-C or "
-                     "--count."),
+        typer.Option(
+            "--watch",
+            metavar="HZ",
+            min=0.01,
+            max=1000.0,
+            help="Print a JSON line (lolacli.data/1) this often until Ctrl-C or --count.",
+        ),
     ] = None,  # fmt: skip
     count: Annotated[
         int | None, typer.Option("--count", min=1, help="With --watch: stop after N samples.")
     ] = None,
     rate: Annotated[
         float | None,
-        typer.Option("--rate", min=1.0, max=100_000.0,
-                     help="Cycle rate in Hz (default: the ENI's cycle time, else 1 kHz)."),
+        typer.Option(
+            "--rate",
+            min=1.0,
+            max=100_000.0,
+            help="Cycle rate in Hz (default: the ENI's cycle time, else 1 kHz).",
+        ),
     ] = None,  # fmt: skip
     fmt: FormatOption = OutputFormat.human,
 ) -> None:

@@ -14,6 +14,7 @@ from lolacli.cli import (  # noqa: F401
     bus_data,
     bus_diag,
     bus_emulate,
+    bus_graph,
     bus_reg,
     bus_scan,
     bus_sii,

@@ -194,8 +194,13 @@ class LiveData:
         out = []
         for position, status in self.master.al_states():
             slave = self.eni.slaves[position - 1]
-            out.append({"position": position, "name": slave.name,
-                        "state": al_state_name(status) if status is not None else None})
+            out.append(
+                {
+                    "position": position,
+                    "name": slave.name,
+                    "state": al_state_name(status) if status is not None else None,
+                }
+            )
         return out
 
     def leave(self) -> None:
