@@ -11,8 +11,10 @@ from typer.core import TyperGroup
 from lolacli import __version__
 from lolacli.cli import (  # noqa: F401
     bus,
+    bus_data,
     bus_diag,
     bus_emulate,
+    bus_graph,
     bus_reg,
     bus_scan,
     bus_sii,
