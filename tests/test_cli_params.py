@@ -93,6 +93,9 @@ def _commands():  # type: ignore[no-untyped-def]
 
 #: flags that mean different things in different commands (so their help differs)
 _MEANS_MORE_THAN_ONE_THING = {
+    "--count": "frames listed (capture list) or samples watched (bus data)",
+    "--rate": "bus data defaults to the ENI's cycle, a simulation to 2 kHz",
+    "--watch": "a variable reported at the end (bus simulate) or a sampling rate (bus data)",
     "--bad-link": "the same fault, said of a chain on a wire (bus emulate) or in virtual time",
     "--esi": "eni generate takes folders of ESI files too, and their PDOs, SMs and DC",
     "--plot": "a folder of PNGs (capture analyze) or one PNG (traj plan, joint track/bode)",

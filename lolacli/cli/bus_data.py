@@ -11,7 +11,7 @@ import typer
 
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import EniOption, IfaceOption
+from lolacli.cli.options import EniOption, IfaceOption, SetValueOption
 
 #: cycles run after OP (and after --set) before a snapshot is shown: outputs out, inputs back
 SETTLE_CYCLES = 20
@@ -19,49 +19,48 @@ SETTLE_CYCLES = 20
 POLL_NS = 100_000_000
 
 
+Filters = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--filter",
+        metavar="GLOB",
+        help="Only variables whose names match (shell wildcards, any case; "
+        "no wildcard: a part of the name); repeatable.",
+    ),
+]
+WatchHz = Annotated[
+    float | None,
+    typer.Option(
+        "--watch",
+        metavar="HZ",
+        min=0.01,
+        max=1000.0,
+        help="Print a JSON line (lolacli.data/1) this often until Ctrl-C or --count.",
+    ),
+]
+Count = Annotated[
+    int | None, typer.Option("--count", min=1, help="With --watch: stop after N samples.")
+]
+DataRate = Annotated[
+    float | None,
+    typer.Option(
+        "--rate",
+        min=1.0,
+        max=100_000.0,
+        help="Cycle rate in Hz (default: the ENI's cycle time, else 1 kHz).",
+    ),
+]
+
+
 @app.command("data")
 def data_cmd(
     iface: IfaceOption = None,
     eni: EniOption = None,
-    filters: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--filter",
-            metavar="GLOB",
-            help="Only variables whose names match (shell wildcards, any case; "
-            "no wildcard: a part of the name); repeatable.",
-        ),
-    ] = None,  # fmt: skip
-    set_values: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set",
-            metavar="NAME=VALUE",
-            help="Write this output variable (typed as the ENI says); repeatable.",
-        ),
-    ] = None,  # fmt: skip
-    watch: Annotated[
-        float | None,
-        typer.Option(
-            "--watch",
-            metavar="HZ",
-            min=0.01,
-            max=1000.0,
-            help="Print a JSON line (lolacli.data/1) this often until Ctrl-C or --count.",
-        ),
-    ] = None,  # fmt: skip
-    count: Annotated[
-        int | None, typer.Option("--count", min=1, help="With --watch: stop after N samples.")
-    ] = None,
-    rate: Annotated[
-        float | None,
-        typer.Option(
-            "--rate",
-            min=1.0,
-            max=100_000.0,
-            help="Cycle rate in Hz (default: the ENI's cycle time, else 1 kHz).",
-        ),
-    ] = None,  # fmt: skip
+    filters: Filters = None,
+    set_values: SetValueOption = None,
+    watch: WatchHz = None,
+    count: Count = None,
+    rate: DataRate = None,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's bus (default: the embedded LOLA chain, emulated in process; --iface
@@ -82,14 +81,7 @@ def data_cmd(
     config = load_eni(eni or default_eni())
     settings = [parse_setting(config, item) for item in set_values or ()]
     variables = select(config, filters or ())
-    if iface is None:
-        from lolacli.simulate import VirtualBus
-
-        transport: Any = VirtualBus(config).transport
-    else:
-        from lolacli.master.transport import RawSocketTransport
-
-        transport = RawSocketTransport(iface)
+    transport = _transport(config, iface)
     from lolacli.master.data import LiveData
 
     live = LiveData(config, transport, variables, rate_hz=rate, realtime=iface is not None)
@@ -115,6 +107,17 @@ def data_cmd(
         emit_json(doc)
     else:
         _render(doc)
+
+
+def _transport(config: Any, iface: str | None) -> Any:
+    """The in-process emulated chain of ``config``, or a live bus on ``iface``."""
+    if iface is None:
+        from lolacli.simulate import VirtualBus
+
+        return VirtualBus(config).transport
+    from lolacli.master.transport import RawSocketTransport
+
+    return RawSocketTransport(iface)
 
 
 def _watch(live: Any, hz: float, count: int | None, stop: Any, *, virtual: bool) -> None:

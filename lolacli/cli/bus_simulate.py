@@ -17,6 +17,7 @@ from lolacli.cli.options import (
     MaxLostOption,
     MaxWkcOption,
     SeedOption,
+    SetValueOption,
     StuckSafeopOption,
 )
 
@@ -73,10 +74,7 @@ Watch = Annotated[
     list[str] | None,
     typer.Option("--watch", metavar="VARIABLE", help="Report this variable's last value."),
 ]
-SetValue = Annotated[
-    list[str] | None,
-    typer.Option("--set", metavar="VARIABLE=VALUE", help="Write this output variable every cycle."),
-]
+SetValue = SetValueOption
 NoMiddleware = Annotated[
     bool,
     typer.Option(

@@ -106,3 +106,12 @@ DurationOption = Annotated[
         help="Stop after this many seconds (0: until Ctrl-C).",
     ),
 ]
+
+SetValueOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--set",
+        metavar="VARIABLE=VALUE",
+        help="Write this output variable (typed as the ENI says) every cycle; repeatable.",
+    ),
+]
