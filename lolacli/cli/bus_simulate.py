@@ -147,6 +147,29 @@ CableM = Annotated[
         "to slave 1), 0-100 m at 5 ns/m; default 1 m; repeatable.",
     ),
 ]
+Move = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--move",
+        metavar="JOINT:DISTANCE[:V:A:J]",
+        help="Move a drive by DISTANCE from where it starts on a jerk-limited S-curve "
+        "streamed in CSP, one set-point a cycle; JOINT a slave name (Joint04 L Knee, L "
+        "Knee, Joint04), its position (4), or all. Units: the drive's increments, V/A/J in "
+        "increments/s, /s², /s³ (default 100000:1e6:2e7). Repeatable; replaces the "
+        "back-and-forth (drives without a move hold still). The JSON's moves give each "
+        "joint's following error.",
+    ),
+]
+Trajectory = Annotated[
+    Path | None,
+    typer.Option(
+        "--trajectory",
+        metavar="FILE",
+        help="Goals to stream like --move, at their times: CSV with the header "
+        "time_s,joint,distance[,v,a,j] (a goal interrupts the joint's running move), or "
+        "JSON, a list of objects with those keys.",
+    ),
+]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
@@ -178,11 +201,14 @@ def simulate_cmd(
     host_latency_us: HostLatencyUs = None,
     forwarding: Forwarding = "model",
     cable_m: CableM = None,
+    move: Move = None,
+    trajectory: Trajectory = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
-    virtual time, enable the drives, move every joint, and report round trip, WKC, lost
+    virtual time, enable the drives, move every joint (a back-and-forth, or the S-curves of
+    --move/--trajectory), and report round trip, WKC, lost
     frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
     verdict. The round trip is the timing model's formula unless --host-latency-us (drawn
     per frame with --seed), --forwarding physics or --cable-m change it; the report says
@@ -204,6 +230,7 @@ def simulate_cmd(
         busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
+        moves=move or (), trajectory=trajectory,
     )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
