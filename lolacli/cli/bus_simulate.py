@@ -376,6 +376,31 @@ def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
     ]
 
 
+def _render_moves(console: Any, moves: list[dict[str, Any]]) -> None:
+    """The moves' table: each joint's distance, profile time and following error (the
+    set-point sent against the actual position received in the same cycle)."""
+    from lolacli.cli.common import data_table, fit_table
+    from lolacli.text import number
+
+    unit = moves[0]["unit"]
+    table = data_table(f"Moves (inc: {unit}; error: set-point sent - actual received)")
+    for column in ("slave", "joint", "distance", "duration", "error RMS", "error max"):
+        table.add_column(column, justify="left" if column == "joint" else "right")
+    for m in moves:
+        if m["duration_s"] is None:
+            cells = ["never started"] * 4
+        else:
+            cells = [
+                number(m["distance"], "inc"),
+                number(m["duration_s"], "s") + ("" if m["complete"] else " (cut)"),
+                number(m["following_error_rms"], "inc", 1),
+                number(m["following_error_max"], "inc", 0),
+            ]
+        table.add_row(str(m["slave"]), m["joint"], *cells)
+    fit_table(table, console, min(console.width, 80))
+    console.print(table)
+
+
 def _render(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
@@ -400,4 +425,6 @@ def _render(doc: dict[str, Any]) -> None:
         for name, s in doc["sections_us"].items():
             sections.add_row(name, s["thread"], f"{s['mean']:g}", f"{s['p99']:g}", f"{s['max']:g}")
         console.print(sections)
+    if doc.get("moves"):
+        _render_moves(console, doc["moves"])
     render_verdict(console, doc["verdict"], doc["findings"])

@@ -113,7 +113,7 @@ def parse_move(text: str) -> Goal:
             joint, numbers = ":".join(parts[:-1]), parts[-1:] + [
                 str(DEFAULT_V), str(DEFAULT_A), str(DEFAULT_J)]
         else:
-            raise ValueError("expected JOINT:DISTANCE[:V:A:J]")
+            raise ValueError("no distance")
         return _goal(joint, numbers[0], numbers[1], numbers[2], numbers[3])
     except ValueError as exc:
         raise UsageError(f"--move {text!r}: {exc} (JOINT:DISTANCE[:V:A:J], {UNIT})") from None
@@ -323,6 +323,10 @@ class Moves:
         origin = kernel._origin  # noqa: SLF001 - where the new profile starts
         pos = profile.sample()["position"]
         home = int(self.homes[i])
+        lo, hi = home + origin + float(pos.min()), home + origin + float(pos.max())
+        if lo < -(2**31) or hi > 2**31 - 1:
+            raise goal.error(f"the move from {home + origin:.0f} reaches {lo if lo < 0 else hi:.0f}"
+                             ", outside the drive's INTEGER32 target position")
         stop = min(self.rows, k + len(pos))
         self.targets[k:stop, i] = np.rint(home + origin + pos[: stop - k]).astype(np.int64)
         self.targets[stop:, i] = round(home + origin + profile.end_position)
