@@ -278,12 +278,13 @@ class Application:
         if not moves.started and self.group.steady:
             drives = self.drives
             moves.begin(
-                [d.actual_position for d in drives], master.image.outputs,
-                [d.target.byte_offset for d in drives],
+                [d.actual_position for d in drives], master.image.inputs,
+                master.image.outputs,
                 [d.position_actual.byte_offset for d in drives],
+                [d.target.byte_offset for d in drives],
             )
         if moves.started:
-            moves.cycle(master.image.snapshot.data)
+            moves.cycle()
         if timed:
             self.planner_ns.append(time.perf_counter_ns() - t0)
 

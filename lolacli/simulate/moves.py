@@ -244,6 +244,40 @@ def resolve(goals: tuple[Goal, ...], slaves: list[tuple[int, str]],
     return out
 
 
+def _int32s(buffer: bytearray, at: list[int]) -> Any:
+    """The little-endian INTEGER32s at byte offsets ``at`` of ``buffer`` as one numpy
+    view (no copy): a strided array where the offsets are evenly spaced (a drive's
+    variables repeat with the same layout), else a small object that gathers and
+    scatters their bytes."""
+    import numpy as np
+
+    n = len(at)
+    steps = {b - a for a, b in zip(at, at[1:], strict=False)}
+    if n == 1 or (len(steps) == 1 and min(steps) >= 4):
+        stride = at[1] - at[0] if n > 1 else 4
+        return np.ndarray((n,), dtype="<i4", buffer=buffer, offset=at[0], strides=(stride,))
+    return _Scattered(buffer, at)
+
+
+class _Scattered:
+    """INTEGER32s at offsets that are not evenly spaced: ``view[:] = values`` writes them,
+    ``numpy.asarray(view)`` reads them."""
+
+    def __init__(self, buffer: bytearray, at: list[int]) -> None:
+        import numpy as np
+
+        self.bytes = np.frombuffer(buffer, dtype=np.uint8)
+        self.index = np.asarray([a + b for a in at for b in range(4)], dtype=np.intp)
+
+    def __setitem__(self, key: Any, values: Any) -> None:
+        import numpy as np
+
+        self.bytes[self.index] = np.asarray(values, dtype="<i4").view(np.uint8)
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> Any:
+        return self.bytes[self.index].view("<i4")
+
+
 class Moves:
     """The planner of a simulation's moves (module docstring): ``goals`` as (drive index,
     goal), ``n`` drives, ``cycles`` the run's cycles, ``cycle_s`` the cycle time."""
@@ -274,40 +308,32 @@ class Moves:
         self.homes: Any = None
         self.k = 0  # cycles since the moves began (the row written next)
         self.started = False
-        self._out: Any = None  # (outputs view, byte indices)
-        self._in: Any = None  # input byte indices
-        self._t8: Any = None
-        self._a8: Any = None
+        self._out: Any = None  # the targets in the outputs (an int32 view)
+        self._in: Any = None  # the actual positions in the inputs (an int32 view)
 
-    def begin(self, homes: list[int], outputs: bytearray, out_at: list[int],
-              in_at: list[int]) -> None:
-        """The moves start: every drive's start position (``homes``), the outputs and
-        the byte offsets of each drive's target and actual position in the images."""
+    def begin(self, homes: list[int], inputs: bytearray, outputs: bytearray,
+              in_at: list[int], out_at: list[int]) -> None:
+        """The moves start: every drive's start position (``homes``), the process image's
+        inputs and outputs (read and written in place every cycle) and the byte offsets of
+        each drive's actual and target position in them."""
         import numpy as np
 
         self.homes = np.asarray(homes, dtype=np.int64)
         self.targets[:] = self.homes.astype("<i4")
-        out_idx = np.asarray([at + b for at in out_at for b in range(4)], dtype=np.intp)
-        self._out = (np.frombuffer(outputs, dtype=np.uint8), out_idx)
-        self._in = np.asarray([at + b for at in in_at for b in range(4)], dtype=np.intp)
-        self._t8 = self.targets.view(np.uint8).reshape(self.rows, 4 * self.n)
-        self._a8 = self.actual.view(np.uint8).reshape(self.rows, 4 * self.n)
+        self._in, self._out = _int32s(inputs, in_at), _int32s(outputs, out_at)
         self.started = True
 
-    def cycle(self, inputs: bytes) -> None:
+    def cycle(self) -> None:
         """One cycle: new goals planned, this cycle's set-points written to the outputs,
-        the actual positions received kept."""
-        import numpy as np
-
+        the actual positions received (the inputs of this cycle) kept."""
         k = self.k
         pending = self.pending
         if pending and pending[0][0] <= k:
             for i, goal in pending.pop(0)[1]:
                 self._plan(k, i, goal)
         row = min(k, self.rows - 1)
-        view, idx = self._out
-        view[idx] = self._t8[row]
-        self._a8[row] = np.frombuffer(inputs, dtype=np.uint8)[self._in]
+        self._out[:] = self.targets[row]
+        self.actual[row] = self._in
         self.k = k + 1
 
     def _plan(self, k: int, i: int, goal: Goal) -> None:

@@ -163,3 +163,22 @@ def test_a_drive_slower_than_the_move_lags_and_faults_past_its_window(tmp_path: 
     assert faulted["verdict"] == "fail"
     (fault,) = faulted["drive_faults"]
     assert fault["error_code"] == 0x8611
+
+
+@pytest.mark.parametrize("at", [[3], [2, 10, 18, 26], [0, 5, 30], [20, 4, 12]])
+def test_int32_views_write_and_read_in_place(at: list[int]) -> None:
+    import numpy as np
+
+    from lolacli.simulate.moves import _int32s
+
+    buffer = bytearray(range(40))
+    untouched = [i for i in range(40) if not any(a <= i < a + 4 for a in at)]
+    view = _int32s(buffer, at)
+    values = [(-1) ** i * (i + 1) * 123_456_789 for i in range(len(at))]
+    view[:] = np.asarray(values, dtype="<i4")
+    assert [int.from_bytes(buffer[a:a + 4], "little", signed=True) for a in at] == values
+    assert [buffer[i] for i in untouched] == untouched
+    row = np.zeros(len(at), dtype="<i4")
+    buffer[at[0]:at[0] + 4] = (-7).to_bytes(4, "little", signed=True)
+    row[:] = view
+    assert list(row) == [-7, *values[1:]]
