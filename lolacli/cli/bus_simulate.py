@@ -145,6 +145,29 @@ CableM = Annotated[
         "to slave 1), 0-100 m at 5 ns/m; default 1 m; repeatable.",
     ),
 ]
+Move = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--move",
+        metavar="JOINT:DISTANCE[:V:A:J]",
+        help="Move a drive by DISTANCE from where it starts on a jerk-limited S-curve "
+        "streamed in CSP, one set-point a cycle; JOINT a slave name (Joint04 L Knee, L "
+        "Knee, Joint04), its position (4), or all. Units: the drive's increments, V/A/J in "
+        "increments/s, /s², /s³ (default 100000:1e6:2e7). Repeatable; replaces the "
+        "back-and-forth (drives without a move hold still). The JSON's moves give each "
+        "joint's following error.",
+    ),
+]
+Trajectory = Annotated[
+    Path | None,
+    typer.Option(
+        "--trajectory",
+        metavar="FILE",
+        help="Goals to stream like --move, at their times: CSV with the header "
+        "time_s,joint,distance[,v,a,j] (a goal interrupts the joint's running move), or "
+        "JSON, a list of objects with those keys.",
+    ),
+]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
@@ -176,11 +199,14 @@ def simulate_cmd(
     host_latency_us: HostLatencyUs = None,
     forwarding: Forwarding = "model",
     cable_m: CableM = None,
+    move: Move = None,
+    trajectory: Trajectory = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
-    virtual time, enable the drives, move every joint, and report round trip, WKC, lost
+    virtual time, enable the drives, move every joint (a back-and-forth, or the S-curves of
+    --move/--trajectory), and report round trip, WKC, lost
     frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
     verdict. The round trip is the timing model's formula unless --host-latency-us (drawn
     per frame with --seed), --forwarding physics or --cable-m change it; the report says
@@ -202,6 +228,7 @@ def simulate_cmd(
         busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
+        moves=move or (), trajectory=trajectory,
     )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
@@ -347,6 +374,31 @@ def _live_rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
     ]
 
 
+def _render_moves(console: Any, moves: list[dict[str, Any]]) -> None:
+    """The moves' table: each joint's distance, profile time and following error (the
+    set-point sent against the actual position received in the same cycle)."""
+    from lolacli.cli.common import data_table, fit_table
+    from lolacli.text import number
+
+    unit = moves[0]["unit"]
+    table = data_table(f"Moves (inc: {unit}; error: set-point sent - actual received)")
+    for column in ("slave", "joint", "distance", "duration", "error RMS", "error max"):
+        table.add_column(column, justify="left" if column == "joint" else "right")
+    for m in moves:
+        if m["duration_s"] is None:
+            cells = ["never started"] * 4
+        else:
+            cells = [
+                number(m["distance"], "inc"),
+                number(m["duration_s"], "s") + ("" if m["complete"] else " (cut)"),
+                number(m["following_error_rms"], "inc", 1),
+                number(m["following_error_max"], "inc", 0),
+            ]
+        table.add_row(str(m["slave"]), m["joint"], *cells)
+    fit_table(table, console, min(console.width, 80))
+    console.print(table)
+
+
 def _render(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
@@ -371,4 +423,6 @@ def _render(doc: dict[str, Any]) -> None:
         for name, s in doc["sections_us"].items():
             sections.add_row(name, s["thread"], f"{s['mean']:g}", f"{s['p99']:g}", f"{s['max']:g}")
         console.print(sections)
+    if doc.get("moves"):
+        _render_moves(console, doc["moves"])
     render_verdict(console, doc["verdict"], doc["findings"])

@@ -5,15 +5,17 @@ minimum-jerk back-and-forth (:mod:`lolacli.motion`), sensors read, ``--set`` and
 from __future__ import annotations
 
 import struct
+import time
 from operator import itemgetter
 from typing import Any
 
 from lolacli.devices.cia402 import ERROR_CODE, Cia402State
-from lolacli.errors import LinkError, LolaError
+from lolacli.errors import LinkError, LolaError, UsageError
 from lolacli.master.core import Master
 from lolacli.master.slaves import BusSlave, Cia402Drive, ForceTorqueSensor, Imu, has_field
 from lolacli.master.variables import BusVariable, ProcessImage, variable_for
 from lolacli.motion.profile import back_and_forth
+from lolacli.simulate.moves import Moves, resolve
 from lolacli.simulate.options import SimulateOptions
 
 _ENABLED = Cia402State.OPERATION_ENABLED
@@ -145,6 +147,8 @@ class Application:
         # the AL states go on cycling, and those cycles are not the run's)
         self.last_cycle: int | None = None
         self.last_skipped = 0
+        self.moves: Moves | None = None  # --move / --trajectory
+        self.planner_ns: list[int] = []  # the planner's time each cycle (section "planner")
         image = master.image
         for name in options.watch:
             self.watch[name] = image.link(name, variable_for(image.find(name)))
@@ -171,6 +175,17 @@ class Application:
                         self.sensors.append(ForceTorqueSensor(master.image, slave.name, side))
                     except LinkError:
                         pass
+        if self.options.moves:
+            slaves = [(s.position, s.name) for s in master.eni.slaves]
+            names = [d.slave for d in self.drives]
+            goals = resolve(self.options.moves, slaves, names)
+            for drive in self.drives:
+                if drive.target is None or drive.target.byte_offset is None or (
+                        drive.position_actual.byte_offset is None):
+                    raise UsageError(f"--move: drive {drive.slave}'s target or actual position "
+                                     "is not byte-aligned in the process image")
+            self.moves = Moves(goals, len(self.drives), self.options.cycles,
+                               1.0 / self.options.rate_hz)
 
     def install(self, mcap: Any) -> None:
         self.mcap = mcap
@@ -180,7 +195,9 @@ class Application:
             master.devices.append(self.group)
         if self.shm is not None:
             master.control.append(self._publish)
-        if self.drives:
+        if self.moves is not None:
+            master.control.append(self._planner)
+        elif self.drives:
             master.control.append(self._move)
         if self.fixed:
             master.control.append(self._set_fixed)
@@ -251,6 +268,26 @@ class Application:
         offset = round(back_and_forth(t, self._period_ns, self.options.amplitude_counts))
         self.group.move(offset, self.homes)  # type: ignore[union-attr]
 
+    def _planner(self, master: Master) -> None:
+        """--move/--trajectory: the S-curves' set-points of this cycle (once every drive
+        is enabled; their positions then are where the moves start)."""
+        timed = master.options.time_sections
+        t0 = time.perf_counter_ns() if timed else 0
+        moves = self.moves
+        assert moves is not None and self.group is not None
+        if not moves.started and self.group.steady:
+            drives = self.drives
+            moves.begin(
+                [d.actual_position for d in drives], master.image.inputs,
+                master.image.outputs,
+                [d.position_actual.byte_offset for d in drives],
+                [d.target.byte_offset for d in drives],
+            )
+        if moves.started:
+            moves.cycle()
+        if timed:
+            self.planner_ns.append(time.perf_counter_ns() - t0)
+
     def _record(self, master: Master) -> None:
         stats = master.stats
         t = master.transport.now_ns()
@@ -277,7 +314,9 @@ class Application:
                 {
                     "cycle": stats.cycles,
                     "names": [d.slave for d in self.drives],
-                    "target": self.group.target_positions() if self.group else [],
+                    "target": self.moves.last_targets()
+                    if self.moves is not None and self.moves.started
+                    else self.group.target_positions() if self.group else [],
                     "actual": [d.actual_position for d in self.drives],
                 },
             )

@@ -10,6 +10,7 @@ from typing import Any
 
 from lolacli.eni.model import Eni
 from lolacli.errors import EniError, UsageError
+from lolacli.simulate.moves import Goal
 from lolacli.timing.model import HostLatency
 
 
@@ -46,6 +47,9 @@ class SimulateOptions:
     host_latency: HostLatency | None = None  # drawn a frame, seeded with ``seed``
     forwarding: str = "model"  # "physics": each slave's delay from its ports' physics
     cable_m: tuple[str, ...] = ()  # "M" (every segment) and "K=M" (segment K) items
+    # --move / --trajectory (lolacli.simulate.moves): S-curves streamed in CSP instead of
+    # the back-and-forth; drives without a goal hold their position
+    moves: tuple[Goal, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,13 +190,16 @@ def options_from_cli(
     watch: Sequence[str] = (),
     host_latency_us: str | None = None,
     cable_m: Sequence[str] = (),
+    moves: Sequence[str] = (),
+    trajectory: Path | None = None,
     **fields: Any,
 ) -> SimulateOptions:
     """:class:`SimulateOptions` from the command line's spelling: ``duration`` (``10s``,
     ``500ms``; default 10 s) or ``cycles``, ``link_down`` as ``K[@T]``, ``set_values`` as
     ``VARIABLE=VALUE``, ``host_latency_us`` as ``MEAN[:STD]`` (µs), ``cable_m`` as ``M``
-    or ``K=M`` items; the other ``fields`` as they are. UsageError for what does not
-    parse or contradicts itself."""
+    or ``K=M`` items, ``moves`` as ``JOINT:DISTANCE[:V:A:J]`` and ``trajectory`` a goals
+    file (:mod:`lolacli.simulate.moves`); the other ``fields`` as they are. UsageError
+    for what does not parse or contradicts itself."""
     from lolacli.emulator.run import parse_bad_link, parse_link_down
     from lolacli.timing.model import parse_cable_m, parse_duration_ns, parse_host_latency
 
@@ -223,8 +230,23 @@ def options_from_cli(
         host_latency=parse_host_latency(host_latency_us) if host_latency_us is not None
         else None,
         cable_m=_cable_items(tuple(cable_m), parse_cable_m),
+        moves=_goals(moves, trajectory, fields.get("middleware", True)),
         **fields,
     )
+
+
+def _goals(moves: Sequence[str], trajectory: Path | None, middleware: bool) -> tuple[Goal, ...]:
+    """The goals of ``--move`` items and a ``--trajectory`` file (checked; the joints wait
+    for the ENI: :meth:`lolacli.simulate.application.Application`)."""
+    from lolacli.simulate.moves import parse_move, parse_trajectory
+
+    goals = [parse_move(m) for m in moves]
+    if trajectory is not None:
+        goals += parse_trajectory(trajectory)
+    if goals and not middleware:
+        raise UsageError("--move/--trajectory and --no-middleware contradict each other: the "
+                         "moves go through the Bus Variables")
+    return tuple(goals)
 
 
 def _cable_items(items: tuple[str, ...], parse: Callable[..., Any]) -> tuple[str, ...]:

@@ -127,6 +127,18 @@ def findings(
             slave=fault["slave"],
             count=fault["faults"],
         )
+    for move in doc["moves"] or ():
+        if not move["complete"]:
+            started = move["duration_s"] is not None
+            out.add(
+                "move-incomplete",
+                warn,
+                f"the move of slave {move['slave']} ({move['joint']}) "
+                + ("did not end within the run (its profile takes "
+                   f"{move['duration_s']:g} s)" if started else
+                   "never started: the drives were never all enabled"),
+                slave=move["slave"],
+            )
     for name, value in doc["watch"].items():
         shown = f"{value:.6g}" if isinstance(value, float) else value
         out.add("watch", Severity.INFO, f"{name} = {shown} (last value)")
@@ -269,11 +281,24 @@ def report(
     software_ns = 0.0
     first = app.first_cycle
     timed_from = first - (stats.cycles - len(master.sections_ns["rx"]))
+    planner = app.planner_ns
     for name, thread in SECTIONS:
-        s = summarize_array(master.sections_ns[name][timed_from:])
+        values: Any = master.sections_ns[name][timed_from:]
+        planned = None
+        if name == "control" and planner and len(planner) == len(master.sections_ns[name]):
+            # the planner runs in the control hooks: its own section, out of control's
+            import numpy as np
+
+            planned = np.asarray(planner[timed_from:], dtype=np.int64)
+            values = np.asarray(values, dtype=np.int64) - planned
+        s = summarize_array(values)
         if s is not None:
             sections[name] = {"thread": thread, **s.to_dict(scale=1e-3)}
             software_ns += s.mean
+        p = summarize_array(planned) if planned is not None else None
+        if p is not None:
+            sections["planner"] = {"thread": "main", **p.to_dict(scale=1e-3)}
+            software_ns += p.mean
     run_cycles = (stats.cycles if app.last_cycle is None else app.last_cycle) - first
     simulated_s = run_cycles * master.cycle_time_ns / 1e9
     emulation = summarize_array(master.bus_emulation_ns[timed_from:])
@@ -323,6 +348,7 @@ def report(
         "drives": len(app.drives),
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
         "drive_faults": app.drive_faults,
+        "moves": _moves(master, app),
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},
         "faults": {
             "drop_p": options.drop_probability,
@@ -336,6 +362,15 @@ def report(
         if mcap is not None else None,
         "shm": options.shm,
     }
+
+
+def _moves(master: Master, app: Application) -> list[dict[str, Any]] | None:
+    """Each moved joint's move and following error (None without --move/--trajectory)."""
+    if app.moves is None:
+        return None
+    positions = {s.name: s.position for s in master.eni.slaves}
+    names = [d.slave for d in app.drives]
+    return app.moves.report(names, [positions[n] for n in names])
 
 
 def _jsonable(value: Any) -> Any:
