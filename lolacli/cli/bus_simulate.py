@@ -205,23 +205,17 @@ def simulate_cmd(
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
-    virtual time, enable the drives, move every joint (a back-and-forth, or the S-curves of
-    --move/--trajectory), and report round trip, WKC, lost
-    frames, DC error and the per-cycle software sections (lolacli.simulate/1) with a
-    verdict. The round trip is the timing model's formula unless --host-latency-us (drawn
-    per frame with --seed), --forwarding physics or --cable-m change it; the report says
-    which inputs made it (timing_sources). --iface runs the same in real time on a
-    live bus and adds the cycle period and jitter achieved and the scheduling granted.
-    Exit 1 when the verdict fails, 2 for bad options or variables, 3 for an ENI that
-    cannot be simulated, 4 when no slave answers, 130/143 when stopped (recordings are
-    kept up to the last cycle)."""
+    virtual time, move every joint (a back-and-forth, or --move/--trajectory S-curves) and
+    report round trip, WKC, lost frames, DC error and the software sections with a verdict
+    (lolacli.simulate/1). --host-latency-us, --forwarding, --cable-m vary the round trip
+    (timing_sources says how). --iface: the same in real time on a live bus. Exit 1 when
+    the verdict fails, 2 bad options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
     from lolacli.simulate import options_from_cli, simulate
 
     options = options_from_cli(
-        rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down,
-        bad_link=bad_link,
+        rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down, bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
         pcap=pcap, mcap=mcap, drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
         middleware=not no_middleware, shm=shm, pace=pace, iface=iface,
