@@ -286,7 +286,7 @@ def analyze_file(
     file first: the analysis reads the file up to three times.
     Raises :class:`~lolacli.errors.CaptureError` for files that are not captures.
     """
-    spool = _spool(path)
+    spool = spool_stream(path)
     if spool is not None:
         with spool:
             try:
@@ -369,7 +369,7 @@ def stream_pairs(report: CaptureReport, on_pairs: OnPairs, *, engine: str = "aut
     p.run()
 
 
-def _spool(path: str | Path) -> Any:
+def spool_stream(path: str | Path) -> Any:
     """A temporary copy of a stream (pipe, character device, socket), None for a regular
     file or anything that cannot be opened (CaptureReader says why)."""
     import shutil

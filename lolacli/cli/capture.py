@@ -134,19 +134,25 @@ def export_cmd(
     that Foxglove plots, the channels `bus simulate --mcap` writes. The file is written
     whole or not at all (a temporary file renamed at the end). The findings are those of
     `capture analyze` (exit 1 when one is a failure, the file written anyway)."""
-    from lolacli.capture.analyze import analyze_file
+    from lolacli.capture.analyze import analyze_file, spool_stream
     from lolacli.capture.export import Stopped, check_target, export_mcap
     from lolacli.interrupt import stop_signals
 
     check_target(mcap)  # an unwritable path fails before the capture is read
     result = None
+    spool = spool_stream(file)  # a pipe is read twice (analysis, export): copied once
+    source = Path(spool.name) if spool is not None else file
     with stop_signals() as stop, stop.polled(), _Progress(file, quiet=False) as progress:
-        report = analyze_file(file, progress=progress, engine=engine, should_stop=stop)
-        if not stop():
-            try:
+        try:
+            report = analyze_file(source, progress=progress, engine=engine, should_stop=stop)
+            if not stop():
                 result = export_mcap(report, mcap, engine=engine, should_stop=stop)
-            except Stopped:
-                pass
+                result.capture = str(file)
+        except Stopped:
+            pass
+        finally:
+            if spool is not None:
+                spool.close()
     if stop() or result is None:
         sys.stderr.write(f"lolacli: stopped by {_signal_name(stop.exit_code)}; {mcap} "
                          "not written\n")

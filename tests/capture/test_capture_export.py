@@ -178,6 +178,23 @@ def test_cli_json_and_human(tmp_path: Path) -> None:
     assert all(len(line) <= 80 for line in lines)
 
 
+def test_a_capture_piped_in_exports_as_the_file_does(tmp_path: Path) -> None:
+    """A pipe is read once (the analysis and the export each read the capture): the same
+    channels and counts as from the file, named as given."""
+    path = CAPTURES[0] if CAPTURES else pytest.skip("no corpus")
+    from_file = run("capture", "export", str(path), "--mcap", str(tmp_path / "f.mcap"),
+                    "--format", "json")
+    with open(path, "rb") as f:
+        piped = subprocess.run(
+            [sys.executable, "-m", "lolacli", "capture", "export", "/dev/stdin", "--mcap",
+             str(tmp_path / "p.mcap"), "--format", "json"],
+            cwd=ROOT, stdin=f, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert piped.returncode == 0, piped.stderr
+    a, b = json.loads(from_file.stdout), json.loads(piped.stdout)
+    assert b["capture"] == "/dev/stdin"
+    assert (b["frames"], b["channels"]) == (a["frames"], a["channels"])
+
+
 def test_a_truncated_capture_exports_what_it_holds_with_the_findings(tmp_path: Path) -> None:
     source = next((p for p in CAPTURES if p.name == "ethercrab__replay-dc.pcapng"), None)
     if source is None:
