@@ -704,10 +704,13 @@ def request_states(
         if not doing:
             break
         writes: list[Datagram] = []
+        acked: dict[int, int] = {}  # position: the AL status whose error is acknowledged
         for r in doing:
             s, to = r.slave, paths[r.slave.position][step]
             writes += _step_writes(bus, s, s.al_state, to, configs[s.position])
             ack = AL_ERROR_INDICATOR if s.al_status & AL_ERROR_INDICATOR else 0
+            if ack:
+                acked[s.position] = s.al_status
             writes.append(bus.apwr(s, Register.AL_CONTROL, _U16.pack(to | ack)))
             r.steps.append(f"{al_state_name(s.al_state)} -> {to.name}")
         for d in bus.master.exchange_many(writes):
@@ -716,7 +719,8 @@ def request_states(
                     f"a write to 0x{d.ado:04X} of the slave at auto-increment address "
                     f"0x{d.adp:04X} was not taken"
                 )
-        _wait(bus, doing, [paths[r.slave.position][step] for r in doing], timeout_ns)
+        _wait(bus, doing, [paths[r.slave.position][step] for r in doing], timeout_ns,
+              acked)
         for r in doing:  # OP: outputs again, for a slave that takes OP with the next ones
             c = configs[r.slave.position]
             if r.ok and paths[r.slave.position][step] == AlState.OP and c and c.outputs:
@@ -736,9 +740,19 @@ def _code(bus: BenchBus, s: BenchSlave) -> int:
     return int(_U16.unpack(raw)[0])
 
 
-def _wait(bus: BenchBus, doing: list[StateResult], to: list[AlState], timeout_ns: int) -> None:
-    """Poll AL status until each slave is in its state, has refused, or time runs out."""
-    end = time.monotonic_ns() + timeout_ns
+#: how long an acknowledged error may still show unchanged before it counts as a new
+#: refusal: the slave's firmware, not its ESC, takes the request in (as IgH's master, the
+#: status must change; a slave that refuses the same way again shows no change at all)
+ACK_SETTLE_NS = 1_000_000_000
+
+
+def _wait(bus: BenchBus, doing: list[StateResult], to: list[AlState], timeout_ns: int,
+          acked: dict[int, int]) -> None:  # fmt: skip
+    """Poll AL status until each slave is in its state, has refused, or time runs out.
+    A slave in ``acked`` whose status still reads as it did when its error was
+    acknowledged has not taken the request in yet (for up to :data:`ACK_SETTLE_NS`)."""
+    start = time.monotonic_ns()
+    end, settled = start + timeout_ns, start + min(ACK_SETTLE_NS, timeout_ns)
     waiting = list(zip(doing, to, strict=True))
     while waiting:
         got = bus.master.exchange_many(
@@ -751,7 +765,9 @@ def _wait(bus: BenchBus, doing: list[StateResult], to: list[AlState], timeout_ns
                 continue
             status = _U16.unpack_from(d.data)[0]
             r.slave.al_status = status
-            if status & AL_ERROR_INDICATOR:
+            if acked.get(r.slave.position) == status and time.monotonic_ns() < settled:
+                still.append((r, state))  # the error acknowledged, not yet taken in
+            elif status & AL_ERROR_INDICATOR:
                 r.refused = r.steps[-1]
                 r.al_status_code = _U16.unpack_from(d.data, 4)[0]
             elif status & AL_STATE_MASK != state:

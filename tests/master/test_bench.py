@@ -126,6 +126,39 @@ def test_states_up_down_and_a_refusal(eni) -> None:
     assert {chain.slaves[k].al_state for k in range(25)} == {AlState.INIT}
 
 
+class _LaggingFirmware:
+    """The chain as a real-time emulator answers it: frames first, the slaves' firmware
+    (AL control requests among it) only after every ``lag``-th frame."""
+
+    def __init__(self, chain, lag: int) -> None:
+        self.chain, self.lag, self.frames = chain, lag, 0
+
+    def process(self, frame: bytes, t_ns: int):
+        answer = self.chain.process(frame, t_ns, defer_cycles=True)
+        self.frames += 1
+        if self.frames % self.lag == 0:
+            self.chain.run_deferred_cycles()
+        return answer
+
+
+@pytest.mark.parametrize("lag", [1, 2, 5])
+def test_an_acknowledged_error_still_showing_is_no_refusal(eni, lag: int) -> None:
+    """A refusal leaves INIT+ERR; the next request acknowledges it, and until the
+    firmware takes the request in, the status still reads INIT+ERR: no second refusal."""
+    chain = make_chain(eni, EmulateOptions())
+    bus = bench.BenchBus(ChainTransport(_LaggingFirmware(chain, lag)))
+    gpio = [s for s in bus.slaves if eni.slaves[s.position - 1].mailbox is None]
+    boot = bench.request_states(bus, gpio, AlState.BOOT)
+    assert [(r.refused, r.al_status_code) for r in boot] == [("INIT -> BOOT", 0x0013)] * len(gpio)
+    again = bench.request_states(bus, gpio, AlState.INIT)
+    assert [(r.ok, r.refused) for r in again] == [(True, None)] * len(gpio)
+    assert set(chain.al_statuses()[s.position - 1] for s in gpio) == {AlState.INIT}
+    bench.request_states(bus, gpio, AlState.BOOT)
+    twice = bench.request_states(bus, gpio, AlState.BOOT)  # refused again: no change shows
+    assert [r.refused for r in twice] == ["INIT -> BOOT"] * len(gpio)
+    assert not any(r.timed_out for r in twice)
+
+
 def test_a_configuration_register_of_a_running_slave_needs_force(eni) -> None:
     _chain, bus = _bus(eni)
     s = bus.slaves[2]
