@@ -259,7 +259,18 @@ def _pdo_bytes(pdos: tuple[Pdo, ...], direction: Direction) -> int:
 
 
 def _eni_sm_type(sm: ConfiguredSyncManager) -> SmType | None:
+    """The SM's use as the ENI types it, else as its control byte says (an ENI whose
+    InitCmds alone set the SM up: mode bits 1:0 mailbox or buffered, direction bits 3:2
+    written or read by the master)."""
     kind = sm.kind.lower()
+    if not kind:
+        mode, direction = sm.sync_manager.control & 0x03, (sm.sync_manager.control >> 2) & 0x03
+        if mode not in (0x00, 0x02) or direction not in (0x00, 0x01):
+            return None
+        written = direction == 0x01
+        if mode == 0x02:
+            return SmType.MAILBOX_OUT if written else SmType.MAILBOX_IN
+        return SmType.OUTPUTS if written else SmType.INPUTS
     return {
         "mboxout": SmType.MAILBOX_OUT,
         "mboxin": SmType.MAILBOX_IN,
