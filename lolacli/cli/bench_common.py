@@ -6,24 +6,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING
 
 import typer
 
 if TYPE_CHECKING:
     from lolacli.master.bench import BenchBus, BenchSlave
 
-SlaveArgument = Annotated[
-    str,
-    typer.Argument(
-        metavar="SLAVE",
-        help="A position (3), @station address (@0x1003) or slave name (from its SII).",
-        show_default=False,
-    ),
-]
-FrameTimeoutOption = Annotated[
-    str, typer.Option("--frame-timeout", help="Wait this long for each frame (e.g. 20ms).")
-]
 
 
 @contextmanager

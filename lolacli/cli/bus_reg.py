@@ -6,10 +6,9 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.bench_common import FrameTimeoutOption, SlaveArgument
 from lolacli.cli.bus import app as bus_app
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import IfaceArgument
+from lolacli.cli.options import FrameTimeoutOption, IfaceArgument, SlaveArgument
 
 SCHEMA = "lolacli.reg/1"
 app = typer.Typer(no_args_is_help=True, help="ESC registers of one slave (read, write).")

@@ -6,10 +6,9 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.bench_common import FrameTimeoutOption
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import IfaceArgument
+from lolacli.cli.options import FrameTimeoutOption, IfaceArgument
 
 SCHEMA = "lolacli.state/1"
 

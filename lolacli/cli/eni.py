@@ -21,6 +21,7 @@ from lolacli.cli.common import (
     emit_json,
     say,
 )
+from lolacli.cli.options import FrameTimeoutOption, IfaceArgument
 
 app = typer.Typer(no_args_is_help=True, help="Read, check and compare ENI files.")
 
@@ -377,11 +378,6 @@ def _write_atomically(path: Path, data: bytes) -> None:
             os.unlink(tmp)
 
 
-_GenIface = Annotated[
-    str,
-    typer.Option("--iface", "-i", metavar="IF",
-                 help="EtherCAT: the network interface of the bus to scan."),
-]
 _GenOutput = Annotated[
     Path, typer.Option("--output", "-o", help="The ENI file to write.", show_default=False)
 ]
@@ -397,19 +393,16 @@ _GenNoCoe = Annotated[
     bool, typer.Option("--no-coe", help="Take the PDOs from the SII, not from CoE "
                        "0x1C12/0x1C13.")
 ]
-_GenTimeout = Annotated[
-    str, typer.Option("--timeout", help="Wait this long for each frame (e.g. 20ms).")
-]
 
 
 @app.command("generate")
 def generate_cmd(
-    iface: _GenIface,
+    iface: IfaceArgument,
     output: _GenOutput,
     esi: _GenEsi = None,
     cycle_time: _GenCycle = "1ms",
     no_coe: _GenNoCoe = False,
-    timeout: _GenTimeout = "20ms",
+    frame_timeout: FrameTimeoutOption = "20ms",
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Scan the bus on IF and write its ENI (lolacli.eni-generate/1): identities and
@@ -424,7 +417,7 @@ def generate_cmd(
     from lolacli.master.transport import RawSocketTransport
 
     cycle_ns = _positive_duration(cycle_time, "--cycle-time")
-    timeout_ns = _positive_duration(timeout, "--timeout")
+    timeout_ns = _positive_duration(frame_timeout, "--frame-timeout")
     _check_output(output)
     esi_files = _esi_files(list(esi or ()))
     options = GenerateOptions(cycle_time_ns=cycle_ns, frame_timeout_ns=timeout_ns,

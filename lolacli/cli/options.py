@@ -41,6 +41,19 @@ _IFACE = typer.Option(
 IfaceArgument = Annotated[str, _IFACE]
 #: the interface of a command that runs in process without one (``sdo``)
 IfaceOption = Annotated[str | None, _IFACE]
+#: how long the bench verbs (``bus reg/sii/alias/state``) wait for a frame
+FrameTimeoutOption = Annotated[
+    str, typer.Option("--frame-timeout", help="Wait this long for each frame (e.g. 20ms).")
+]
+#: one slave of a live bus, as the bench verbs name it
+SlaveArgument = Annotated[
+    str,
+    typer.Argument(
+        metavar="SLAVE",
+        help="A position (3), @station address (@0x1003) or slave name (from its SII).",
+        show_default=False,
+    ),
+]
 
 #: an ENI that stands for the chain (emulated, or the live bus's configuration)
 EniOption = Annotated[
