@@ -243,7 +243,7 @@ def test_the_ci_page_runs(tmp_path: Path) -> None:
     worse = json.loads((work / "worse" / "lola.json").read_text())
     assert {r["figure"] for r in worse["regressions"]} == {
         "simulation: round trip p50", "simulation: round trip p99",
-        "simulation: max rate, bus only"}
+        "simulation: max rate, round trip only"}
     now = json.loads((work / "now" / "lola.json").read_text())
     assert now["gate"]["compared"] and not now["regressions"]
 

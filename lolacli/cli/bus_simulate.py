@@ -290,7 +290,7 @@ def _us(stats: dict[str, Any] | None, *keys: str) -> str:
 
 def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
     software = doc["software_us_per_cycle"]
-    rates = f"{doc['max_rate_hz'] or 0:,} Hz bus only"
+    rates = f"{doc['max_rate_hz'] or 0:,} Hz round trip only"
     if doc["max_rate_with_software_hz"]:
         rates += f", {doc['max_rate_with_software_hz']:,} Hz with the software"
     dc = doc["dc_max_error_ns"]

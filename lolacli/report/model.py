@@ -48,7 +48,7 @@ HEADLINE = {
     "round_trip_p99_us": ("round trip p99", "µs", "higher"),
     "cycle_jitter_us": ("cycle jitter (std)", "µs", "higher"),
     "lost_frames": ("lost frames", "", "higher"),
-    "max_rate_hz": ("max rate, bus only", "Hz", "lower"),
+    "max_rate_hz": ("max rate, round trip only", "Hz", "lower"),
 }
 
 
@@ -354,7 +354,7 @@ def _timing_table(columns: list[tuple[str, dict[str, Any]]], sim: dict[str, Any]
         rows.append(["calibrated per-slave delay", "",
                      *per("calibrated_per_slave_delay_ns", "ns", 0),
                      "(measured - wire - cable - host) / slaves"])
-        rows.append(["max rate, bus only", "", *per("max_rate_hz", "Hz", 0),
+        rows.append(["max rate, round trip only", "", *per("max_rate_hz", "Hz", 0),
                      "1 / measured round trip"])
     if sim is not None and sim.get("software_us_per_cycle") is not None:
         cells = [number(sim["software_us_per_cycle"], "µs") if label == "simulation" else "–"

@@ -251,7 +251,7 @@ def test_gate_direction_and_tolerance(lola, simulation):
     report = build_report(eni=lola, simulation=simulation, baseline=base,
                           tolerance_percent=10.0)
     assert {r["figure"] for r in report.regressions} == {
-        "simulation: round trip p99", "simulation: max rate, bus only"}
+        "simulation: round trip p99", "simulation: max rate, round trip only"}
     assert report.verdict == "fail"
     loose = build_report(eni=lola, simulation=simulation, baseline=base,
                          tolerance_percent=60.0)
