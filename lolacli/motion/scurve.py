@@ -53,6 +53,11 @@ from lolacli.errors import UsageError
 #: the largest magnitude accepted for any input (distances, limits): 1e12 in the user's
 #: unit keeps every product of the planner (v^2 / a, a^3 / j^2 ...) finite and exact enough
 HUGE = 1e12
+#: the smallest magnitude accepted for a limit (vmax, amax, jmax): below it the phase
+#: times and their products leave the floating-point range
+TINY = 1e-12
+#: the most cycles a profile is sampled on (5 arrays of 8-byte numbers each)
+MAX_SAMPLES = 2_000_000
 _EPS = 1e-9  # cycles: a time within this of a whole cycle is that cycle
 
 
@@ -118,6 +123,8 @@ def _check(name: str, value: float, *, positive: bool = False) -> float:
         raise UsageError(f"{name} {value:g} is out of range (at most {HUGE:g} in magnitude)")
     if positive and value <= 0.0:
         raise UsageError(f"{name} must be greater than 0, not {value:g}")
+    if positive and value < TINY:
+        raise UsageError(f"{name} {value:g} is out of range (at least {TINY:g})")
     return value
 
 
@@ -196,6 +203,8 @@ class SCurve:
         if step is None:
             step = self.duration / 1000.0 if self.duration > 0 else 1.0
         n = max(1, math.ceil(self.duration / step - _EPS)) if self.duration > 0 else 0
+        if n > MAX_SAMPLES:
+            raise UsageError(f"{n:.3g} cycles in the profile: at most {MAX_SAMPLES:,}")
         t = np.minimum(np.arange(n + 1) * step, self.duration)
         starts = np.asarray(self.starts)
         i = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, 6)

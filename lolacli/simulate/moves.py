@@ -88,7 +88,7 @@ def _goal(joint: str, distance: Any, v: Any, a: Any, j: Any, t_s: Any = 0.0,
         raise ValueError("no joint given")
     d = _number(str(distance), "distance")
     if abs(d) > MAX_DISTANCE:
-        raise ValueError(f"distance {d:g} is out of range (at most {MAX_DISTANCE:.0f} {UNIT})")
+        raise ValueError(f"distance {d:g} is over {MAX_DISTANCE:,.0f} {UNIT}")
     limits = []
     for name, value in (("velocity", v), ("acceleration", a), ("jerk", j)):
         x = _number(str(value), name)
@@ -109,6 +109,8 @@ def parse_move(text: str) -> Goal:
     try:
         if len(parts) >= 5 and _all_numbers(parts[-4:]):
             joint, numbers = ":".join(parts[:-4]), parts[-4:]
+        elif len(parts) in (3, 4) and _all_numbers(parts[1:]):
+            raise ValueError("V, A and J go together, or none")
         elif len(parts) >= 2:
             joint, numbers = ":".join(parts[:-1]), parts[-1:] + [
                 str(DEFAULT_V), str(DEFAULT_A), str(DEFAULT_J)]
@@ -116,7 +118,9 @@ def parse_move(text: str) -> Goal:
             raise ValueError("no distance")
         return _goal(joint, numbers[0], numbers[1], numbers[2], numbers[3])
     except ValueError as exc:
-        raise UsageError(f"--move {text!r}: {exc} (JOINT:DISTANCE[:V:A:J], {UNIT})") from None
+        hint = " (JOINT:DISTANCE[:V:A:J])" if len(str(exc)) < 24 else ""
+        said = f" {text!r}" if hint else ""  # else the message names the value
+        raise UsageError(f"--move{said}: {exc}{hint}") from None
 
 
 def _all_numbers(fields: list[str]) -> bool:
@@ -235,11 +239,9 @@ def resolve(goals: tuple[Goal, ...], slaves: list[tuple[int, str]],
                 found = (position, name)
                 break
         if found is None:
-            raise goal.error(f"no slave {goal.joint!r} (a slave name such as "
-                             f"{slaves[0][1]!r}, its position 1 to {len(slaves)}, or all)")
+            raise goal.error(f"no slave {goal.joint!r} (a name, 1 to {len(slaves)}, or all)")
         if found[1] not in index:
-            raise goal.error(f"slave {found[0]} ({found[1]}) is not a CiA 402 drive "
-                             "(no statusword and target position in its process data)")
+            raise goal.error(f"slave {found[0]} is not a CiA 402 drive")
         out.append((index[found[1]], goal))
     return out
 

@@ -106,12 +106,16 @@ def test_json_trajectory_and_its_bad_row(tmp_path: Path) -> None:
         ("22:100", "not a CiA 402 drive"),
         ("GPIO 2AI:100", "not a CiA 402 drive"),
         ("4", "no distance"),
+        ("4:100:5", "V, A and J go together"),
+        ("all:1e300", "is over 2,147,483,647 increments"),
+        ("all:1e12:1e-12:1e-12:1e-12", "is over"),
     ],
 )
 def test_bad_move_is_a_one_line_usage_error(move: str, says: str) -> None:
     done = run("--duration", "100ms", "-q", "--move", move)
     assert done.returncode == 2, done.stderr
     assert done.stderr.count("\n") == 1 and says in done.stderr
+    assert len(done.stderr.rstrip("\n")) <= 80, done.stderr
     assert "Traceback" not in done.stderr and done.stdout == ""
 
 
