@@ -51,6 +51,11 @@ BusHzOption = Annotated[
                  "is computed each bus cycle); cycles between control updates extrapolate."),
 ]
 PlotOption = Annotated[Path | None, typer.Option("--plot", help="Write a PNG figure here.")]
+SeriesFlag = Annotated[
+    bool,
+    typer.Option("--series", help="JSON: each case's error θd − θ every 0.1 ms as well "
+                 "(error_series; for lolacli report --joint-track's figure)."),
+]
 
 _DEFAULT_JOINT = "Joint03 L Hip Pitch"  # lolacli.motion.joint.DEFAULT_JOINT (no numpy here)
 
@@ -123,6 +128,7 @@ def track_cmd(
         "--fast-bus-hz", min=100, max=10_000,
         help="Bus rate of the third case, Hz (a multiple of --control-hz).")] = 2000,
     plot: PlotOption = None,
+    series: SeriesFlag = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
     """Table III of seed 000: a walking hip trajectory tracked with the bus at the control
@@ -153,7 +159,7 @@ def track_cmd(
         "joint": params.name,
         "trajectory": {"kind": "walking hip", "step_s": step_s, "steps": steps,
                        "amplitude_rad": walk.amplitude_rad},
-        "cases": [c.to_dict() for c in cases],
+        "cases": [c.to_dict() | (_series(c) if series else {}) for c in cases],
         "learning": {k: [{"k_e": ke, "rms_error_rad": e} for ke, e in v.steps]
                      for k, v in learnt.items()},
     }
@@ -163,6 +169,16 @@ def track_cmd(
         emit_json(doc)
         return
     _render_track(doc)
+
+
+def _series(case: Any) -> dict[str, Any]:
+    """The case's error over its window: θd − θ (rad, to 1e-10) every ``sample_s`` from 0."""
+    import numpy as np
+
+    t = case.tracking.times_s
+    return {"error_series": {
+        "sample_s": round(float(t[1] - t[0]), 12) if len(t) > 1 else 1e-4,
+        "error_rad": np.round(case.tracking.error_rad, 10).tolist()}}
 
 
 def _render_track(doc: dict[str, Any]) -> None:

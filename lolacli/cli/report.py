@@ -9,7 +9,15 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.bus_simulate import CableM, Duration, Forwarding, HostLatencyUs, Rate
+from lolacli.cli.bus_simulate import (
+    CableM,
+    Duration,
+    Forwarding,
+    HostLatencyUs,
+    Move,
+    Rate,
+    Trajectory,
+)
 from lolacli.cli.options import DriftOption, DropOption, SeedOption, StuckSafeopOption
 from lolacli.errors import UsageError
 
@@ -50,6 +58,17 @@ BaselineOption = Annotated[
     typer.Option("--baseline", help="An earlier report's JSON: exit 1 naming each headline "
                  "figure that got worse beyond --tolerance."),
 ]
+JointTrackOption = Annotated[
+    Path | None,
+    typer.Option("--joint-track", metavar="FILE", help="joint track --format json's "
+                 "document: the Joint tracking section (Table III; its error over time with "
+                 "joint track --series)."),
+]
+JointBodeOption = Annotated[
+    Path | None,
+    typer.Option("--joint-bode", metavar="FILE", help="joint bode --format json's "
+                 "document: the Bandwidth section (gain and phase, the -3 dB bandwidth)."),
+]
 ToleranceOption = Annotated[
     str, typer.Option("--tolerance", help="How much worse a headline figure may get.")
 ]
@@ -69,52 +88,77 @@ def report_cmd(
     host_latency_us: HostLatencyUs = None,
     forwarding: Forwarding = "model",
     cable_m: CableM = None,
+    move: Move = None,
+    trajectory: Trajectory = None,
+    joint_track: JointTrackOption = None,
+    joint_bode: JointBodeOption = None,
     fmt: PageFormatOption = PageFormat.html,
     baseline: BaselineOption = None,
     tolerance: ToleranceOption = "10%",
 ) -> None:
-    """A timing report of an ENI, captures and/or a simulation: verdict with every
-    finding, network, timing model against the measured round trip, bus measurements
-    (round trip histogram, CDF and over time, cycle jitter, lost frames, WKC, AL states),
-    distributed clocks, software cycle, captures side by side. Exit 1 when the verdict
-    fails (a failure of a capture or the simulation, or a regression against
-    --baseline), 2 for bad options, 3 for bad input or an output that cannot be
-    written, 130/143 when stopped (nothing is written)."""
+    """A timing report of an ENI, captures, a simulation and/or a joint's tracking and
+    bandwidth: verdict with every finding, network, timing model against the measured
+    round trip, bus measurements (round trip histogram, CDF and over time, cycle jitter,
+    lost frames, WKC, AL states), distributed clocks, software cycle, captures side by
+    side, the simulation's moved joints (--move/--trajectory), joint tracking
+    (--joint-track) and bandwidth (--joint-bode). Exit 1 when the verdict fails (a
+    failure of a capture or the simulation, or a regression against --baseline), 2 for
+    bad options, 3 for bad input or an output that cannot be written, 130/143 when
+    stopped (nothing is written)."""
     from lolacli.report import build_report, check_output, load_baseline, parse_tolerance
 
     captures = capture or []
-    if eni is None and not captures and not simulate:
-        raise UsageError("nothing to report: give --eni, --capture or --simulate")
-    simulation_only = {"--rate": rate != 2000.0, "--duration": duration is not None,
-                       "--drop-p": drop_p != 0.0, "--stuck-safeop": bool(stuck_safeop),
-                       "--drift-ppb": drift_ppb != 0, "--seed": seed != 0,
-                       "--host-latency-us": host_latency_us is not None,
-                       "--forwarding": forwarding != "model", "--cable-m": bool(cable_m)}
-    if not simulate and any(simulation_only.values()):
-        given = ", ".join(k for k, v in simulation_only.items() if v)
-        raise UsageError(f"{given}: options of the simulation; add --simulate")
+    if eni is None and not captures and not simulate and not (joint_track or joint_bode):
+        raise UsageError("nothing to report: give --eni, --capture, --simulate, "
+                         "--joint-track or --joint-bode")
+    sim_args = {"rate_hz": rate, "duration": duration, "stuck_safeop": stuck_safeop or (),
+                "drop_probability": drop_p, "drift_ppb": drift_ppb, "seed": seed,
+                "host_latency_us": host_latency_us, "forwarding": forwarding,
+                "cable_m": cable_m or (), "moves": move or (), "trajectory": trajectory}
+    _simulation_only(simulate, sim_args)
     check_output(output)  # before any work
     tolerance_percent = parse_tolerance(tolerance)
     base = load_baseline(baseline) if baseline is not None else None
+    track, bode = _joint_docs(joint_track, joint_bode)
     model = _eni(eni, simulate)
     analyses = [_analyze(path, model) for path in captures]
-    simulation = None
-    if simulate:
-        from lolacli.simulate import options_from_cli
-        from lolacli.simulate import simulate as run_simulation
-
-        options = options_from_cli(
-            rate_hz=rate, duration=duration, stuck_safeop=stuck_safeop or (),
-            drop_probability=drop_p, drift_ppb=drift_ppb, seed=seed,
-            host_latency_us=host_latency_us, forwarding=forwarding,
-            cable_m=cable_m or ())  # fmt: skip
-        assert model is not None
-        simulation = run_simulation(model, options)
+    simulation = _simulate(model, sim_args) if simulate else None
     report = build_report(eni=model, captures=analyses, simulation=simulation, baseline=base,
-                          baseline_name=str(baseline), tolerance_percent=tolerance_percent)
+                          baseline_name=str(baseline), tolerance_percent=tolerance_percent,
+                          joint_track=track, joint_bode=bode)
     _write(report, output, fmt)
     if report.verdict == "fail":
         raise typer.Exit(1)
+
+
+#: the simulation's options (their options_from_cli names), flags and defaults
+_SIMULATION_ONLY = (("rate_hz", "--rate", 2000.0), ("duration", "--duration", None),
+                    ("drop_probability", "--drop-p", 0.0), ("stuck_safeop", "--stuck-safeop", ()),
+                    ("drift_ppb", "--drift-ppb", 0), ("seed", "--seed", 0),
+                    ("host_latency_us", "--host-latency-us", None),
+                    ("forwarding", "--forwarding", "model"), ("cable_m", "--cable-m", ()),
+                    ("moves", "--move", ()), ("trajectory", "--trajectory", None))
+
+
+def _simulation_only(simulate: bool, args: dict[str, Any]) -> None:
+    """UsageError for an option of the simulation given without --simulate."""
+    given = [flag for key, flag, default in _SIMULATION_ONLY if args[key] != default]
+    if not simulate and given:
+        raise UsageError(f"{', '.join(given)}: options of the simulation; add --simulate")
+
+
+def _joint_docs(track: Path | None, bode: Path | None) -> tuple[Any, Any]:
+    from lolacli.report import load_joint_bode, load_joint_track
+
+    return (load_joint_track(track) if track is not None else None,
+            load_joint_bode(bode) if bode is not None else None)
+
+
+def _simulate(model: Any, args: dict[str, Any]) -> Any:
+    from lolacli.simulate import options_from_cli, simulate
+
+    assert model is not None
+    return simulate(model, options_from_cli(**args))
 
 
 def _eni(path: Path | None, simulate: bool) -> Any:

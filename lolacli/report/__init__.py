@@ -3,7 +3,8 @@
 :func:`build_report` takes the results the other commands produce — the ENI model,
 ``capture analyze``'s :class:`~lolacli.capture.analyze.CaptureReport` (analysed with
 ``keep_series=True`` for the figures) and ``bus simulate``'s
-:class:`~lolacli.simulate.SimulationResult` — and places their numbers in sections
+:class:`~lolacli.simulate.SimulationResult`, ``joint track``'s and ``joint bode``'s JSON
+(:func:`load_joint_track`, :func:`load_joint_bode`) — and places their numbers in sections
 (``lolacli.report/1``); :func:`write_report` writes it as HTML or Markdown with its JSON
 beside it::
 
@@ -17,6 +18,8 @@ beside it::
 """
 
 from lolacli.report.gate import load_baseline, parse_tolerance
+from lolacli.report.joints import load_bode as load_joint_bode
+from lolacli.report.joints import load_track as load_joint_track
 from lolacli.report.model import SCHEMA, Report, build_report
 from lolacli.report.write import check_output, json_path, write_report
 
@@ -27,6 +30,8 @@ __all__ = [
     "check_output",
     "json_path",
     "load_baseline",
+    "load_joint_bode",
+    "load_joint_track",
     "parse_tolerance",
     "write_report",
 ]

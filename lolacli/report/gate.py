@@ -1,6 +1,8 @@
 """The regression gate of ``lolacli report --baseline``: the headline figures of each
-measurement (round trip p50/p99, cycle jitter, lost frames, max rate) against those of an
-earlier report's JSON; a figure worse by more than the tolerance is a regression."""
+measurement (round trip p50/p99, cycle jitter, lost frames, max rate; a simulation's
+largest following error, joint track's RMS error per case, joint bode's bandwidth)
+against those of an earlier report's JSON; a figure worse by more than the tolerance is a
+regression."""
 
 from __future__ import annotations
 
@@ -65,12 +67,12 @@ def apply_gate(
 ) -> None:
     """Compare ``report``'s headline figures with ``baseline``'s (measurements matched by
     label); every regression becomes a failure finding linked to its section."""
-    from lolacli.report.model import HEADLINE
+    from lolacli.report.model import HEADLINE, HEADLINE_SECTION
 
     compared: list[dict[str, Any]] = []
     regressions: list[dict[str, Any]] = []
     units: dict[str, str] = {}
-    current = {s.label: s.headline for s in report.sources}
+    current = report.headlines()
     for label, figures in baseline["headline"].items():
         now = current.get(label)
         if now is None or not isinstance(figures, dict):
@@ -90,16 +92,20 @@ def apply_gate(
                              "worse": worse})
             if worse:
                 regressions.append({"figure": figure, "baseline": old, "value": new,
-                                    "change_percent": change})
+                                    "change_percent": change, "key": key})
             units[figure] = unit
     report.gate = {"baseline": name,
                    "tolerance_percent": tolerance_percent, "compared": compared}
     report.regressions = regressions
-    section = "comparison" if report.section("comparison") else (
+    fallback = "comparison" if report.section("comparison") else (
         "bus" if report.section("bus") else "verdict")
     for r in regressions:
+        key = r.pop("key")
+        section = HEADLINE_SECTION.get(key, fallback)
+        section = section if report.section(section) else fallback
         shown = "" if r["change_percent"] is None else f" ({r['change_percent']:+.1f} %)"
-        before, after = (number(v, units[r["figure"]], 1) for v in (r["baseline"], r["value"]))
+        before, after = (number(v, units[r["figure"]], 1 if abs(v) >= 1 else 4)
+                         for v in (r["baseline"], r["value"]))
         found = Finding("regression", Severity.FAILURE,
                         f"{r['figure']} got worse: {before} → {after}{shown}, "
                         f"tolerance {tolerance_percent:g} %")

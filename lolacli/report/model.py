@@ -8,7 +8,9 @@ A section is present when its input is, and absent (not empty) when it is not:
 ``verdict`` always; ``network`` with an ENI; ``timing`` with an ENI or a capture whose
 line the timing model can read; ``bus`` with a capture or a simulation; ``dc`` when a
 capture or the simulation has distributed-clock figures; ``software`` with a simulation
-that timed its sections; ``comparison`` with two or more measurements.
+that timed its sections; ``comparison`` with two or more measurements; ``joints`` with a
+simulation that moved joints (``--move``/``--trajectory``); ``tracking`` with ``joint
+track``'s document and ``bandwidth`` with ``joint bode``'s (:mod:`lolacli.report.joints`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ if TYPE_CHECKING:
 
     from lolacli.capture.analyze import CaptureReport
     from lolacli.eni.model import Eni
+    from lolacli.report.joints import JointDoc
     from lolacli.simulate import SimulationResult
 
 SCHEMA = "lolacli.report/1"
@@ -40,6 +43,9 @@ TITLES = {
     "dc": "Distributed clocks",
     "software": "Software cycle",
     "comparison": "Measurements side by side",
+    "joints": "Joints",
+    "tracking": "Joint tracking",
+    "bandwidth": "Bandwidth",
 }
 
 #: the figures the regression gate compares, with their unit and which way is worse
@@ -49,7 +55,14 @@ HEADLINE = {
     "cycle_jitter_us": ("cycle jitter (std)", "µs", "higher"),
     "lost_frames": ("lost frames", "", "higher"),
     "max_rate_hz": ("max rate, round trip only", "Hz", "lower"),
+    # the joints: a simulation's moves, joint track's cases, joint bode's response
+    "following_error_rms": ("largest following error RMS", "increments", "higher"),
+    "tracking_rms_error_mrad": ("RMS tracking error", "mrad", "higher"),
+    "bandwidth_hz": ("-3 dB bandwidth", "Hz", "lower"),
 }
+#: the section a headline figure's regression links to (the others: comparison or bus)
+HEADLINE_SECTION = {"following_error_rms": "joints", "tracking_rms_error_mrad": "tracking",
+                    "bandwidth_hz": "bandwidth"}
 
 
 @dataclass(slots=True)
@@ -83,6 +96,8 @@ class Source:
     dc_t_s: np.ndarray | None = None  # seconds since the cyclic run started
     dc_error_ns: np.ndarray | None = None
     timing: dict[str, Any] | None = None  # bus timing's document with this measured total
+    #: --move/--trajectory: each moved joint's (s, following error in increments)
+    following_error: dict[str, tuple[Any, Any]] = field(default_factory=dict)
 
     @property
     def headline(self) -> dict[str, float | None]:
@@ -95,13 +110,18 @@ class Source:
             rate = d.get("max_rate_hz")
         else:
             rate = self.timing["max_rate_hz"] if self.timing else None
-        return {
+        out = {
             "round_trip_p50_us": rt.get("median"),
             "round_trip_p99_us": rt.get("p99"),
             "cycle_jitter_us": jitter.get("std"),
             "lost_frames": d.get("lost_frames"),
             "max_rate_hz": round(rate, 3) if rate is not None else None,
         }
+        if d.get("moves"):  # a simulation that moved joints
+            from lolacli.report.joints import joints_data
+
+            out["following_error_rms"] = joints_data(d["moves"])["largest_following_error_rms"]
+        return out
 
 
 @dataclass(slots=True)
@@ -114,6 +134,20 @@ class Report:
     regressions: list[dict[str, Any]] = field(default_factory=list)
     gate: dict[str, Any] | None = None
     notes: list[str] = field(default_factory=list)
+    joint_track: JointDoc | None = None
+    joint_bode: JointDoc | None = None
+
+    def headlines(self) -> dict[str, dict[str, float | None]]:
+        """The headline figures by measurement: each source's, then joint track's cases
+        ("joint track: <case>") and joint bode's bandwidth ("joint bode")."""
+        out = {s.label: s.headline for s in self.sources}
+        if self.joint_track is not None:
+            for c in self.joint_track.doc["cases"]:
+                out[f"joint track: {c['name']}"] = {
+                    "tracking_rms_error_mrad": round(c["rms_error_rad"] * 1e3, 9)}
+        if self.joint_bode is not None:
+            out["joint bode"] = {"bandwidth_hz": self.joint_bode.doc.get("bandwidth_hz")}
+        return out
 
     def section(self, id: str) -> Section | None:
         return next((s for s in self.sections if s.id == id), None)
@@ -126,7 +160,7 @@ class Report:
             "sections": [s.id for s in self.sections],
             "regressions": self.regressions,
             "gate": self.gate,
-            "headline": {s.label: s.headline for s in self.sources},
+            "headline": self.headlines(),
             "inputs": self.inputs,
             "notes": self.notes,
             "data": {s.id: s.data for s in self.sections if s.data},
@@ -141,11 +175,15 @@ def build_report(
     baseline: dict[str, Any] | None = None,
     baseline_name: str = "baseline",
     tolerance_percent: float = 10.0,
+    joint_track: JointDoc | None = None,
+    joint_bode: JointDoc | None = None,
 ) -> Report:
     """The report over what was given (see the module docstring). ``captures`` analysed
-    with ``keep_series=True`` get their plots; ``baseline`` (an earlier report's JSON)
-    turns on the regression gate: each headline figure worse than the baseline's by more
-    than ``tolerance_percent`` is a regression and a failure."""
+    with ``keep_series=True`` get their plots; ``joint_track``/``joint_bode`` are ``joint
+    track``'s and ``joint bode``'s documents (:func:`lolacli.report.joints.load_track`,
+    ``load_bode``); ``baseline`` (an earlier report's JSON) turns on the regression gate:
+    each headline figure worse than the baseline's by more than ``tolerance_percent`` is a
+    regression and a failure."""
     sources = _sources(captures, simulation)
     notes: list[str] = []
     timing = _timing(eni, sources, notes)
@@ -162,9 +200,20 @@ def build_report(
         sections.append(_software(simulation.doc))
     if len(sources) > 1:
         sections.append(_comparison(sources))
+    sim = next((s for s in sources if s.kind == "simulation"), None)
+    if sim is not None and sim.doc.get("moves"):
+        sections.append(_joints(sim))
+    if joint_track is not None:
+        sections.append(_tracking(joint_track))
+    if joint_bode is not None:
+        sections.append(_bandwidth(joint_bode))
     present = {s.id for s in sections}
-    findings = _findings(sources, timing, present)
-    report = Report("pass", findings, sections, sources, _inputs(eni, sources), notes=notes)
+    findings = _findings(sources, timing, present) + _joint_findings(joint_track, joint_bode)
+    inputs = _inputs(eni, sources) | {
+        "joint_track": joint_track.path if joint_track is not None else None,
+        "joint_bode": joint_bode.path if joint_bode is not None else None}
+    report = Report("pass", _by_severity(findings), sections, sources, inputs, notes=notes,
+                    joint_track=joint_track, joint_bode=joint_bode)
     if baseline is not None:
         from lolacli.report.gate import apply_gate
 
@@ -206,6 +255,7 @@ def _sources(captures: Sequence[CaptureReport], simulation: SimulationResult | N
                 dc = np.asarray(s.dc_error_ns, dtype=np.int64)
                 src.dc_t_s = (dc[:, 0] - s.start_ns) / 1e9
                 src.dc_error_ns = dc[:, 1]
+            src.following_error = dict(s.following_error)
         out.append(src)
     return out
 
@@ -519,11 +569,13 @@ def _comparison(sources: list[Source]) -> Section:
     head = ["figure", *[s.label for s in sources]]
     rows = []
     for key, (name, unit, _worse) in HEADLINE.items():
+        if not any(key in s.headline for s in sources):  # e.g. no simulation moved joints
+            continue
         cells = []
         for i, s in enumerate(sources):
-            v = s.headline[key]
+            v = s.headline.get(key)
             text = "–" if v is None else number(v, unit)
-            b = base[key]
+            b = base.get(key)
             if i and v is not None and b:
                 text += f" ({100 * (v - b) / b:+.1f} %)"
             cells.append(text)
@@ -534,12 +586,63 @@ def _comparison(sources: list[Source]) -> Section:
         {s.label: s.headline for s in sources})
 
 
+# ---------------------------------------------------------------- joints
+
+
+def _joints(sim: Source) -> Section:
+    from lolacli.report.joints import joints_data, moves_rows
+
+    moves = sim.doc["moves"]
+    unit = moves[0]["unit"]
+    table = Table(["slave", "joint", "distance", "duration", "error RMS", "error max"],
+                  moves_rows(moves), f"Moves (inc: {unit}; error: set-point sent - actual "
+                  "received)")
+    return Section("joints", TITLES["joints"], (
+        "The joints the simulation moved (--move/--trajectory): jerk-limited S-curves "
+        "streamed in cyclic synchronous position, one set-point a cycle. Following error: "
+        "the set-point the master sent minus the actual position it received in the same "
+        "cycle (the bus's delay included), over each joint's motion; in the drive's "
+        "increments (no encoder resolution is modelled, so no radians)."), [table],
+        joints_data(moves))
+
+
+def _tracking(track: JointDoc) -> Section:
+    from lolacli.report.joints import tracking_data, tracking_rows
+
+    d = track.doc
+    t = d.get("trajectory") or {}
+    walk = (f"a walking hip, {number(t['step_s'], 's')} steps, {t['steps']} measured"
+            if {"step_s", "steps"} <= set(t) else "its trajectory")
+    table = Table(["case", "control rate", "bus rate", "k_e", "RMS error", "max error",
+                   "RMS change vs the first"], tracking_rows(d["cases"]),
+                  f"Tracking error θd − θ of {d['joint']} (seed 000 Table III)")
+    series = "" if all("error_series" in c for c in d["cases"]) else (
+        " The document has no error series (joint track --series), so no figure.")
+    return Section("tracking", TITLES["tracking"], (
+        f"joint track ({track.path}): {d['joint']} on {walk}, with the standard velocity "
+        "feed-forward at the control rate, with the learned k_e (k_vel,ff = 1 + k_e), and "
+        "with a faster bus extrapolating the targets between control updates. Errors after "
+        f"settling, every 0.1 ms drive period.{series}"), [table], tracking_data(track))
+
+
+def _bandwidth(bode: JointDoc) -> Section:
+    from lolacli.report.joints import bandwidth_data, bandwidth_rows
+
+    return Section("bandwidth", TITLES["bandwidth"], (
+        f"joint bode ({bode.path}): the closed loop's response from the central control's "
+        "target to the joint angle, from a small-amplitude chirp through the bus (seed 000 "
+        "Fig. 10); the bandwidth is where the gain falls for good below -3 dB."),
+        [Table(["", ""], bandwidth_rows(bode))], bandwidth_data(bode))
+
+
 # ---------------------------------------------------------------- findings and verdict
 
 
 def _section_of(kind: str, present: set[str]) -> str:
     if kind.startswith("dc") and "dc" in present:
         return "dc"
+    if kind.startswith(("move", "drive-fault")) and "joints" in present:
+        return "joints"
     if kind.startswith("calibration") and "timing" in present:
         return "timing"
     return "bus" if "bus" in present else "verdict"
@@ -555,8 +658,25 @@ def _findings(sources: list[Source], timing: Section | None, present: set[str]
         for w in timing.data["warnings"]:
             out.append({**Finding("calibration", Severity.WARNING, w).to_dict(),
                         "source": "timing model", "section": "timing"})
+    return out
+
+
+def _joint_findings(track: JointDoc | None, bode: JointDoc | None) -> list[dict[str, Any]]:
+    from lolacli.report.joints import bandwidth_findings, tracking_findings
+
+    out = []
+    if track is not None:
+        out += [{**f.to_dict(), "source": "joint track", "section": "tracking"}
+                for f in tracking_findings(track)]
+    if bode is not None:
+        out += [{**f.to_dict(), "source": "joint bode", "section": "bandwidth"}
+                for f in bandwidth_findings(bode)]
+    return out
+
+
+def _by_severity(findings: list[dict[str, Any]]) -> list[dict[str, Any]]:
     order = {"failure": 0, "warning": 1, "info": 2}
-    return sorted(out, key=lambda f: order.get(f["severity"], 3))
+    return sorted(findings, key=lambda f: order.get(f["severity"], 3))
 
 
 def _verdict(report: Report) -> Section:

@@ -29,6 +29,8 @@ class Spec:
     vline: float | None = None
     bars: list[tuple[str, list[float]]] | None = None  # horizontal bars per name
     names: list[str] | None = None
+    hline: float | None = None
+    logx: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +83,54 @@ def specs(report: Report) -> list[Spec]:
                         "µs per cycle", names=names, bars=[
                             ("p99", [sections[n]["p99"] for n in names]),
                             ("mean", [sections[n]["mean"] for n in names])]))
+    return out + _joint_specs(report, present)
+
+
+def _joint_specs(report: Report, present: set[str]) -> list[Spec]:
+    """The joints' figures: a simulation's following error over time, seed 000's Fig. 9
+    (joint track's error over time) and Fig. 10 (joint bode's gain and phase)."""
+    import numpy as np
+
+    from lolacli.report.joints import drawn_joints
+
+    out: list[Spec] = []
+    sim = next((s for s in report.sources if s.kind == "simulation"), None)
+    if "joints" in present and sim is not None and sim.following_error:
+        drawn = drawn_joints(sim.following_error, sim.doc["moves"])
+        more = len(sim.following_error) - len(drawn)
+        out.append(Spec("joints", "following-error", "Following error over time" + (
+            f" ({len(drawn)} joints with the largest RMS; {more} more in the table)"
+            if more > 0 else ""), "time since the moves began (s)",
+            "set-point - actual (increments)",
+            [Series(j, *sim.following_error[j]) for j in drawn]))
+    track = report.joint_track
+    if "tracking" in present and track is not None and all(
+            "error_series" in c for c in track.doc["cases"]):
+        series = []
+        for c in track.doc["cases"]:
+            e = c["error_series"]
+            y = np.asarray(e["error_rad"], dtype=np.float64) * 1e3
+            series.append(Series(c["name"], np.arange(y.size) * e["sample_s"], y))
+        if any(s.y.size for s in series):
+            out.append(Spec("tracking", "tracking-error",
+                            f"Tracking error over time: {track.doc['joint']} (seed 000 Fig. 9)",
+                            "time after settling (s)", "θd − θ (mrad)",
+                            [s for s in series if s.y.size]))
+    bode = report.joint_bode
+    points = [p for p in bode.doc["points"] if np.isfinite(p["gain_db"])] if bode else []
+    if "bandwidth" in present and bode is not None and points:
+        f = np.asarray([p["freq_hz"] for p in points])
+        bw = bode.doc.get("bandwidth_hz")
+        mark = (f"-3 dB bandwidth {bw:.1f} Hz, dashed" if bw is not None
+                else "-3 dB not reached")
+        out.append(Spec("bandwidth", "bode-gain", f"Closed-loop gain, target to joint angle "
+                        f"({mark}; seed 000 Fig. 10)", "frequency (Hz)", "gain (dB)",
+                        [Series("gain", f, np.asarray([p["gain_db"] for p in points]))],
+                        vline=bw, hline=-3.0103, logx=True))
+        out.append(Spec("bandwidth", "bode-phase", "Closed-loop phase, target to joint angle",
+                        "frequency (Hz)", "phase (°)",
+                        [Series("phase", f, np.asarray([p["phase_deg"] for p in points]))],
+                        vline=bw, logx=True))
     return out
 
 
@@ -119,7 +169,8 @@ def svg_figures(report: Report) -> list[Figure]:
         if f.bars is not None:
             drawn = hbars(f.title, f.xlabel, f.names or [], f.bars)
         else:
-            drawn = chart(f.title, f.xlabel, f.ylabel, f.series, f.vline)
+            drawn = chart(f.title, f.xlabel, f.ylabel, f.series, f.vline, hline=f.hline,
+                          logx=f.logx)
         out.append(Figure(f.section, f.name, f.title, svg=drawn))
     return out
 
@@ -167,6 +218,18 @@ def _draw(ax: Any, f: Spec) -> None:
                 ax.plot(*thin(s.x, s.y), lw=0.8, label=s.label)
         if f.vline is not None:
             ax.axvline(f.vline, color="grey", lw=0.8, ls="--")
+        if f.hline is not None:
+            ax.axhline(f.hline, color="grey", lw=0.8, ls="--")
+        if f.logx:  # round values labelled as numbers (matplotlib's minor 3×10¹ overlap)
+            from matplotlib.ticker import NullFormatter
+
+            from lolacli.report.svg import fmt_tick, log_ticks
+
+            ax.set_xscale("log")
+            xs = [float(x) for s in f.series for x in s.x]
+            at = log_ticks(min(xs), max(xs))
+            ax.set_xticks(at, [fmt_tick(t) for t in at])
+            ax.xaxis.set_minor_formatter(NullFormatter())
         if len(f.series) > 1:
             ax.legend(fontsize=8)
         ax.set_ylabel(f.ylabel)

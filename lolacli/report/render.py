@@ -116,6 +116,8 @@ def _inputs_line(report: Report) -> str:
     if sim:
         parts.append(f"simulation {sim['cycles']:,} cycles at {sim['rate_hz']:,g} Hz "
                      f"({sim['mode']})")
+    parts += [f"{name} {i[key]}" for key, name in (("joint_track", "joint track"),
+                                                   ("joint_bode", "joint bode")) if i.get(key)]
     return "; ".join(parts) or "no inputs"
 
 

@@ -44,7 +44,22 @@ def ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     return [first + i * step for i in range(int((hi - first) / step + 1e-9) + 1)]
 
 
-def _fmt(v: float) -> str:
+def log_ticks(lo: float, hi: float) -> list[float]:
+    """Round values (1, 2, 5 × 10^k; only the decades over a wide range) in [lo, hi] > 0."""
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo <= 0 or hi <= lo:
+        return []
+    out: list[float] = []
+    for steps in ((1, 2, 5), (1,)):
+        out = [m * 10.0**k for k in range(math.floor(math.log10(lo)),
+                                          math.ceil(math.log10(hi)) + 1)
+               for m in steps if lo * (1 - 1e-9) <= m * 10.0**k <= hi * (1 + 1e-9)]
+        if len(out) <= 10:
+            break
+    return out
+
+
+def fmt_tick(v: float) -> str:
+    """A tick's label: a short number."""
     if v == 0:
         return "0"
     if abs(v) >= 1e7 or abs(v) < 0.01:
@@ -64,11 +79,17 @@ def thin(x: Any, y: Any) -> tuple[Any, Any]:
 
 
 def chart(title: str, xlabel: str, ylabel: str, series: Sequence[Series],
-          vline: float | None = None) -> str:
+          vline: float | None = None, *, hline: float | None = None,
+          logx: bool = False) -> str:
     """One x/y chart: lines or histogram bars, axes with round ticks, a legend when there
-    is more than one series."""
+    is more than one series; dashed lines at x = ``vline`` and y = ``hline``; ``logx``: a
+    logarithmic x axis (x > 0)."""
     import numpy as np
 
+    if logx:  # draw log10(x), label the ticks with x
+        series = [Series(s.label, np.log10(np.asarray(s.x, dtype=np.float64)), s.y, s.kind)
+                  for s in series]
+        vline = math.log10(vline) if vline is not None and vline > 0 else None
     xs = np.concatenate([np.asarray(s.x, dtype=np.float64) for s in series])
     ys = np.concatenate([np.asarray(s.y, dtype=np.float64) for s in series])
     x0, x1 = float(xs.min()), float(xs.max())
@@ -76,6 +97,8 @@ def chart(title: str, xlabel: str, ylabel: str, series: Sequence[Series],
     y1 = float(ys.max())
     if x1 <= x0:
         x0, x1 = x0 - 1.0, x1 + 1.0
+    if hline is not None:
+        y0, y1 = min(y0, hline), max(y1, hline)
     if y1 <= y0:
         y0, y1 = y0 - 1.0, y1 + 1.0
     pad = (y1 - y0) * 0.05
@@ -92,15 +115,17 @@ def chart(title: str, xlabel: str, ylabel: str, series: Sequence[Series],
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {W} {H}" role="img" '
            f'aria-label="{e(title)}" class="chart">',
            f'<text x="{W / 2}" y="18" text-anchor="middle" class="t">{e(title)}</text>']
-    for t in ticks(x0, x1):
+    xticks = [(math.log10(t), t) for t in log_ticks(10**x0, 10**x1)] if logx else [
+        (t, t) for t in ticks(x0, x1)]
+    for t, shown in xticks:
         x = px(t)
         out.append(f'<line x1="{x:.1f}" y1="{TOP}" x2="{x:.1f}" y2="{TOP + ph}" class="g"/>'
                    f'<text x="{x:.1f}" y="{TOP + ph + 16}" text-anchor="middle">'
-                   f"{_fmt(t)}</text>")
+                   f"{fmt_tick(shown)}</text>")
     for t in ticks(y0, y1):
         y = py(t)
         out.append(f'<line x1="{LEFT}" y1="{y:.1f}" x2="{LEFT + pw}" y2="{y:.1f}" class="g"/>'
-                   f'<text x="{LEFT - 6}" y="{y + 4:.1f}" text-anchor="end">{_fmt(t)}</text>')
+                   f'<text x="{LEFT - 6}" y="{y + 4:.1f}" text-anchor="end">{fmt_tick(t)}</text>')
     out.append(f'<rect x="{LEFT}" y="{TOP}" width="{pw}" height="{ph}" class="frame"/>')
     out.append(f'<text x="{LEFT + pw / 2}" y="{H - 8}" text-anchor="middle">{e(xlabel)}</text>')
     out.append(f'<text transform="translate(16 {TOP + ph / 2}) rotate(-90)" '
@@ -124,7 +149,11 @@ def chart(title: str, xlabel: str, ylabel: str, series: Sequence[Series],
     if vline is not None and x0 <= vline <= x1:
         x = px(vline)
         out.append(f'<line x1="{x:.1f}" y1="{TOP}" x2="{x:.1f}" y2="{TOP + ph}" '
-                   'stroke="#555" stroke-dasharray="4 3"/>')
+                   'stroke="#555" stroke-dasharray="4 3" class="vline"/>')
+    if hline is not None:
+        y = py(hline)
+        out.append(f'<line x1="{LEFT}" y1="{y:.1f}" x2="{LEFT + pw}" y2="{y:.1f}" '
+                   'stroke="#555" stroke-dasharray="4 3" class="hline"/>')
     if many:
         for i, s in enumerate(series):
             y = TOP + 14 + 16 * i
@@ -159,7 +188,7 @@ def hbars(title: str, xlabel: str, names: Sequence[str],
     for t in ts:
         out.append(f'<line x1="{px(t):.1f}" y1="{TOP}" x2="{px(t):.1f}" y2="{bottom}" '
                    f'class="g"/><text x="{px(t):.1f}" y="{bottom + 16}" '
-                   f'text-anchor="middle">{_fmt(t)}</text>')
+                   f'text-anchor="middle">{fmt_tick(t)}</text>')
     for i, name in enumerate(names):
         y = TOP + i * row_h
         out.append(f'<text x="{left - 6}" y="{y + 16}" text-anchor="end">{e(name)}</text>')

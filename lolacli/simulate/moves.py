@@ -390,12 +390,7 @@ class Moves:
             }
             if first is not None and done > first:
                 end = self.end[i]
-                err = (self.targets[first:done, i].astype(np.int64)
-                       - self.actual[first:done, i].astype(np.int64))
-                nonzero = np.flatnonzero(err)
-                # the motion: until the profile's end, then while the error lasts
-                last = max(end - first, int(nonzero[-1]) if nonzero.size else 0)
-                err = err[: last + 1]
+                err = self._error(i)
                 entry.update({
                     "target_position": int(self.targets[-1, i]),
                     "end_position": int(self.actual[done - 1, i]),
@@ -406,4 +401,30 @@ class Moves:
                     "following_error_max": int(np.abs(err).max()),
                 })
             out.append(entry)
+        return out
+
+    def _error(self, i: int) -> Any:
+        """Drive ``i``'s following error per cycle over its motion (module docstring)."""
+        import numpy as np
+
+        first, done = self.first[i], min(self.k, self.rows)
+        err = (self.targets[first:done, i].astype(np.int64)
+               - self.actual[first:done, i].astype(np.int64))
+        nonzero = np.flatnonzero(err)
+        # the motion: until the profile's end, then while the error lasts
+        last = max(self.end[i] - first, int(nonzero[-1]) if nonzero.size else 0)
+        return err[: last + 1]
+
+    def errors(self, names: list[str]) -> dict[str, tuple[Any, Any]]:
+        """Each moved drive's following error over its motion as (seconds since the moves
+        began, error in increments) per cycle, by drive name (for ``lolacli report``)."""
+        import numpy as np
+
+        out = {}
+        for i in self.moved:
+            first = self.first.get(i)
+            if first is None or min(self.k, self.rows) <= first:
+                continue
+            err = self._error(i)
+            out[names[i]] = ((first + np.arange(err.size)) * self.cycle_s, err)
         return out

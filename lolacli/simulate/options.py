@@ -3,7 +3,7 @@ against the ENI (:func:`check`), and what it gives back (:class:`SimulationResul
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,6 +61,9 @@ class SimulationSeries:
     sent_ns: Sequence[int]  # when each cyclic frame of the run left (periods: differences)
     dc_error_ns: Sequence[tuple[int, int]]  # (when, largest |system time difference|)
     start_ns: int  # when the cyclic run started (DC errors before it: start-up)
+    #: --move/--trajectory: each moved drive's (s since the moves began, following error in
+    #: increments) per cycle of its motion (:meth:`lolacli.simulate.moves.Moves.errors`)
+    following_error: Mapping[str, tuple[Any, Any]] = field(default_factory=dict)
 
 
 @dataclass(slots=True)

@@ -138,7 +138,7 @@ class Simulation:
             doc.update(NO_LIVE_KEYS)
             doc.update(timing(master, clock, app.skipped_in_run(skipped0, options.cycles)))
             doc.update(variation(eni, options, self.timing))
-            return _with_series(result(doc, options, master, app, interrupted, stop), master,
+            return _with_series(result(doc, options, master, app, interrupted, stop), master, app,
                                 clock, start_ns)
         finally:
             _close(recorders)
@@ -147,10 +147,11 @@ class Simulation:
 
 
 def _with_series(
-    res: SimulationResult, master: Master, clock: Any, start_ns: int
+    res: SimulationResult, master: Master, app: Application, clock: Any, start_ns: int
 ) -> SimulationResult:
+    moves = app.moves.errors([d.slave for d in app.drives]) if app.moves is not None else {}
     res.series = SimulationSeries(
-        master.stats.round_trip_ns, clock.sent_ns, master.stats.dc_errors_ns, start_ns
+        master.stats.round_trip_ns, clock.sent_ns, master.stats.dc_errors_ns, start_ns, moves
     )
     return res
 
@@ -264,7 +265,7 @@ def _live(
                 "kernel_timestamps": transport.kernel_timestamps,
             }
         )
-        return _with_series(result(doc, options, master, app, interrupted, stop), master,
+        return _with_series(result(doc, options, master, app, interrupted, stop), master, app,
                             clock, start_ns)
     finally:
         transport.close()

@@ -32,7 +32,8 @@ WIDTHS = (1280, 390)
 @pytest.fixture(scope="module")
 def pages(tmp_path_factory) -> dict[str, Path]:
     """Reports of three kinds of input: the simulated LOLA chain with its ENI (every
-    section but the comparison), two captures side by side, and a capture with its ENI."""
+    section but the comparison), two captures side by side, and a simulation that moved a
+    joint with joint track's and joint bode's documents (the joints' sections)."""
     from typer.testing import CliRunner
 
     from lolacli.cli.main import app
@@ -41,6 +42,16 @@ def pages(tmp_path_factory) -> dict[str, Path]:
     dc = CORPUS / "pcap" / "ethercrab__replay-dc.pcapng"
     other = CORPUS / "pcap" / "ethercrab__replay-issue-255.pcapng"
     runs = {"simulation": ["--simulate", "--duration", "2s", "--drift-ppb", "20000"]}
+    # the joints' sections: a move, joint track's Table III and Fig. 9, joint bode's Fig. 10
+    docs = {}
+    for name, args in (("track", ["track", "--steps", "1", "--series"]),
+                       ("bode", ["bode", "--duration", "1"])):
+        docs[name] = folder / f"{name}.json"
+        result = CliRunner().invoke(app, ["joint", *args, "--format", "json"])
+        assert result.exit_code == 0, result.stderr
+        docs[name].write_text(result.stdout)
+    runs["joints"] = ["--simulate", "--duration", "0.5s", "--move", "3:20000", "--joint-track",
+                      str(docs["track"]), "--joint-bode", str(docs["bode"])]
     if CORPUS.is_dir():
         runs["captures"] = ["--capture", str(dc), "--capture", str(other)]
     out = {}
@@ -58,7 +69,7 @@ def _artifacts(tmp_path: Path) -> Path:
     return folder
 
 
-@pytest.mark.parametrize("name", ["simulation", "captures"])
+@pytest.mark.parametrize("name", ["simulation", "captures", "joints"])
 def test_page_in_chromium(name, pages, tmp_path):
     if name not in pages:
         pytest.skip(f"corpus not found at {CORPUS}")
