@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lolacli.errors import EniError
+from lolacli.errors import EniError, InputError
 
 if TYPE_CHECKING:
     from lolacli.eni.esi import EsiFile
@@ -16,27 +16,35 @@ if TYPE_CHECKING:
 MAX_ENI_BYTES = 64 * 1024 * 1024
 
 
-def read_eni_bytes(path: str | Path) -> bytes:
-    """The bytes of an ENI file; :class:`EniError` (exit 3) when it cannot be read."""
+def read_bounded(
+    path: str | Path, what: str, max_bytes: int, error: type[InputError] = InputError
+) -> bytes:
+    """The bytes of an input file of at most ``max_bytes`` (``what`` names its kind in
+    errors: "an ENI file"); ``error`` (exit 3, with the path) when it cannot be read or is
+    larger. Bounded for files with no size to stat too (pipes, /dev/zero)."""
     p = Path(path)
     name = str(path)
     try:
         if p.is_dir():
-            raise EniError("is a directory, not an ENI file", path=name)
-        size = p.stat().st_size
-        if size > MAX_ENI_BYTES:
-            raise EniError(f"file too large for an ENI ({size} bytes)", path=name)
-        with p.open("rb") as f:  # bounded: /dev/zero and pipes have no size to stat
-            data = f.read(MAX_ENI_BYTES + 1)
-        if len(data) > MAX_ENI_BYTES:
-            raise EniError(f"file too large for an ENI (over {MAX_ENI_BYTES} bytes)", path=name)
-        return data
+            raise error(f"is a directory, not {what}", path=name)
+        if p.is_file() and (size := p.stat().st_size) > max_bytes:
+            raise error(f"file too large for {what} ({size:,} bytes)", path=name)
+        with p.open("rb") as f:
+            data = f.read(max_bytes + 1)
     except FileNotFoundError:
-        raise EniError("no such file", path=name) from None
+        raise error("no such file", path=name) from None
     except PermissionError:
-        raise EniError("permission denied", path=name) from None
+        raise error("permission denied", path=name) from None
     except OSError as exc:
-        raise EniError(f"cannot read: {exc.strerror or exc}", path=name) from None
+        raise error(f"cannot read: {exc.strerror or exc}", path=name) from None
+    if len(data) > max_bytes:
+        raise error(f"file too large for {what} (over {max_bytes:,} bytes)", path=name)
+    return data
+
+
+def read_eni_bytes(path: str | Path) -> bytes:
+    """The bytes of an ENI file; :class:`EniError` (exit 3) when it cannot be read."""
+    return read_bounded(path, "an ENI file", MAX_ENI_BYTES, EniError)
 
 
 def lola_path() -> Path:
@@ -63,7 +71,16 @@ def load_esi(path: str | Path) -> EsiFile:
     return parse_esi(read_eni_bytes(path), source=str(path))
 
 
-__all__ = ["MAX_ENI_BYTES", "load_eni", "load_esi", "lola_path", "read_eni_bytes"]
+__all__ = [
+    "MAX_ENI_BYTES",
+    "joints_path",
+    "load_eni",
+    "load_esi",
+    "load_joints",
+    "lola_path",
+    "read_bounded",
+    "read_eni_bytes",
+]
 
 
 def joints_path() -> Path:
@@ -76,20 +93,11 @@ def joints_path() -> Path:
 def load_joints(path: str | Path | None = None) -> dict[str, JointParams]:
     """Read and parse a joints file (``None``: the packaged one). Every failure is an
     :class:`~lolacli.errors.InputError` (exit 3) naming the file."""
-    from lolacli.errors import InputError
     from lolacli.motion.joint import parse_joints
 
     p = Path(path) if path is not None else joints_path()
     try:
-        with p.open("rb") as f:
-            data = f.read(1 << 20)
-        text = data.decode("utf-8")
+        text = read_bounded(p, "a joints file", 1 << 20).decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("not UTF-8 text", path=str(p)) from None
-    except FileNotFoundError:
-        raise InputError("no such file", path=str(p)) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, not a joints file", path=str(p)) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=str(p)) from None
     return parse_joints(text, str(p))

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError, UsageError
+from lolacli.files import read_bounded
 from lolacli.findings import Finding, Severity
 from lolacli.text import number
 
@@ -38,17 +39,7 @@ def load_baseline(path: str | Path) -> dict[str, Any]:
     from lolacli.report.model import SCHEMA
 
     name = str(path)
-    try:
-        with open(path, "rb") as f:
-            raw = f.read(MAX_BASELINE_BYTES + 1)
-    except FileNotFoundError:
-        raise InputError("no such file", path=name) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, not a report", path=name) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=name) from None
-    if len(raw) > MAX_BASELINE_BYTES:
-        raise InputError("too large for a report's JSON", path=name)
+    raw = read_bounded(path, "a report's JSON", MAX_BASELINE_BYTES)
     try:
         doc = json.loads(raw)
     except (ValueError, UnicodeDecodeError) as exc:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from lolacli.errors import InputError
+from lolacli.files import read_bounded
 from lolacli.findings import Finding, Severity
 from lolacli.text import number
 
@@ -50,17 +51,7 @@ class JointDoc:
 
 def _read(path: str | Path, schema: str, command: str) -> dict[str, Any]:
     name = str(path)
-    try:
-        with open(path, "rb") as f:
-            raw = f.read(MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise InputError("no such file", path=name) from None
-    except IsADirectoryError:
-        raise InputError(f"is a directory, not {command}'s JSON", path=name) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=name) from None
-    if len(raw) > MAX_BYTES:
-        raise InputError(f"too large for {command}'s JSON", path=name)
+    raw = read_bounded(path, f"{command}'s JSON", MAX_BYTES)
     try:
         doc = json.loads(raw)
     except (ValueError, UnicodeDecodeError) as exc:

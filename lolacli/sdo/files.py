@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError
-from lolacli.files import MAX_ENI_BYTES
+from lolacli.files import MAX_ENI_BYTES, read_bounded
 from lolacli.od import Dictionary
 from lolacli.od.eds import from_canopen
 
@@ -21,21 +21,8 @@ if TYPE_CHECKING:  # the ESI modules load only where an ESI is read (start-up ti
 
 def read_text_file(path: str | Path, what: str) -> str:
     """A small text file (EDS, check file), bounded like ENI reads; exit 3 on failure."""
-    p = Path(path)
     name = str(path)
-    try:
-        if p.is_dir():
-            raise InputError(f"is a directory, not {what}", path=name)
-        with p.open("rb") as f:
-            data = f.read(MAX_ENI_BYTES + 1)
-    except FileNotFoundError:
-        raise InputError("no such file", path=name) from None
-    except PermissionError:
-        raise InputError("permission denied", path=name) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=name) from None
-    if len(data) > MAX_ENI_BYTES:
-        raise InputError(f"file too large for {what} (over {MAX_ENI_BYTES} bytes)", path=name)
+    data = read_bounded(path, what, MAX_ENI_BYTES)
     if b"\x00" in data:
         raise InputError(f"binary data, not {what}", path=name)
     try:

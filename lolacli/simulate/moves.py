@@ -132,6 +132,8 @@ def _all_numbers(fields: list[str]) -> bool:
     return True
 
 
+#: the largest trajectory file read (a goal a line: ~100 000 goals)
+MAX_TRAJECTORY_BYTES = 4 << 20
 #: the columns of a trajectory file (the last three optional)
 COLUMNS = ("time_s", "joint", "distance", "v", "a", "j")
 
@@ -142,16 +144,12 @@ def parse_trajectory(path: Path) -> list[Goal]:
     objects with those keys (or ``{"goals": [...]}``). InputError (exit 3) with the file
     and line for what does not parse."""
     source = str(path)
+    from lolacli.files import read_bounded
+
     try:
-        text = path.read_bytes()[: 1 << 22].decode("utf-8")
-    except FileNotFoundError:
-        raise InputError("no such file", path=source) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, not a trajectory file", path=source) from None
+        text = read_bounded(path, "a trajectory file", MAX_TRAJECTORY_BYTES).decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("not UTF-8 text", path=source) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", path=source) from None
     if text.lstrip().startswith(("[", "{")):
         rows = _json_rows(text, source)
     else:

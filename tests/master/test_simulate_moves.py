@@ -186,3 +186,18 @@ def test_int32_views_write_and_read_in_place(at: list[int]) -> None:
     buffer[at[0]:at[0] + 4] = (-7).to_bytes(4, "little", signed=True)
     row[:] = view
     assert list(row) == [-7, *values[1:]]
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ("/dev/zero", "file too large for a trajectory file"),
+        ("/", "is a directory, not a trajectory file"),
+        ("/nonexistent/goals.csv", "no such file"),
+    ],
+)
+def test_unreadable_trajectory_is_exit_3_without_reading_forever(path: str, says: str) -> None:
+    """/dev/zero has no size to stat: the read is bounded (it used to read on and on)."""
+    done = run("--duration", "100ms", "-q", "--trajectory", path)
+    assert done.returncode == 3, done.stderr
+    assert done.stderr.count("\n") == 1 and says in done.stderr and path in done.stderr
