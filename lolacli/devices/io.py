@@ -3,9 +3,9 @@
 * :class:`DigitalIo` — digital outputs are stored; digital inputs echo the outputs of the
   same width where there are any, else a walking bit pattern changing every 10 ms.
 * :class:`AnalogInput` — every input entry carries a sine (period 1 s) scaled to its type.
-* :class:`CanGateway` — a placeholder for the CAN gateway of the LOLA chain: its inputs
-  (IMU rates and accelerations, foot force/torque sensors) are deterministic sines of time
-  with distinct phases, so a master sees plausible, changing values.
+* :class:`CanGateway` — the CAN gateway of the LOLA chain: its IMU and foot force/torque
+  sensors sample at their own rates behind a CAN bus (:mod:`lolacli.devices.can`), the
+  process data hold each one's last sample to arrive.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import struct
 from collections.abc import Callable
 
 from lolacli.devices.base import Device
+from lolacli.devices.can import Arrival, CanConfig, arrivals, sensor_value
 from lolacli.eni.model import Direction
 from lolacli.od import OdEntry
 from lolacli.wire.datatypes import DataType, Value
@@ -109,13 +110,156 @@ FLOAT_PACK: dict[int, Callable[[float], bytes]] = {
     DataType.REAL32: struct.Struct("<f").pack,
     DataType.REAL64: struct.Struct("<d").pack,
 }
+_REAL32 = FLOAT_PACK[DataType.REAL32]
 _UNSIGNED = frozenset({DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32})
 
 
-class CanGateway(AnalogInput):
-    """IMU and force/torque sensor values behind a CAN gateway (placeholder)."""
+class CanGateway(Device):
+    """The LOLA CAN gateway: the IMU and foot force/torque sensors behind it are CANopen
+    nodes sampling at their own rates (:mod:`lolacli.devices.can`); each cycle the
+    gateway's process data hold the last sample that has crossed the CAN bus, so a bus
+    faster than a sensor sees the same values for several cycles, a sample's latency
+    after it was taken. ``Sensor status`` gives per sensor its status (1 once a sample
+    arrived) and counter (samples received, mod 65536): a master tells a sample's
+    instant from its counter (:meth:`CanSensor.sample_ns` of ``counter - 1``).
 
-    scale = 100.0
+    :meth:`configure` sets the CAN side (rates, bitrate) before the run;
+    :meth:`receive` writes a sample into the process data as a bridge from a real CAN
+    bus does (:mod:`lolacli.sdo.bridge`), the model's bus then left aside."""
+
+    device_type = 0x00000000
+    STATUS = 0x6000
+
+    def define(self) -> None:
+        self.configure(CanConfig())
+
+    def configure(self, config: CanConfig) -> None:
+        """The CAN side: sensors the ENI maps (their values object in the inputs) on a
+        bus of ``config``'s bitrate, from time 0."""
+        config.check()
+        mapped = {e.index for p in self.slave.pdos for e in p.entries}
+        sensors = tuple(s for s in config.sensors if s.values_index in mapped)
+        self.config = CanConfig(config.bitrate, sensors)
+        self._arrivals = arrivals(self.config)
+        self.next_arrival_ns = -1
+        self._next: Arrival | None = None
+        self._pull()
+        self.bridged = False
+        self._entries = [
+            (
+                self.od.entry(self.STATUS, 2 * i + 1),
+                self.od.entry(self.STATUS, 2 * i + 2),
+                [self.od.entry(s.values_index, sub) for sub in range(1, s.channels + 1)],
+            )
+            for i, s in enumerate(sensors)
+        ]
+        self._cached: tuple[bytes, int, int, bytes] | None = None  # outputs, writes, version
+        self._samples: dict[tuple[int, int], list[bytes]] = {}  # packed values by instant
+        self._image = bytearray()  # the inputs, kept up to date by _write (byte layouts)
+        self._offsets: dict[int, int] = {}  # id(entry) -> its offset in the inputs
+        self._blocks: dict[int, int] = {}  # sensor -> offset of its contiguous values
+        self.rest_cache = None
+
+    def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        """As :meth:`Device.cycle`; the inputs are packed again only when a sample arrived
+        or the dictionary changed (the gateway's cycle at 2 kHz mostly holds)."""
+        self.t_ns = t_ns
+        od, cached = self.od, self._cached
+        if (
+            cached is not None
+            and t_ns < self.next_arrival_ns
+            and cached[1] == od.writes
+            and cached[2] == od.version
+            and cached[0] == outputs
+        ):
+            return cached[3]
+        if outputs and (cached is None or cached[0] != outputs):
+            self.unpack_outputs(outputs)
+        if cached is None or cached[1] != od.writes or cached[2] != od.version:
+            self._image = bytearray(self.pack_inputs())  # the dictionary changed: all
+            self._offsets = {
+                id(e): at for e, at, _ in self.byte_layout_of(Direction.INPUT) or () if e
+            }
+            self._blocks = self._contiguous()
+        self.step(t_ns)
+        inputs = bytes(self._image) if self._offsets else self.pack_inputs()
+        self._cached = (outputs, od.writes, od.version, inputs)
+        return inputs
+
+    def _contiguous(self) -> dict[int, int]:
+        """Sensors whose values lie one after the other in the inputs: their offset."""
+        out = {}
+        for i, (_, _, entries) in enumerate(self._entries):
+            at = [self._offsets.get(id(e)) if e is not None else None for e in entries]
+            if at and at[0] is not None and at == [at[0] + 4 * j for j in range(len(at))]:
+                out[i] = at[0]
+        return out
+
+    def _pull(self) -> None:
+        self._next = next(self._arrivals, None)
+        self.next_arrival_ns = self._next[0] if self._next is not None else 1 << 62
+
+    def step(self, t_ns: int) -> None:
+        if self.bridged:
+            return
+        sensors, cache = self.config.sensors, self._samples
+        if self._next is not None and t_ns - self._next[0] > 2_000_000_000:
+            self._arrivals = arrivals(self.config, t_ns)  # a jump in time: seek
+            self._pull()
+        while self._next is not None and self._next[0] <= t_ns:
+            _, i, k = self._next
+            sensor = sensors[i]
+            key = (i, (sensor.sample_ns(k) % 1_000_000_000))  # the sines repeat each second
+            packed = cache.get(key)
+            if packed is None:
+                t_s = sensor.sample_ns(k) / 1e9
+                scale, node = sensor.scale, sensor.node_id
+                packed = [
+                    _REAL32(sensor_value(scale, sub, node, t_s))
+                    for sub in range(1, sensor.channels + 1)
+                ]
+                if len(cache) < 100_000:
+                    cache[key] = packed
+            self._write(i, k + 1, packed)
+            self._pull()
+
+    def receive(self, name: str, counter: int, values: list[float]) -> None:
+        self._write_values(name, counter, [_REAL32(v) for v in values])
+
+    def _write_values(self, name: str, counter: int, packed: list[bytes]) -> None:
+        """A sample of sensor ``name`` arrived from a CAN bus (``counter``: samples
+        received so far): into the process data; the model's own bus stops."""
+        self.bridged = True
+        names = [s.name for s in self.config.sensors]
+        if name not in names:
+            raise KeyError(f"no sensor {name!r} behind this gateway (it has {names})")
+        self._write(names.index(name), counter, packed)
+        self._cached = self.rest_cache = None
+
+    def _write(self, i: int, counter: int, packed: list[bytes]) -> None:
+        status, count, entries = self._entries[i]
+        image, offsets = self._image, self._offsets
+        if status is not None and status.value[0] != 1:
+            status.value = (1).to_bytes(len(status.value), "little")
+            at = offsets.get(id(status))
+            if at is not None:
+                image[at : at + len(status.value)] = status.value
+        if count is not None:
+            count.value = data = (counter & 0xFFFF).to_bytes(len(count.value), "little")
+            at = offsets.get(id(count))
+            if at is not None:
+                image[at : at + len(data)] = data
+        block = self._blocks.get(i)
+        for entry, data in zip(entries, packed, strict=False):
+            if entry is not None:
+                entry.value = data
+        if block is not None:
+            image[block : block + 4 * len(packed)] = b"".join(packed)
+        else:
+            for entry, data in zip(entries, packed, strict=False):
+                at = offsets.get(id(entry)) if entry is not None else None
+                if at is not None:
+                    image[at : at + 4] = data
 
     def values(self) -> dict[str, Value]:
         return {
