@@ -53,10 +53,22 @@ def frame_bits(data_bytes: int, *, stuffing: bool = True) -> int:
     return bits + (33 + 8 * data_bytes) // 4 if stuffing else bits
 
 
+def channel_phase(subindex: int, node_id: int) -> float:
+    """The phase of a sensor node's channel ``subindex`` (1-based): 0.7 sub + 0.3 node."""
+    return 0.7 * subindex + 0.3 * node_id
+
+
 def sensor_value(scale: float, subindex: int, node_id: int, t_s: float) -> float:
     """The value a sensor node measures at ``t_s`` seconds on its channel ``subindex``
-    (1-based): ``scale * sin(2 pi t + 0.7 sub + 0.3 node)``."""
-    return scale * math.sin(2 * math.pi * t_s + 0.7 * subindex + 0.3 * node_id)
+    (1-based): ``scale * sin(2 pi t + phase)`` with :func:`channel_phase` (the C core's
+    twin of the gateway computes the same doubles: the phase first, then the sum)."""
+    return scale * math.sin(2 * math.pi * t_s + channel_phase(subindex, node_id))
+
+
+def sample_seconds(sample_ns: int) -> float:
+    """A sample's instant as the sines take it: its place in its second (they repeat
+    each second), so that a value does not depend on how long the run has been going."""
+    return (sample_ns % 1_000_000_000) / 1e9
 
 
 @dataclass(frozen=True)
@@ -220,37 +232,101 @@ class CanBus:
 
 Arrival = tuple[int, int, int]  # (instant it arrived, sensor, sample)
 
+#: the longest hyperperiod and the most arrivals in three of them a schedule is made for
+MAX_HYPERPERIOD_NS = 1_000_000_000
+HORIZON_EVENTS = 200_000
 
-def arrivals(config: CanConfig, from_ns: int = 0, *, horizon_events: int = 200_000
-             ) -> Iterator[Arrival]:
-    """The samples' arrivals at the gateway in time order, without end (ties: sensor
-    order), from about ``from_ns`` on (at least the hyperperiod before it, so that what
-    each sensor holds at ``from_ns`` is among them). When the sensors' schedule repeats
-    after the hyperperiod H (the least common multiple of their periods, up to 1 s and
-    ``horizon_events`` arrivals) and the bus has settled into it by H, the arrivals of
-    [H, 2H) repeat, shifted, for ever (checked against a third H); otherwise
-    :class:`CanBus` runs from ``from_ns`` less a second, its bus idle then."""
+
+@dataclass(frozen=True)
+class CanSchedule:
+    """The bus's arrivals when they repeat: with H the sensors' hyperperiod (the least
+    common multiple of their periods), the arrivals of [H, 2H) recur shifted by H for
+    ever (sensor ``i``'s sample numbers by ``shifts[i]``), checked against [2H, 3H).
+    ``log``: every arrival of [0, 3H), in time order (ties: sensor order); the bus
+    settles from its idle start by H. :func:`schedule` makes one."""
+
+    hyper_ns: int
+    shifts: tuple[int, ...]
+    log: tuple[Arrival, ...]
+
+    def template(self) -> list[Arrival]:
+        h = self.hyper_ns
+        return [a for a in self.log if h <= a[0] < 2 * h]
+
+    def held_rows(self) -> list[tuple[int, tuple[int, ...]]]:
+        """After each arrival of :attr:`log`: its instant and the sample every sensor
+        holds then (``-1``: none yet), the table the C core looks a time up in."""
+        held = [-1] * len(self.shifts)
+        rows = []
+        for t_a, i, k in self.log:
+            held[i] = k
+            rows.append((t_a, tuple(held)))
+        return rows
+
+    def held_at(self, t_ns: int) -> list[int]:
+        """The sample each sensor holds at ``t_ns`` (arrivals at ``t_ns`` included):
+        from :attr:`log` up to 3H, beyond it from [2H, 3H) shifted by whole H."""
+        h = self.hyper_ns
+        q = t_ns // h - 2 if t_ns >= 3 * h else 0
+        local = t_ns - q * h
+        held = [-1] * len(self.shifts)
+        for t_a, i, k in self.log:
+            if t_a > local:
+                break
+            held[i] = k
+        return [k + q * s if k >= 0 else -1 for k, s in zip(held, self.shifts, strict=True)]
+
+
+def schedule(config: CanConfig, *, horizon_events: int = HORIZON_EVENTS) -> CanSchedule | None:
+    """The bus's :class:`CanSchedule`, or ``None`` when it does not repeat within reach
+    (a hyperperiod over :data:`MAX_HYPERPERIOD_NS`, more than ``horizon_events``
+    arrivals in three, or a bus not settled by H)."""
     sensors = config.sensors
     if not sensors:
-        return
+        return None
     periods = [s.period_ns for s in sensors]
     hyper = math.lcm(*periods)
     per_h = sum(hyper // p for p in periods)
-    if hyper <= 1_000_000_000 and 3 * per_h <= horizon_events:
-        bus = CanBus(config)
-        bus.advance(3 * hyper)
-        seen = bus.log
-        template = [a for a in seen if hyper <= a[0] < 2 * hyper]
-        third = [a for a in seen if 2 * hyper <= a[0] < 3 * hyper]
-        shifts = [hyper // p for p in periods]
-        if template and third == [(t + hyper, i, k + shifts[i]) for t, i, k in template]:
-            m = max(0, (from_ns - hyper) // hyper - 1)
-            if m == 0:
-                yield from (a for a in seen if a[0] < hyper)
-            while True:
-                for t_a, i, k in template:
-                    yield (t_a + m * hyper, i, k + m * shifts[i])
-                m += 1
+    if hyper > MAX_HYPERPERIOD_NS or 3 * per_h > horizon_events:
+        return None
+    bus = CanBus(config)
+    bus.advance(3 * hyper)
+    seen = bus.log
+    template = [a for a in seen if hyper <= a[0] < 2 * hyper]
+    third = [a for a in seen if 2 * hyper <= a[0] < 3 * hyper]
+    shifts = [hyper // p for p in periods]
+    if {i for _, i, _ in template} != set(range(len(sensors))) or third != [
+        (t + hyper, i, k + shifts[i]) for t, i, k in template
+    ]:
+        return None
+    return CanSchedule(hyper, tuple(shifts), tuple(seen))
+
+
+_UNKNOWN = object()
+
+
+def arrivals(config: CanConfig, from_ns: int = 0, *, horizon_events: int = HORIZON_EVENTS,
+             periodic: CanSchedule | None | object = _UNKNOWN) -> Iterator[Arrival]:
+    """The samples' arrivals at the gateway in time order, without end (ties: sensor
+    order), from about ``from_ns`` on (at least the hyperperiod H before it, so that what
+    each sensor holds at ``from_ns`` is among them). With a :func:`schedule`, its
+    template repeats for ever; otherwise :class:`CanBus` runs from ``from_ns`` less a
+    second, its bus idle then. ``periodic``: the config's :func:`schedule` when the
+    caller has it."""
+    if periodic is _UNKNOWN:
+        periodic = schedule(config, horizon_events=horizon_events)
+    if isinstance(periodic, CanSchedule):
+        hyper, shifts = periodic.hyper_ns, periodic.shifts
+        template = periodic.template()
+        m = max(0, (from_ns - hyper) // hyper - 1)
+        if m == 0:
+            yield from (a for a in periodic.log if a[0] < hyper)
+        while True:
+            for t_a, i, k in template:
+                yield (t_a + m * hyper, i, k + m * shifts[i])
+            m += 1
+    if not config.sensors:
+        return
     bus = CanBus(config, max(0, from_ns - 1_000_000_000))
     while True:
         bus.advance(bus.next_event_ns)
@@ -264,9 +340,13 @@ __all__ = [
     "IMU_RATE_HZ",
     "CanBus",
     "CanConfig",
+    "CanSchedule",
     "CanSensor",
     "arrivals",
+    "channel_phase",
     "frame_bits",
     "lola_sensors",
+    "sample_seconds",
+    "schedule",
     "sensor_value",
 ]

@@ -15,7 +15,14 @@ import struct
 from collections.abc import Callable
 
 from lolacli.devices.base import Device
-from lolacli.devices.can import Arrival, CanConfig, arrivals, sensor_value
+from lolacli.devices.can import (
+    Arrival,
+    CanConfig,
+    arrivals,
+    sample_seconds,
+    schedule,
+    sensor_value,
+)
 from lolacli.eni.model import Direction
 from lolacli.od import OdEntry
 from lolacli.wire.datatypes import DataType, Value
@@ -120,12 +127,14 @@ class CanGateway(Device):
     gateway's process data hold the last sample that has crossed the CAN bus, so a bus
     faster than a sensor sees the same values for several cycles, a sample's latency
     after it was taken. ``Sensor status`` gives per sensor its status (1 once a sample
-    arrived) and counter (samples received, mod 65536): a master tells a sample's
-    instant from its counter (:meth:`CanSensor.sample_ns` of ``counter - 1``).
+    arrived) and counter (the sample's number plus one, mod 65536): a master tells a
+    sample's instant from its counter (:meth:`CanSensor.sample_ns` of ``counter - 1``).
+    A sample's values are :func:`~lolacli.devices.can.sensor_value` at its
+    :func:`~lolacli.devices.can.sample_seconds`.
 
-    :meth:`configure` sets the CAN side (rates, bitrate) before the run;
-    :meth:`receive` writes a sample into the process data as a bridge from a real CAN
-    bus does (:mod:`lolacli.sdo.bridge`), the model's bus then left aside."""
+    :meth:`configure` sets the CAN side (rates, bitrate) before the run. This class is
+    the reference; the C core runs the same cycle from the bus's
+    :class:`~lolacli.devices.can.CanSchedule` (:mod:`lolacli.devices.flat`)."""
 
     device_type = 0x00000000
     STATUS = 0x6000
@@ -135,23 +144,24 @@ class CanGateway(Device):
 
     def configure(self, config: CanConfig) -> None:
         """The CAN side: sensors the ENI maps (their values object in the inputs) on a
-        bus of ``config``'s bitrate, from time 0."""
+        bus of ``config``'s bitrate, from time 0 (UsageError for a bus that cannot carry
+        them)."""
         config.check()
         mapped = {e.index for p in self.slave.pdos for e in p.entries}
-        sensors = tuple(s for s in config.sensors if s.values_index in mapped)
+        places = [j for j, s in enumerate(config.sensors) if s.values_index in mapped]
+        sensors = tuple(config.sensors[j] for j in places)
         self.config = CanConfig(config.bitrate, sensors)
-        self._arrivals = arrivals(self.config)
-        self.next_arrival_ns = -1
-        self._next: Arrival | None = None
-        self._pull()
-        self.bridged = False
-        self._entries = [
+        self.schedule = schedule(self.config)
+        self.held = [-1] * len(sensors)  # the sample each sensor's values are of
+        # per sensor its status and counter (0x6000, two subindexes a sensor, in the
+        # configuration's order) and its values
+        self.sensor_entries = [
             (
-                self.od.entry(self.STATUS, 2 * i + 1),
-                self.od.entry(self.STATUS, 2 * i + 2),
+                self.od.entry(self.STATUS, 2 * j + 1),
+                self.od.entry(self.STATUS, 2 * j + 2),
                 [self.od.entry(s.values_index, sub) for sub in range(1, s.channels + 1)],
             )
-            for i, s in enumerate(sensors)
+            for j, s in zip(places, sensors, strict=True)
         ]
         self._cached: tuple[bytes, int, int, bytes] | None = None  # outputs, writes, version
         self._samples: dict[tuple[int, int], list[bytes]] = {}  # packed values by instant
@@ -159,6 +169,15 @@ class CanGateway(Device):
         self._offsets: dict[int, int] = {}  # id(entry) -> its offset in the inputs
         self._blocks: dict[int, int] = {}  # sensor -> offset of its contiguous values
         self.rest_cache = None
+        self.resume(0)
+
+    def resume(self, t_ns: int) -> None:
+        """Take the arrivals up again from about ``t_ns`` (after a jump in time, or after
+        the C core ran the gateway's cycles)."""
+        self._arrivals = arrivals(self.config, t_ns, periodic=self.schedule)
+        self._pull()
+        self._applied_ns = -(1 << 63)  # the last arrival taken in
+        self._cached = None
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
         """As :meth:`Device.cycle`; the inputs are packed again only when a sample arrived
@@ -167,7 +186,7 @@ class CanGateway(Device):
         od, cached = self.od, self._cached
         if (
             cached is not None
-            and t_ns < self.next_arrival_ns
+            and self._applied_ns <= t_ns < self.next_arrival_ns
             and cached[1] == od.writes
             and cached[2] == od.version
             and cached[0] == outputs
@@ -189,30 +208,29 @@ class CanGateway(Device):
     def _contiguous(self) -> dict[int, int]:
         """Sensors whose values lie one after the other in the inputs: their offset."""
         out = {}
-        for i, (_, _, entries) in enumerate(self._entries):
+        for i, (_, _, entries) in enumerate(self.sensor_entries):
             at = [self._offsets.get(id(e)) if e is not None else None for e in entries]
             if at and at[0] is not None and at == [at[0] + 4 * j for j in range(len(at))]:
                 out[i] = at[0]
         return out
 
     def _pull(self) -> None:
-        self._next = next(self._arrivals, None)
+        self._next: Arrival | None = next(self._arrivals, None)
         self.next_arrival_ns = self._next[0] if self._next is not None else 1 << 62
 
     def step(self, t_ns: int) -> None:
-        if self.bridged:
-            return
         sensors, cache = self.config.sensors, self._samples
-        if self._next is not None and t_ns - self._next[0] > 2_000_000_000:
-            self._arrivals = arrivals(self.config, t_ns)  # a jump in time: seek
-            self._pull()
+        if t_ns < self._applied_ns or (
+            self._next is not None and t_ns - self._next[0] > 2_000_000_000
+        ):
+            self.resume(t_ns)  # a jump in time, back or forward: seek
         while self._next is not None and self._next[0] <= t_ns:
-            _, i, k = self._next
+            self._applied_ns, i, k = self._next
             sensor = sensors[i]
-            key = (i, (sensor.sample_ns(k) % 1_000_000_000))  # the sines repeat each second
+            key = (i, sensor.sample_ns(k) % 1_000_000_000)  # the sines repeat each second
             packed = cache.get(key)
             if packed is None:
-                t_s = sensor.sample_ns(k) / 1e9
+                t_s = sample_seconds(sensor.sample_ns(k))
                 scale, node = sensor.scale, sensor.node_id
                 packed = [
                     _REAL32(sensor_value(scale, sub, node, t_s))
@@ -220,24 +238,13 @@ class CanGateway(Device):
                 ]
                 if len(cache) < 100_000:
                     cache[key] = packed
-            self._write(i, k + 1, packed)
+            self._write(i, k, packed)
             self._pull()
 
-    def receive(self, name: str, counter: int, values: list[float]) -> None:
-        self._write_values(name, counter, [_REAL32(v) for v in values])
-
-    def _write_values(self, name: str, counter: int, packed: list[bytes]) -> None:
-        """A sample of sensor ``name`` arrived from a CAN bus (``counter``: samples
-        received so far): into the process data; the model's own bus stops."""
-        self.bridged = True
-        names = [s.name for s in self.config.sensors]
-        if name not in names:
-            raise KeyError(f"no sensor {name!r} behind this gateway (it has {names})")
-        self._write(names.index(name), counter, packed)
-        self._cached = self.rest_cache = None
-
-    def _write(self, i: int, counter: int, packed: list[bytes]) -> None:
-        status, count, entries = self._entries[i]
+    def _write(self, i: int, k: int, packed: list[bytes]) -> None:
+        """Sensor ``i``'s sample ``k`` (its values ``packed``) into the process data."""
+        self.held[i] = k
+        status, count, entries = self.sensor_entries[i]
         image, offsets = self._image, self._offsets
         if status is not None and status.value[0] != 1:
             status.value = (1).to_bytes(len(status.value), "little")
@@ -245,7 +252,10 @@ class CanGateway(Device):
             if at is not None:
                 image[at : at + len(status.value)] = status.value
         if count is not None:
-            count.value = data = (counter & 0xFFFF).to_bytes(len(count.value), "little")
+            size = len(count.value)
+            count.value = data = ((k + 1) & 0xFFFF & ((1 << 8 * size) - 1)).to_bytes(
+                size, "little"
+            )
             at = offsets.get(id(count))
             if at is not None:
                 image[at : at + len(data)] = data

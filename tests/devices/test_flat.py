@@ -6,7 +6,7 @@ import struct
 
 import pytest
 
-from lolacli.devices import AnalogInput, CanGateway, Cia402Drive, DigitalIo, device_for
+from lolacli.devices import AnalogInput, Cia402Drive, DigitalIo, device_for
 from lolacli.devices.flat import (
     CYCLIC_BYTES,
     KIND_ANALOG,
@@ -63,8 +63,7 @@ def test_bit_mapped_io_and_analog_channels() -> None:
     assert len(flat.channels) // 6 == 8  # eight 1-bit inputs echoing eight outputs
     assert all(flat.channels[k + 3] == 1 for k in range(0, len(flat.channels), 6))
     # the gateway's inputs as a plain analog device (the gateway itself samples at its
-    # sensors' rates behind a CAN bus, in Python: test_can_gateway_rates.py)
-    assert flatten(_device("CAN Gateway (IMU, FTS)")) is None
+    # sensors' rates behind a CAN bus: tests/devices/test_can_gateway.py)
     gateway = AnalogInput(next(s for s in LOLA.slaves if s.name == "CAN Gateway (IMU, FTS)"))
     flat = flatten(gateway)
     assert flat is not None and flat.kind == KIND_ANALOG
@@ -107,9 +106,6 @@ def test_every_example_device_flattens(name: str) -> None:
     for slave in load_eni(EXAMPLES / name).slaves:
         device = device_for(slave)
         flat = flatten(device)
-        if isinstance(device, CanGateway):  # its sensors' CAN bus runs in Python
-            assert flat is None
-            continue
         assert flat is not None, slave.name
         assert (flat.out_bytes, flat.in_bytes) == device.process_data_bytes()
         assert len(flat.in_map) // 4 == len(device.mapping(Direction.INPUT)) - sum(
