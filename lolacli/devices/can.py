@@ -40,6 +40,7 @@ FTS_RATE_HZ = 1000.0  # not in the seed: the 1 kHz its control loop needs (§IV)
 MAX_RATE_HZ = 100_000.0
 IMU_NODE, FTS_LEFT_NODE, FTS_RIGHT_NODE = 0x10, 0x11, 0x12
 VALUE_BYTES = 4  # REAL32
+NEVER_NS = 1 << 126  # later than any time (the emulator's reach beyond 2^62 included)
 
 
 def frame_bits(data_bytes: int, *, stuffing: bool = True) -> int:
@@ -168,7 +169,7 @@ class CanBus:
         self._busy: tuple[int, int, int] | None = None  # (end, sensor, frame)
         self.now_ns = -1
         # the next time anything happens (a sample taken, a frame ending)
-        self.next_event_ns = min(self._next_ns) if sensors else 1 << 62
+        self.next_event_ns = min(self._next_ns) if sensors else NEVER_NS
 
     def advance(self, t_ns: int) -> bool:
         """Run the bus up to ``t_ns`` (frames ending at ``t_ns`` have arrived); True when
@@ -183,7 +184,7 @@ class CanBus:
             busy = self._busy
             if busy is None:
                 ready = -1  # the sensor whose frame wins the idle bus (priority: order)
-                start = 1 << 62
+                start = NEVER_NS
                 for i in range(n):
                     if pending[i]:
                         at = max(self._free_ns, pending[i][0][1])
@@ -337,6 +338,7 @@ def arrivals(config: CanConfig, from_ns: int = 0, *, horizon_events: int = HORIZ
 __all__ = [
     "CAN_BITRATE",
     "FTS_RATE_HZ",
+    "NEVER_NS",
     "IMU_RATE_HZ",
     "CanBus",
     "CanConfig",

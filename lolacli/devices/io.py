@@ -16,6 +16,7 @@ from collections.abc import Callable
 
 from lolacli.devices.base import Device
 from lolacli.devices.can import (
+    NEVER_NS,
     Arrival,
     CanConfig,
     arrivals,
@@ -216,7 +217,7 @@ class CanGateway(Device):
 
     def _pull(self) -> None:
         self._next: Arrival | None = next(self._arrivals, None)
-        self.next_arrival_ns = self._next[0] if self._next is not None else 1 << 62
+        self.next_arrival_ns = self._next[0] if self._next is not None else NEVER_NS
 
     def step(self, t_ns: int) -> None:
         sensors, cache = self.config.sensors, self._samples
