@@ -11,9 +11,12 @@ import typer
 from lolacli.cli.bus import app
 from lolacli.cli.common import FormatOption, OutputFormat, default_eni, emit_json
 from lolacli.cli.options import (
+    CanBitrateOption,
     DriftOption,
     DropOption,
     EniOption,
+    FtsRateOption,
+    ImuRateOption,
     MaxLostOption,
     MaxWkcOption,
     SeedOption,
@@ -201,6 +204,9 @@ def simulate_cmd(
     cable_m: CableM = None,
     move: Move = None,
     trajectory: Trajectory = None,
+    imu_rate: ImuRateOption = 200.0,
+    fts_rate: FtsRateOption = 1000.0,
+    can_bitrate: CanBitrateOption = 1_000_000,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
@@ -222,7 +228,8 @@ def simulate_cmd(
         busy_wait_us=busy_wait_us, realtime_priority=realtime_priority, max_lost=max_lost,
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
-        moves=move or (), trajectory=trajectory,
+        moves=move or (), trajectory=trajectory, imu_rate_hz=imu_rate, fts_rate_hz=fts_rate,
+        can_bitrate=can_bitrate,
     )  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
@@ -311,12 +318,29 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
         ("software per cycle", f"{software:g} µs" if software is not None else "not timed"),
         ("max rate", rates),
     ]
+    if doc.get("can_gateway"):
+        rows += _sensor_rows(doc["can_gateway"])
     if doc.get("timing_sources"):
         rows += _source_rows(doc["timing_sources"])
     if doc.get("mode") == "realtime":
         rows += _live_rows(doc)
     else:
         rows.append(("virtual / wall time", f"{doc['realtime_factor']:g}× real time"))
+    return rows
+
+
+def _sensor_rows(gateway: dict[str, Any]) -> list[tuple[str, str]]:
+    """Each CAN sensor's age at the master (seed 000 §III)."""
+    from lolacli.text import number
+
+    rows = []
+    for s in gateway["sensors"]:
+        age = s["age_us"]
+        text = (
+            f"{number(age['mean'], 'µs', 1)} mean, {number(age['max'], 'µs', 1)} max "
+            f"at {number(s['rate_hz'], 'Hz')}" if age is not None else "no sample read"
+        )
+        rows.append((f"{s['name']} age", text))
     return rows
 
 

@@ -98,6 +98,33 @@ DriftOption = Annotated[
 ]
 SeedOption = Annotated[int, typer.Option("--seed", help="Seed of the fault generator.")]
 
+# ---------------------------------------------------------------- the CAN gateway's sensors
+
+ImuRateOption = Annotated[
+    float,
+    typer.Option(
+        "--imu-rate",
+        metavar="HZ",
+        help="The emulated CAN gateway's IMU rate (Hz; the LOLA seed's 200).",
+    ),
+]
+FtsRateOption = Annotated[
+    float,
+    typer.Option(
+        "--fts-rate",
+        metavar="HZ",
+        help="Its foot force/torque sensors' rate (Hz; default 1000).",
+    ),
+]
+CanBitrateOption = Annotated[
+    int,
+    typer.Option(
+        "--can-bitrate",
+        metavar="BIT/S",
+        help="Its CAN bus's bitrate (10000 to 1000000 bit/s; the seed's 1000000).",
+    ),
+]
+
 # ---------------------------------------------------------------- verdict thresholds
 
 MaxLostOption = Annotated[

@@ -11,7 +11,10 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
   (an output entry takes ``ceil(bits / 8)`` bytes, at least one; an input contributes its
   value's low ``bits`` bits, zero beyond its bytes);
 * the step's own rows: the CiA 402 drive's cyclic entries, the digital IO channels, the
-  analog channels with their phases.
+  analog channels with their phases, the CAN gateway's sensor channels with their phases
+  and scales and ``aux``: its sensors and the bus's schedule
+  (:class:`~lolacli.devices.can.CanSchedule`: every arrival of three hyperperiods and
+  what each sensor holds after it), the sample each sensor's values are of last.
 
 ``None`` when the core does not follow the device: a class with its own step or mapping
 code, a drive whose configuration needs what the core's mirror of its step lacks
@@ -21,18 +24,20 @@ ramps), or a use the tables cannot hold without changing it (a value whose lengt
 would change, more than 64 bits where the core computes in 64). Python runs those.
 
 While the core holds a device's state, the entries' values and the device's scalars
-(time of the last cycle, CiA 402 power state and last controlword, last analog sample)
-live in the tables; :meth:`FlatDevice.store` gives them back to the objects.
+(time of the last cycle, CiA 402 power state and last controlword, last analog sample,
+the gateway's held samples) live in the tables; :meth:`FlatDevice.store` gives them back
+to the objects.
 """
 
 from __future__ import annotations
 
 from array import array
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from lolacli.devices.base import Device
+from lolacli.devices.can import channel_phase
 from lolacli.devices.cia402 import Cia402Drive, Cia402State
-from lolacli.devices.io import FLOAT_PACK, AnalogInput, DigitalIo
+from lolacli.devices.io import FLOAT_PACK, AnalogInput, CanGateway, DigitalIo
 from lolacli.eni.model import Direction
 from lolacli.errors import LolaError
 from lolacli.od import OdEntry
@@ -42,6 +47,13 @@ KIND_GENERIC = 2
 KIND_CIA402 = 3
 KIND_DIGITAL_IO = 4
 KIND_ANALOG = 5
+KIND_CAN_GATEWAY = 6
+
+#: the gateway's tables (_ccore.c): aux header words, per sensor, rows of its channels
+CAN_HEADER_WORDS = 4  # sensors, hyperperiod, schedule rows, spare
+CAN_SENSOR_WORDS = 8  # status at, bytes, counter at, bytes, shift, period, phase, held
+#: the most schedule rows a gateway's table holds (beyond, Python runs it)
+CAN_MAX_ROWS = 30_000
 
 #: bytes of the CiA 402 cyclic entries, in ``Cia402Drive._entries`` order
 CYCLIC_BYTES = (2, 2, 1, 1, 4, 4, 4, 4, 4, 2, 2, 2, 2, 4, 4, 4, 4, 4, 2)
@@ -53,6 +65,7 @@ _STEPS = {
     Cia402Drive.step: KIND_CIA402,
     DigitalIo.step: KIND_DIGITAL_IO,
     AnalogInput.step: KIND_ANALOG,
+    CanGateway.step: KIND_CAN_GATEWAY,
 }
 _BASE_METHODS = (
     "cycle",
@@ -67,11 +80,16 @@ _KIND_METHODS = {
     KIND_CIA402: ("entries", "config", "ramp", "core_can_run", "at_rest", "_update_status"),
     KIND_DIGITAL_IO: ("channels",),
     KIND_ANALOG: ("channels",),
+    KIND_CAN_GATEWAY: ("cycle", "configure", "resume", "_pull", "_write"),
 }
+#: base methods a kind's class overrides with the same semantics (the gateway's cycle is
+#: Device.cycle with a cache of its inputs)
+_KIND_OVERRIDES = {KIND_CAN_GATEWAY: frozenset({"cycle"})}
 _KIND_CLASS: dict[int, type[Device]] = {
     KIND_CIA402: Cia402Drive,
     KIND_DIGITAL_IO: DigitalIo,
     KIND_ANALOG: AnalogInput,
+    KIND_CAN_GATEWAY: CanGateway,
 }
 _POWER_STATES = frozenset(int(s) for s in Cia402State)
 _MASK64 = (1 << 64) - 1
@@ -99,13 +117,14 @@ class FlatDevice:
     vals: bytearray
     out_map: array[int]  # rows of 4
     in_map: array[int]
-    channels: array[int]  # digital IO rows of 6, analog rows of 6
-    phases: array[float]  # analog, one per channel
+    channels: array[int]  # digital IO rows of 6, analog rows of 6, CAN rows of 6
+    phases: array[float]  # analog, one per channel; CAN gateway, phase and scale each
     cyclic: tuple[int, ...]  # CiA 402: offsets of the cyclic entries in vals
     out_bytes: int
     in_bytes: int
     period_ns: int = 0
     scale: float = 0.0
+    aux: array[int] = field(default_factory=lambda: array("q"))  # CAN gateway (module)
 
     def load(self) -> DeviceScalars | None:
         """The entries' values into ``vals`` and the device's scalars; ``None`` when the
@@ -131,6 +150,12 @@ class FlatDevice:
             last = getattr(device, "last_sample", None)
             if last is not None:
                 scalars.last_sample, scalars.has_last = last, True
+        elif isinstance(device, CanGateway):
+            held = device.held
+            if len(held) != self.aux[0] or not all(_bounded(k) for k in held):
+                return None
+            for i, k in enumerate(held):
+                self.aux[CAN_HEADER_WORDS + i * CAN_SENSOR_WORDS + 7] = k
         if not all(_bounded(v) for v in (scalars.t_ns, scalars.last_sample)):
             return None
         return scalars
@@ -149,6 +174,12 @@ class FlatDevice:
             device.previous_cw = scalars.previous_cw
         elif isinstance(device, AnalogInput) and scalars.has_last:
             device.last_sample = scalars.last_sample
+        elif isinstance(device, CanGateway):
+            aux = self.aux
+            device.held = [
+                aux[CAN_HEADER_WORDS + i * CAN_SENSOR_WORDS + 7] for i in range(aux[0])
+            ]
+            device.resume(scalars.t_ns)
 
 
 def flatten(device: Device) -> FlatDevice | None:
@@ -169,7 +200,10 @@ class _NotFlat(Exception):
 def _kind(device: Device) -> int | None:
     cls = type(device)
     kind = _STEPS.get(getattr(cls, "step", None))  # type: ignore[arg-type]
-    if kind is None or any(getattr(cls, m) is not getattr(Device, m) for m in _BASE_METHODS):
+    own = _KIND_OVERRIDES.get(kind, frozenset()) if kind is not None else frozenset()
+    if kind is None or any(
+        getattr(cls, m) is not getattr(Device, m) for m in _BASE_METHODS if m not in own
+    ):
         return None
     reference = _KIND_CLASS.get(kind)
     if reference is not None:
@@ -208,6 +242,7 @@ class _Builder:
         channels, phases = array("q"), array("d")
         cyclic: tuple[int, ...] = ()
         period_ns, scale = 0, 0.0
+        aux = array("q")
         if self.kind == KIND_CIA402:
             assert isinstance(device, Cia402Drive)
             if not device.core_can_run():
@@ -226,6 +261,9 @@ class _Builder:
             period_ns, scale = device.sample_period_ns, float(device.scale)
             if type(period_ns) is not int or not 0 < period_ns < VALUE_LIMIT:
                 raise _NotFlat
+        elif self.kind == KIND_CAN_GATEWAY:
+            assert isinstance(device, CanGateway)
+            channels, phases, aux = self._gateway(device)
         slots = tuple(sorted(self.slots.values(), key=lambda s: s[1]))
         return FlatDevice(
             device=device,
@@ -242,6 +280,7 @@ class _Builder:
             in_bytes=in_bytes,
             period_ns=period_ns,
             scale=scale,
+            aux=aux,
         )
 
     def _map(self, direction: Direction, *, writes: bool) -> array[int]:
@@ -294,12 +333,49 @@ class _Builder:
         return rows, phases
 
 
+    def _gateway(self, device: CanGateway) -> tuple[array[int], array[float], array[int]]:
+        """The gateway's channel rows (sensor, value at, 4, 1 (REAL32), 0, 0) with their
+        phases and scales, and its aux table (see the module)."""
+        plan = device.schedule
+        sensors = device.config.sensors
+        if plan is None or len(plan.log) > CAN_MAX_ROWS or not plan.hyper_ns < VALUE_LIMIT:
+            raise _NotFlat  # a bus whose arrivals do not repeat soon enough: Python
+        rows, phases = array("q"), array("d")
+        aux = array("q", (len(sensors), plan.hyper_ns, len(plan.log), 0))
+        for i, (sensor, (status, count, entries)) in enumerate(
+            zip(sensors, device.sensor_entries, strict=True)
+        ):
+            words = []
+            for entry, sizes in ((status, (1, 8)), (count, (2, 8))):
+                if entry is None:
+                    words += [-1, 0]
+                    continue
+                size = len(entry.value)
+                if not sizes[0] <= size <= sizes[1]:
+                    raise _NotFlat
+                words += [self.slot(entry), size]
+            words += [plan.shifts[i], sensor.period_ns, sensor.phase_ns, -1]
+            aux.extend(words)
+            for sub, entry in enumerate(entries, start=1):
+                if entry is None:
+                    continue
+                rows.extend((i, self.slot(entry, 4), 4, 1, 0, 0))
+                phases.extend((channel_phase(sub, sensor.node_id), float(sensor.scale)))
+        for t_a, held in plan.held_rows():
+            aux.append(t_a)
+            aux.extend(held)
+        if not all(_bounded(x) for x in aux):
+            raise _NotFlat
+        return rows, phases, aux
+
+
 def _bounded(value: int) -> bool:
     return -VALUE_LIMIT < value < VALUE_LIMIT
 
 
 __all__ = [
     "KIND_ANALOG",
+    "KIND_CAN_GATEWAY",
     "KIND_CIA402",
     "KIND_DIGITAL_IO",
     "KIND_GENERIC",

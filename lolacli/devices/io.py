@@ -3,9 +3,9 @@
 * :class:`DigitalIo` — digital outputs are stored; digital inputs echo the outputs of the
   same width where there are any, else a walking bit pattern changing every 10 ms.
 * :class:`AnalogInput` — every input entry carries a sine (period 1 s) scaled to its type.
-* :class:`CanGateway` — a placeholder for the CAN gateway of the LOLA chain: its inputs
-  (IMU rates and accelerations, foot force/torque sensors) are deterministic sines of time
-  with distinct phases, so a master sees plausible, changing values.
+* :class:`CanGateway` — the CAN gateway of the LOLA chain: its IMU and foot force/torque
+  sensors sample at their own rates behind a CAN bus (:mod:`lolacli.devices.can`), the
+  process data hold each one's last sample to arrive.
 """
 
 from __future__ import annotations
@@ -15,6 +15,15 @@ import struct
 from collections.abc import Callable
 
 from lolacli.devices.base import Device
+from lolacli.devices.can import (
+    NEVER_NS,
+    Arrival,
+    CanConfig,
+    arrivals,
+    sample_seconds,
+    schedule,
+    sensor_value,
+)
 from lolacli.eni.model import Direction
 from lolacli.od import OdEntry
 from lolacli.wire.datatypes import DataType, Value
@@ -109,13 +118,159 @@ FLOAT_PACK: dict[int, Callable[[float], bytes]] = {
     DataType.REAL32: struct.Struct("<f").pack,
     DataType.REAL64: struct.Struct("<d").pack,
 }
+_REAL32 = FLOAT_PACK[DataType.REAL32]
 _UNSIGNED = frozenset({DataType.UNSIGNED8, DataType.UNSIGNED16, DataType.UNSIGNED32})
 
 
-class CanGateway(AnalogInput):
-    """IMU and force/torque sensor values behind a CAN gateway (placeholder)."""
+class CanGateway(Device):
+    """The LOLA CAN gateway: the IMU and foot force/torque sensors behind it are CANopen
+    nodes sampling at their own rates (:mod:`lolacli.devices.can`); each cycle the
+    gateway's process data hold the last sample that has crossed the CAN bus, so a bus
+    faster than a sensor sees the same values for several cycles, a sample's latency
+    after it was taken. ``Sensor status`` gives per sensor its status (1 once a sample
+    arrived) and counter (the sample's number plus one, mod 65536): a master tells a
+    sample's instant from its counter (:meth:`CanSensor.sample_ns` of ``counter - 1``).
+    A sample's values are :func:`~lolacli.devices.can.sensor_value` at its
+    :func:`~lolacli.devices.can.sample_seconds`.
 
-    scale = 100.0
+    :meth:`configure` sets the CAN side (rates, bitrate) before the run. This class is
+    the reference; the C core runs the same cycle from the bus's
+    :class:`~lolacli.devices.can.CanSchedule` (:mod:`lolacli.devices.flat`)."""
+
+    device_type = 0x00000000
+    STATUS = 0x6000
+
+    def define(self) -> None:
+        self.configure(CanConfig())
+
+    def configure(self, config: CanConfig) -> None:
+        """The CAN side: sensors the ENI maps (their values object in the inputs) on a
+        bus of ``config``'s bitrate, from time 0 (UsageError for a bus that cannot carry
+        them)."""
+        config.check()
+        mapped = {e.index for p in self.slave.pdos for e in p.entries}
+        places = [j for j, s in enumerate(config.sensors) if s.values_index in mapped]
+        sensors = tuple(config.sensors[j] for j in places)
+        self.config = CanConfig(config.bitrate, sensors)
+        self.schedule = schedule(self.config)
+        self.held = [-1] * len(sensors)  # the sample each sensor's values are of
+        # per sensor its status and counter (0x6000, two subindexes a sensor, in the
+        # configuration's order) and its values
+        self.sensor_entries = [
+            (
+                self.od.entry(self.STATUS, 2 * j + 1),
+                self.od.entry(self.STATUS, 2 * j + 2),
+                [self.od.entry(s.values_index, sub) for sub in range(1, s.channels + 1)],
+            )
+            for j, s in zip(places, sensors, strict=True)
+        ]
+        self._cached: tuple[bytes, int, int, bytes] | None = None  # outputs, writes, version
+        self._samples: dict[tuple[int, int], list[bytes]] = {}  # packed values by instant
+        self._image = bytearray()  # the inputs, kept up to date by _write (byte layouts)
+        self._offsets: dict[int, int] = {}  # id(entry) -> its offset in the inputs
+        self._blocks: dict[int, int] = {}  # sensor -> offset of its contiguous values
+        self.rest_cache = None
+        self.resume(0)
+
+    def resume(self, t_ns: int) -> None:
+        """Take the arrivals up again from about ``t_ns`` (after a jump in time, or after
+        the C core ran the gateway's cycles)."""
+        self._arrivals = arrivals(self.config, t_ns, periodic=self.schedule)
+        self._pull()
+        self._applied_ns = -(1 << 63)  # the last arrival taken in
+        self._cached = None
+
+    def cycle(self, outputs: bytes, t_ns: int) -> bytes:
+        """As :meth:`Device.cycle`; the inputs are packed again only when a sample arrived
+        or the dictionary changed (the gateway's cycle at 2 kHz mostly holds)."""
+        self.t_ns = t_ns
+        od, cached = self.od, self._cached
+        if (
+            cached is not None
+            and self._applied_ns <= t_ns < self.next_arrival_ns
+            and cached[1] == od.writes
+            and cached[2] == od.version
+            and cached[0] == outputs
+        ):
+            return cached[3]
+        if outputs and (cached is None or cached[0] != outputs):
+            self.unpack_outputs(outputs)
+        if cached is None or cached[1] != od.writes or cached[2] != od.version:
+            self._image = bytearray(self.pack_inputs())  # the dictionary changed: all
+            self._offsets = {
+                id(e): at for e, at, _ in self.byte_layout_of(Direction.INPUT) or () if e
+            }
+            self._blocks = self._contiguous()
+        self.step(t_ns)
+        inputs = bytes(self._image) if self._offsets else self.pack_inputs()
+        self._cached = (outputs, od.writes, od.version, inputs)
+        return inputs
+
+    def _contiguous(self) -> dict[int, int]:
+        """Sensors whose values lie one after the other in the inputs: their offset."""
+        out = {}
+        for i, (_, _, entries) in enumerate(self.sensor_entries):
+            at = [self._offsets.get(id(e)) if e is not None else None for e in entries]
+            if at and at[0] is not None and at == [at[0] + 4 * j for j in range(len(at))]:
+                out[i] = at[0]
+        return out
+
+    def _pull(self) -> None:
+        self._next: Arrival | None = next(self._arrivals, None)
+        self.next_arrival_ns = self._next[0] if self._next is not None else NEVER_NS
+
+    def step(self, t_ns: int) -> None:
+        sensors, cache = self.config.sensors, self._samples
+        if t_ns < self._applied_ns or (
+            self._next is not None and t_ns - self._next[0] > 2_000_000_000
+        ):
+            self.resume(t_ns)  # a jump in time, back or forward: seek
+        while self._next is not None and self._next[0] <= t_ns:
+            self._applied_ns, i, k = self._next
+            sensor = sensors[i]
+            key = (i, sensor.sample_ns(k) % 1_000_000_000)  # the sines repeat each second
+            packed = cache.get(key)
+            if packed is None:
+                t_s = sample_seconds(sensor.sample_ns(k))
+                scale, node = sensor.scale, sensor.node_id
+                packed = [
+                    _REAL32(sensor_value(scale, sub, node, t_s))
+                    for sub in range(1, sensor.channels + 1)
+                ]
+                if len(cache) < 100_000:
+                    cache[key] = packed
+            self._write(i, k, packed)
+            self._pull()
+
+    def _write(self, i: int, k: int, packed: list[bytes]) -> None:
+        """Sensor ``i``'s sample ``k`` (its values ``packed``) into the process data."""
+        self.held[i] = k
+        status, count, entries = self.sensor_entries[i]
+        image, offsets = self._image, self._offsets
+        if status is not None and status.value[0] != 1:
+            status.value = (1).to_bytes(len(status.value), "little")
+            at = offsets.get(id(status))
+            if at is not None:
+                image[at : at + len(status.value)] = status.value
+        if count is not None:
+            size = len(count.value)
+            count.value = data = ((k + 1) & 0xFFFF & ((1 << 8 * size) - 1)).to_bytes(
+                size, "little"
+            )
+            at = offsets.get(id(count))
+            if at is not None:
+                image[at : at + len(data)] = data
+        block = self._blocks.get(i)
+        for entry, data in zip(entries, packed, strict=False):
+            if entry is not None:
+                entry.value = data
+        if block is not None:
+            image[block : block + 4 * len(packed)] = b"".join(packed)
+        else:
+            for entry, data in zip(entries, packed, strict=False):
+                at = offsets.get(id(entry)) if entry is not None else None
+                if at is not None:
+                    image[at : at + 4] = data
 
     def values(self) -> dict[str, Value]:
         return {

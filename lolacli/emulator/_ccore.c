@@ -6,7 +6,8 @@
  *   - system_time_loop, Esc.system_time_ns, Esc.check_watchdog, Esc.cycle
  *     (lolacli/emulator/esc/),
  *   - Device.cycle / unpack_outputs / pack_inputs (lolacli/devices/base.py), the steps of
- *     Cia402Drive (devices/cia402.py), DigitalIo and AnalogInput (devices/io.py),
+ *     Cia402Drive (devices/cia402.py), DigitalIo, AnalogInput and CanGateway
+ *     (devices/io.py; the gateway's CAN bus as its CanSchedule, devices/can.py),
  *   - Chain._run_slots for frames of register reads and writes that only store bytes
  *     (lolacli/emulator/chain.py, esc/controller.py, esc/sm.py, esc/eeprom.py).
  * The tables it runs on are built from the Python objects by core.py and
@@ -35,7 +36,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 10
+#define ABI_VERSION 11
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -49,7 +50,8 @@ typedef __int128 i128;
 #define PI 3.141592653589793 /* math.pi, the same double */
 
 /* device kinds (lolacli/devices/flat.py) */
-enum { K_NONE = 0, K_PYTHON = 1, K_GENERIC = 2, K_CIA402 = 3, K_DIGITAL_IO = 4, K_ANALOG = 5 };
+enum { K_NONE = 0, K_PYTHON = 1, K_GENERIC = 2, K_CIA402 = 3, K_DIGITAL_IO = 4, K_ANALOG = 5,
+       K_CAN_GATEWAY = 6 };
 
 /* CiA 402: the cyclic entries (Cia402Drive.entries order) and their sizes */
 enum { E_CW, E_SW, E_MODES, E_MODES_DISPLAY, E_TARGET, E_POSITION, E_VELOCITY,
@@ -62,6 +64,13 @@ static const i64 CYCLIC_BYTES[N_CYCLIC] = {2, 2, 1, 1, 4, 4, 4, 4, 4, 2, 2, 2, 2
 #define MAP_WORDS 4     /* image bit, bits, value offset, value bytes */
 #define DIO_WORDS 6     /* position, input offset, input bytes, bits, source offset (-1), source bytes */
 #define ANALOG_WORDS 6  /* offset, bytes, type (0 integer, 1 REAL32, 2 REAL64), full, offset added, mask */
+#define CAN_WORDS 6     /* sensor, value offset, 4, 1 (REAL32), 0, 0; doubles: phase, scale */
+/* the gateway's aux table: header, per sensor, then per schedule row its instant and the
+ * sample every sensor holds after it (-1: none) */
+enum { A_SENSORS, A_HYPER, A_ROWS, A_SPARE, A_HEADER };
+enum { S_STATUS, S_STATUS_BYTES, S_COUNTER, S_COUNTER_BYTES, S_SHIFT, S_PERIOD, S_PHASE,
+       S_HELD, S_WORDS };
+#define CAN_MAX_SENSORS 64
 
 /* One slave: its ESC's cyclic state and its device's. Field order and types are mirrored
  * by core.py's SlaveTable (ctypes); lolacli_core_abi lets it check the layout. */
@@ -80,6 +89,7 @@ typedef struct {
     i64 *imap; i64 imap_n;
     i64 *chan; i64 chan_n;
     double *phase;
+    i64 *aux; i64 aux_n;     /* the CAN gateway's sensors and schedule */
     i64 dev_t_ns, power, prev_cw, last_sample, has_last, period;
     double scale;
     i64 e[N_CYCLIC];
@@ -385,6 +395,48 @@ static void analog_step(slave_t *s, i64 t) {
     }
 }
 
+/* CanGateway.step: each sensor's sample at t from the schedule (CanSchedule.held_at),
+ * written as CanGateway._write does when it is not the one held */
+static void can_step(slave_t *s, i64 t) {
+    i64 *a = s->aux;
+    i64 n_sensors = a[A_SENSORS], hyper = a[A_HYPER], n_rows = a[A_ROWS];
+    i64 *sensor = a + A_HEADER;
+    const i64 *rows = sensor + n_sensors * S_WORDS;
+    i64 width = 1 + n_sensors;
+    i128 q = 0;
+    i64 local = t;
+    if (t >= 3 * hyper) {
+        q = floordiv(t, hyper) - 2;
+        local = (i64)(t - q * hyper);
+    }
+    i64 lo = 0, hi = n_rows; /* the rows at or before local: [0, lo) */
+    while (lo < hi) {
+        i64 mid = lo + (hi - lo) / 2;
+        if (rows[mid * width] <= local) lo = mid + 1;
+        else hi = mid;
+    }
+    if (lo == 0) return; /* nothing arrived yet */
+    const i64 *row = rows + (lo - 1) * width;
+    for (i64 i = 0; i < n_sensors; i++) {
+        i64 *w = sensor + i * S_WORDS;
+        i64 k = row[1 + i];
+        if (k < 0) continue;
+        k = (i64)(k + q * w[S_SHIFT]);
+        if (k == w[S_HELD]) continue;
+        w[S_HELD] = k;
+        if (w[S_STATUS] >= 0 && s->vals[w[S_STATUS]] != 1) put_le(s->vals + w[S_STATUS], w[S_STATUS_BYTES], 1);
+        if (w[S_COUNTER] >= 0) put_le(s->vals + w[S_COUNTER], w[S_COUNTER_BYTES], (u64)(k + 1) & 0xFFFF);
+        i128 instant = (i128)w[S_PHASE] + (i128)k * w[S_PERIOD];
+        double ts = (double)(i64)floormod(instant, NS_PER_S) / 1e9;
+        for (i64 c = 0; c < s->chan_n; c++) {
+            const i64 *ch = s->chan + c * CAN_WORDS;
+            if (ch[0] != i) continue;
+            float f = (float)(s->phase[2 * c + 1] * sin(2 * PI * ts + s->phase[2 * c]));
+            memcpy(s->vals + ch[1], &f, 4);
+        }
+    }
+}
+
 /* Esc.cycle + Device.cycle for one slave whose table holds its state */
 static void slave_cycle(slave_t *s, i64 t) {
     int state = s->mem[AL_STATUS] & AL_STATE_MASK;
@@ -400,6 +452,7 @@ static void slave_cycle(slave_t *s, i64 t) {
     if (s->kind == K_CIA402) cia402_step(s, t);
     else if (s->kind == K_DIGITAL_IO) digital_io_step(s, t);
     else if (s->kind == K_ANALOG) analog_step(s, t);
+    else if (s->kind == K_CAN_GATEWAY) can_step(s, t);
     s->dev_t_ns = t;
     if (s->in_bytes) {
         uint8_t *image = s->mem + s->in_start;
@@ -938,7 +991,7 @@ i64 lolacli_core_check_slave(const slave_t *s) {
     if (!bounded(s->clk_start) || !bounded(s->clk_drift) || !bounded(s->clk_corr) ||
         !bounded(s->last_outputs_ns) || !bounded(s->now_ns) || !bounded(s->wd_timeout))
         return 2;
-    if (s->kind < K_NONE || s->kind > K_ANALOG) return 3;
+    if (s->kind < K_NONE || s->kind > K_CAN_GATEWAY) return 3;
     if (s->kind < K_GENERIC) return 0;
     if (!within(s->out_start, s->out_bytes, MEMORY_BYTES) ||
         !within(s->in_start, s->in_bytes, MEMORY_BYTES))
@@ -988,6 +1041,38 @@ i64 lolacli_core_check_slave(const slave_t *s) {
             if (row[2] < 0 || row[2] > 2 || row[1] != want || row[1] < 1 || row[1] > 8 ||
                 !within(row[0], row[1], s->vals_len))
                 return 13;
+        }
+    } else if (s->kind == K_CAN_GATEWAY) {
+        const i64 *a = s->aux;
+        if (!a || s->aux_n < A_HEADER || (s->chan_n && !s->phase)) return 14;
+        i64 n_sensors = a[A_SENSORS], hyper = a[A_HYPER], n_rows = a[A_ROWS];
+        if (n_sensors < 0 || n_sensors > CAN_MAX_SENSORS || hyper <= 0 || hyper > LIMIT / 4 ||
+            n_rows < 0 || n_rows > LIMIT / (1 + CAN_MAX_SENSORS) ||
+            s->aux_n != A_HEADER + n_sensors * S_WORDS + n_rows * (1 + n_sensors))
+            return 14;
+        for (i64 i = 0; i < n_sensors; i++) {
+            const i64 *w = a + A_HEADER + i * S_WORDS;
+            if ((w[S_STATUS] != -1 && (w[S_STATUS_BYTES] < 1 || w[S_STATUS_BYTES] > 8 ||
+                                       !within(w[S_STATUS], w[S_STATUS_BYTES], s->vals_len))) ||
+                (w[S_COUNTER] != -1 && (w[S_COUNTER_BYTES] < 2 || w[S_COUNTER_BYTES] > 8 ||
+                                        !within(w[S_COUNTER], w[S_COUNTER_BYTES], s->vals_len))))
+                return 15;
+            if (w[S_SHIFT] < 1 || !bounded(w[S_SHIFT]) || w[S_PERIOD] < 1 || !bounded(w[S_PERIOD]) ||
+                !bounded(w[S_PHASE]) || w[S_HELD] < -1 || !bounded(w[S_HELD]))
+                return 15;
+        }
+        const i64 *rows = a + A_HEADER + n_sensors * S_WORDS;
+        for (i64 r = 0; r < n_rows; r++) {
+            const i64 *row = rows + r * (1 + n_sensors);
+            if (row[0] < 0 || row[0] >= 3 * hyper || (r && row[0] < row[-1 - n_sensors])) return 16;
+            for (i64 i = 0; i < n_sensors; i++)
+                if (row[1 + i] < -1 || !bounded(row[1 + i])) return 16;
+        }
+        for (i64 k = 0; k < s->chan_n; k++) {
+            const i64 *row = s->chan + k * CAN_WORDS;
+            if (row[0] < 0 || row[0] >= n_sensors || row[2] != 4 || row[3] != 1 ||
+                !within(row[1], 4, s->vals_len))
+                return 17;
         }
     }
     return 0;

@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 10
+ABI_VERSION = 11
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -93,6 +93,8 @@ class SlaveTable(ctypes.Structure):
         ("chan", _VP),
         ("chan_n", _I64),
         ("phase", _VP),
+        ("aux", _VP),
+        ("aux_n", _I64),
         ("dev_t_ns", _I64),
         ("power", _I64),
         ("prev_cw", _I64),
@@ -116,6 +118,7 @@ F_IN_START, F_IN_BYTES = _WORD["in_start"], _WORD["in_bytes"]
 F_VALS, F_VALS_LEN = _WORD["vals"], _WORD["vals_len"]
 F_OMAP, F_OMAP_N, F_IMAP, F_IMAP_N = _WORD["omap"], _WORD["omap_n"], _WORD["imap"], _WORD["imap_n"]
 F_CHAN, F_CHAN_N, F_PHASE = _WORD["chan"], _WORD["chan_n"], _WORD["phase"]
+F_AUX, F_AUX_N = _WORD["aux"], _WORD["aux_n"]
 F_DEV_T, F_POWER, F_PREV_CW = _WORD["dev_t_ns"], _WORD["power"], _WORD["prev_cw"]
 F_LAST_SAMPLE, F_HAS_LAST = _WORD["last_sample"], _WORD["has_last"]
 F_PERIOD, F_SCALE, F_E = _WORD["period"], _WORD["scale"], _WORD["e"]
@@ -686,6 +689,8 @@ class ChainCore:
             w[b + F_IMAP] = _address(flat.in_map, keep)
             w[b + F_CHAN] = _address(flat.channels, keep)
             w[b + F_PHASE] = _address(flat.phases, keep)
+            w[b + F_AUX] = _address(flat.aux, keep)
+            w[b + F_AUX_N] = len(flat.aux)
             w[b + F_VALS_LEN] = len(flat.vals)
             w[b + F_OMAP_N], w[b + F_IMAP_N] = len(flat.out_map) // 4, len(flat.in_map) // 4
             w[b + F_CHAN_N] = len(flat.channels) // 6

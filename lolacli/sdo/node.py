@@ -10,7 +10,6 @@ distinct phases, as the EtherCAT side of the gateway shows them (devices/io.py).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,6 +17,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
+from lolacli.devices.can import sensor_value
 from lolacli.sdo.canopen_client import NOTIFIER_CYCLE_S, open_bus, quiet_canopen
 from lolacli.sdo.files import load_eds_od
 
@@ -73,8 +73,7 @@ def sensor_callback(node_id: int, clock: Callable[[], float]) -> Callable[..., A
 
     def read(index: int, subindex: int, od: Any) -> Any:
         if index in SENSOR_SCALE and subindex > 0:
-            phase = 0.7 * subindex + 0.3 * node_id
-            return SENSOR_SCALE[index] * math.sin(2 * math.pi * clock() + phase)
+            return sensor_value(SENSOR_SCALE[index], subindex, node_id, clock())
         if index == COUNTER:
             return int(clock() * 1000) & 0xFFFF
         return None  # the stored or default value

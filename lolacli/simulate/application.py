@@ -17,6 +17,7 @@ from lolacli.master.variables import BusVariable, ProcessImage, variable_for
 from lolacli.motion.profile import back_and_forth
 from lolacli.simulate.moves import Moves, resolve
 from lolacli.simulate.options import SimulateOptions
+from lolacli.simulate.sensors import SensorAges
 
 _ENABLED = Cia402State.OPERATION_ENABLED
 
@@ -149,6 +150,7 @@ class Application:
         self.last_skipped = 0
         self.moves: Moves | None = None  # --move / --trajectory
         self.planner_ns: list[int] = []  # the planner's time each cycle (section "planner")
+        self.sensor_ages: SensorAges | None = None  # the CAN gateway's sensors (virtual)
         image = master.image
         for name in options.watch:
             self.watch[name] = image.link(name, variable_for(image.find(name)))
@@ -170,6 +172,9 @@ class Application:
             elif has_field(master.image, slave.name, Imu.rate_x):
                 # on the image, not the master: they have no procData to run each cycle
                 self.sensors.append(Imu(master.image, slave.name))
+                if self.options.iface is None and self.sensor_ages is None:
+                    ages = SensorAges(master.image, slave.name, self.options.can_config())
+                    self.sensor_ages = ages if ages.sensors else None
                 for side in ("left", "right"):
                     try:
                         self.sensors.append(ForceTorqueSensor(master.image, slave.name, side))
@@ -205,14 +210,23 @@ class Application:
             master.control.append(self._apply_shm)
         if mcap is not None:
             master.admin.append(self._record)
+        if self.sensor_ages is not None:
+            master.control.append(self.sensor_ages.hook)
 
-    def start_run(self) -> None:
+    def start_run(self, *, sensor_ages: bool = False) -> None:
         """The cyclic run starts: findings name its cycles from 0 on (those of the
-        bring-up before it are forgotten)."""
+        bring-up before it are forgotten); with ``sensor_ages`` the gateway's sensors'
+        ages are recorded until :meth:`end_run`."""
         stats = self.master.stats
         self.first_cycle = stats.cycles
         for at in (stats.lost_at, stats.late_at, stats.mismatch_at, stats.skipped_at):
             at.clear()
+        if self.sensor_ages is not None:
+            self.sensor_ages.active = sensor_ages
+
+    def end_run(self) -> None:
+        if self.sensor_ages is not None:
+            self.sensor_ages.active = False
 
     def skipped_in_run(self, skipped0: int, slots: int) -> int:
         """The slots of the run skipped (a stall in its last cycle skips past its end:

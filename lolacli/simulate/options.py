@@ -3,6 +3,7 @@ against the ENI (:func:`check`), and what it gives back (:class:`SimulationResul
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +51,16 @@ class SimulateOptions:
     # --move / --trajectory (lolacli.simulate.moves): S-curves streamed in CSP instead of
     # the back-and-forth; drives without a goal hold their position
     moves: tuple[Goal, ...] = ()
+    # the emulated CAN gateway's sensors (lolacli.devices.can; seed 000 §III)
+    imu_rate_hz: float = 200.0
+    fts_rate_hz: float = 1000.0
+    can_bitrate: int = 1_000_000
+
+    def can_config(self) -> Any:
+        """The emulated gateway's :class:`~lolacli.devices.can.CanConfig`."""
+        from lolacli.devices.can import CanConfig, lola_sensors
+
+        return CanConfig(self.can_bitrate, lola_sensors(self.imu_rate_hz, self.fts_rate_hz))
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +133,12 @@ def check(eni: Eni, options: SimulateOptions) -> None:
             raise UsageError(
                 f"--link-down {after}@{at_s:g}s: after the run ends ({run_s:g} s of cycles)"
             )
+    from lolacli.devices.can import MAX_RATE_HZ as MAX_SENSOR_HZ
+
+    for flag, hz in (("--imu-rate", options.imu_rate_hz), ("--fts-rate", options.fts_rate_hz)):
+        if not (math.isfinite(hz) and 0 < hz <= MAX_SENSOR_HZ):
+            raise UsageError(f"{flag} {hz:g}: expected above 0 to {MAX_SENSOR_HZ:g} Hz")
+    options.can_config().check()  # the bitrate, and a bus the sensors do not saturate
     from lolacli.simulate.variation import check_forwarding
     from lolacli.timing.model import parse_cable_m
 

@@ -349,6 +349,7 @@ def report(
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
         "drive_faults": app.drive_faults,
         "moves": _moves(master, app),
+        "can_gateway": app.sensor_ages.report() if app.sensor_ages is not None else None,
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},
         "faults": {
             "drop_p": options.drop_probability,

@@ -28,6 +28,8 @@ from contextlib import nullcontext
 from dataclasses import replace
 from typing import Any
 
+from lolacli.devices.io import CanGateway
+from lolacli.emulator.slave import device_of
 from lolacli.eni.model import Eni
 from lolacli.errors import TransportError, UsageError
 from lolacli.interrupt import Stop
@@ -109,6 +111,11 @@ class Simulation:
         self.timing = line_timing(eni, options.forwarding, options.cable_m)
         faults = replace(emulate_options(options), timing=self.timing)
         self.bus = VirtualBus(eni, faults, host_latency=options.host_latency)
+        config = options.can_config()
+        for esc in self.bus.chain.slaves:
+            device = device_of(esc)
+            if isinstance(device, CanGateway):
+                device.configure(config)
 
     def run(
         self, *, progress: Progress | None = None, stop: Stop | None = None
@@ -124,11 +131,12 @@ class Simulation:
             start_ns = bus.now_ns()
             bus.arm_faults()
             app.enable()
-            app.start_run()
+            app.start_run(sensor_ages=True)
             skipped0 = master.stats.skipped_cycles
             clock.active = True
             interrupted = _run(master, options, progress, stop, wall0)
             clock.active = False
+            app.end_run()
             app.last_cycle, app.last_skipped = master.stats.cycles, master.stats.skipped_cycles
             master.drain()
             states = app.final_states = final_states(master)
