@@ -739,24 +739,32 @@ class _Pass:
         import numpy as np
 
         st = self.st
+        # views of the C engine's rows (the Python engine's lists: copies); whatever is
+        # kept below is a copy (boolean indexing, astype, _rows), taken before the kernel
+        # writes the rows again
+        view = (lambda out, n: out[:n]) if self.kind == "numpy" else _rows
         n = int(st[S.S_N_RT])
         if n:
-            rt = _rows(self.o_rt, n)
-            meta = _rows(self.o_rtfr, n)
+            rt, meta = view(self.o_rt, n), view(self.o_rtfr, n)
+            lo, hi = int(rt.min()), int(rt.max())
+            packed = _compact(rt, lo, hi)
             cyc = (meta & 1) != 0
-            self.rt_cyclic.append(_compact(rt[cyc]))
-            self.rt_other.append(_compact(rt[~cyc]))
-            odd = (rt <= 0) | (rt >= MIN_TIMEOUT_NS)
-            if odd.any():
+            self.rt_cyclic.append(packed[cyc])
+            self.rt_other.append(packed[~cyc])
+            if lo <= 0 or hi >= MIN_TIMEOUT_NS:
+                odd = (rt <= 0) | (rt >= MIN_TIMEOUT_NS)
                 self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
             if self.keep_series:
-                self.rt_series.append(rt)
+                self.rt_series.append(_rows(rt, n))
                 self.rt_ts.append(_rows(self.o_rtts, n))
             if self.on_pairs is not None:
-                self.on_pairs(int(st[S.S_FRAMES]), rt, _rows(self.o_rtts, n), meta)
+                self.on_pairs(int(st[S.S_FRAMES]), _rows(rt, n), _rows(self.o_rtts, n),
+                              _rows(meta, n))
         n = int(st[S.S_N_PERIOD])
         if n:
-            self.periods.append(_compact(_rows(self.o_period, n)))
+            period = view(self.o_period, n)
+            packed = _compact(period, int(period.min()), int(period.max()))
+            self.periods.append(packed if packed is not period else _rows(period, n))
         n = int(st[S.S_N_BURST])
         if n:
             counts = np.bincount(_rows(self.o_burst, n))
@@ -1130,8 +1138,9 @@ def _take(parts: list[np.ndarray]) -> np.ndarray:
     return whole
 
 
-def _compact(values: np.ndarray) -> np.ndarray:
-    """int32 when the nanosecond values fit (±2.1 s), halving the memory of long series."""
-    if values.size and -(2**31) < values.min() and values.max() < 2**31:
+def _compact(values: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """An int32 copy when the nanosecond values (from ``lo`` to ``hi``) fit (±2.1 s),
+    halving the memory of long series; else ``values`` themselves."""
+    if -(2**31) < lo and hi < 2**31:
         return values.astype("int32")
     return values

@@ -12,7 +12,9 @@ Conventions, numpy's defaults:
 
 The results are exact, and the same however the series is cut into chunks: a 2 GB
 capture holds millions of round trips, kept as a list of chunks; concatenating them (and
-sorting a copy for the median) would double or triple the memory. Instead the order
+sorting a copy for the median) would double or triple the memory. Up to GATHER_MAX
+values are gathered into one array and counted by value (when their span is at most
+the larger of 65,536 and their number) or partitioned. Beyond, the order
 statistics are found by histogram refinement over the chunks: a histogram of up to
 65,536 integer bins over the current window locates the bin that holds the wanted rank,
 the window shrinks to that bin, and once it holds few values they are gathered and
@@ -120,7 +122,12 @@ def summarize_chunks(chunks: Iterable[_Chunk]) -> Summary | None:
     s1, s2 = _moments(parts, lo, hi)
     wanted = _ranks(n)
     memo: dict[int, int] = {}
-    if gathered is not None:  # (a copy of the chunks: partitioned in place)
+    if gathered is not None and hi - lo < max(BINS, n):
+        # few distinct values possible (round trips, periods): count them, exactly
+        cum = np.cumsum(np.bincount(gathered - lo, minlength=hi - lo + 1))
+        at = np.searchsorted(cum, wanted, side="right")
+        memo = {k: lo + int(i) for k, i in zip(wanted, at, strict=True)}
+    elif gathered is not None:  # (a copy of the chunks: partitioned in place)
         gathered.partition(wanted)
         memo = {k: int(gathered[k]) for k in wanted}
     histograms: dict[tuple[int, int], npt.NDArray[np.int64]] = {}
