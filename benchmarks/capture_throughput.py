@@ -8,6 +8,8 @@
                                           # engines against each other, same files, same run
     python benchmarks/capture_throughput.py --frames 200000 --startup --batch 50
                                           # also start-up and many small files in one call
+    python benchmarks/capture_throughput.py --frames 0 --startup --batch-files 500
+                                          # start-up and the batch ratio only
 
 Frame sizes (``--lrw-bytes``, default ``64,800``): the 64-byte LRW of the first benchmark
 and the LOLA chain's frame (an 800-byte LRW and a BRD: 846 bytes on the wire with the
@@ -15,7 +17,14 @@ FCS). For each file the run prints frames/s and bytes/s of ``capture analyze``, 
 tshark, and of a plain read of the file (``readinto`` of 8 MiB chunks, the page cache
 to user memory), and the ratios: analysis against tshark and against the plain read.
 ``--startup`` times ``capture analyze`` of a small corpus capture against ``python3 -c
-pass``; ``--batch N`` times one call on N small captures against N calls (issue 28).
+pass`` (each 20 times, alternately; medians of the wall and of the CPU time); ``--batch
+N`` times one call on N small captures against N calls; ``--batch-files N`` times one
+call on a folder of N small captures against one call on one capture of the same total
+size (the N captures one after the other as pcapng sections: the same frames and bytes)
+and prints the ratio (issue 28: under 3). ``--frames 0`` skips the synthetic captures.
+
+Every command runs with its bytecode cached (``PYTHONPYCACHEPREFIX`` in the run's
+folder, ``PYTHONDONTWRITEBYTECODE`` unset), as an installed package has it.
 
 The capture is what a 2 kHz master produces: per cycle one outgoing frame with an LRW
 (``--lrw-bytes`` of process data) and a BRD of the AL status, and its returned copy
@@ -224,6 +233,19 @@ def _row_after_cycle(m: int, first: int, rows: int) -> int:
 ENGINE = "auto"
 
 
+def _env(engine: str | None = None) -> dict[str, str]:
+    """The environment of the commands timed: this checkout, bytecode cached (see the
+    module docstring), the engine."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=PYCACHE)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    if engine is not None:
+        env["LOLACLI_ENGINE"] = engine
+    return env
+
+
+PYCACHE = os.path.join(tempfile.gettempdir(), "lolacli-bench-pycache")
+
+
 def _timed(
     cmd: list[str], stdout: int | None = subprocess.PIPE, engine: str | None = None
 ) -> tuple[float, bytes, int]:
@@ -238,7 +260,7 @@ def _timed(
         "sys.stderr.write(json.dumps([dt, rss, p.returncode]))\n"
         "sys.stdout.buffer.write(p.stdout or b'')\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=engine or ENGINE)
+    env = _env(engine or ENGINE)
     r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT)
     dt, rss, rc = json.loads(r.stderr.decode().strip().splitlines()[-1])
     return dt, r.stdout, rss if rc in (0, 1) else -1
@@ -332,9 +354,8 @@ def in_process(path: Path, engine: str | None, repeat: int = 3) -> float:
         "    best = min(best, time.perf_counter() - t)\n"
         "print(best)\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT), LOLACLI_ENGINE=engine or ENGINE)
-    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, cwd=ROOT,
-                       check=True)
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True,
+                       env=_env(engine or ENGINE), cwd=ROOT, check=True)
     return float(r.stdout.decode().split()[-1])
 
 
@@ -351,38 +372,65 @@ def plain_read(path: Path, repeat: int = 3) -> float:
     return best
 
 
-def _corpus_small() -> Path | None:
+def _corpus_small(pattern: str = "*.pcap*") -> Path | None:
     """The smallest corpus capture with a few hundred frames or more."""
     corpus = Path(os.environ.get("LOLACLI_CORPUS", ROOT.parent / "shared" / "corpus"))
-    files = sorted((corpus / "pcap").glob("*.pcap*"), key=lambda p: p.stat().st_size)
+    files = sorted((corpus / "pcap").glob(pattern), key=lambda p: p.stat().st_size)
     return next((p for p in files if p.stat().st_size > 20_000), files[0] if files else None)
 
 
-def bench_startup(repeat: int = 7) -> dict[str, float]:
-    """Median wall time of ``capture analyze`` of a small corpus capture and of ``python3
-    -c pass``, each a fresh process."""
+def _run(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU (user + system) seconds of one command, its output discarded."""
+    t = time.perf_counter()
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                         cwd=ROOT)
+    _, _, usage = os.wait4(p.pid, 0)
+    return time.perf_counter() - t, usage.ru_utime + usage.ru_stime
+
+
+def _medians(cmds: dict[str, list[str]], repeat: int) -> dict[str, tuple[float, float]]:
+    """Median wall and CPU seconds of each command, run ``repeat`` times alternately (so
+    that a change of load hits each alike), after one warm-up run each."""
+    env = _env()
+    for cmd in cmds.values():
+        _run(cmd, env)
+    runs: dict[str, list[tuple[float, float]]] = {k: [] for k in cmds}
+    for _ in range(repeat):
+        for k, cmd in cmds.items():
+            runs[k].append(_run(cmd, env))
+
+    def median(v: list[float]) -> float:
+        return sorted(v)[len(v) // 2]
+
+    return {k: (median([w for w, _ in v]), median([c for _, c in v])) for k, v in runs.items()}
+
+
+def bench_startup(repeat: int = 20) -> dict[str, float]:
+    """``capture analyze`` of a small corpus capture (human and JSON output) and
+    ``lolacli --help`` against ``python3 -c pass``, each a fresh process."""
     small = _corpus_small()
     if small is None:
         print("start-up: no corpus capture found")
         return {}
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-
-    def median(cmd: list[str]) -> float:
-        times = []
-        for _ in range(repeat):
-            t = time.perf_counter()
-            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
-                           cwd=ROOT)
-            times.append(time.perf_counter() - t)
-        return sorted(times)[len(times) // 2]
-
-    median(analyze_cmd(small))  # warm
-    empty = median([sys.executable, "-c", "pass"])
-    full = median(analyze_cmd(small))
-    print(f"start-up ({small.name}, median of {repeat}):")
-    print(f"  python3 -c pass:         {empty * 1e3:8.0f} ms")
-    print(f"  capture analyze:         {full * 1e3:8.0f} ms  ({(full - empty) * 1e3:.0f} ms more)")
-    return {"python_pass_s": empty, "analyze_small_s": full, "startup_extra_s": full - empty}
+    lolacli = [sys.executable, "-m", "lolacli"]
+    got = _medians({
+        "pass": [sys.executable, "-c", "pass"],
+        "analyze": [*lolacli, "capture", "analyze", str(small)],
+        "analyze_json": [*lolacli, "capture", "analyze", "--format", "json", str(small)],
+        "help": [*lolacli, "--help"],
+    }, repeat)
+    wall0, cpu0 = got["pass"]
+    print(f"start-up ({small.name}, medians of {repeat}, load {os.getloadavg()[0]:.1f}):")
+    out = {"python_pass_s": wall0, "python_pass_cpu_s": cpu0}
+    for k, (wall, cpu) in got.items():
+        name = k.replace("_", " ")
+        print(f"  {name:14s} wall {wall * 1e3:6.0f} ms (+{(wall - wall0) * 1e3:4.0f})"
+              f"   CPU {cpu * 1e3:6.0f} ms (+{(cpu - cpu0) * 1e3:4.0f})")
+        if k != "pass":
+            out[f"{k}_extra_s"] = wall - wall0
+            out[f"{k}_extra_cpu_s"] = cpu - cpu0
+    out["startup_extra_s"] = out["analyze_extra_s"]
+    return out
 
 
 def bench_batch(n: int, folder: Path) -> dict[str, float]:
@@ -398,7 +446,7 @@ def bench_batch(n: int, folder: Path) -> dict[str, float]:
         dst = batch / f"{k:04d}{small.suffix}"
         shutil.copy(small, dst)
         files.append(dst)
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = _env()
     one = [sys.executable, "-m", "lolacli", "capture", "analyze", "--format", "json"]
     t = time.perf_counter()
     r = subprocess.run([*one, *map(str, files)], capture_output=True, env=env, cwd=ROOT)
@@ -413,6 +461,41 @@ def bench_batch(n: int, folder: Path) -> dict[str, float]:
     print(f"  {n} calls:                {apart:8.2f} s  ({apart / n * 1e3:.1f} ms a file)")
     print(f"  ratio calls / one call:  {apart / together:8.1f} x")
     return {"batch_files": n, "one_call_s": together, "n_calls_s": apart}
+
+
+def bench_batch_files(n: int, folder: Path, repeat: int = 3) -> dict[str, float]:
+    """One call on a folder of N copies of a small corpus capture against one call on one
+    capture of the same total size: the N captures one after the other, each its own
+    pcapng section (the same frames and bytes). The issue's bar: under 3x."""
+    small = _corpus_small("*.pcapng")
+    if small is None:
+        print("batch files: no small pcapng corpus capture found")
+        return {}
+    many = folder / "batch-files"
+    many.mkdir(exist_ok=True)
+    data = small.read_bytes()
+    for k in range(n):
+        (many / f"{k:04d}.pcapng").write_bytes(data)
+    large = folder / "batch-files-as-one.pcapng"
+    with open(large, "wb") as f:
+        for _ in range(n):
+            f.write(data)
+    one = [sys.executable, "-m", "lolacli", "capture", "analyze", "--format", "json",
+           "--max-lost", "1000000000"]
+    r = subprocess.run([*one, str(many)], capture_output=True, env=_env(), cwd=ROOT)
+    assert len(r.stdout.splitlines()) == n, r.stderr[-500:]
+    got = _medians({"folder": [*one, str(many)], "one": [*one, str(large)]}, repeat)
+    (folder_s, folder_cpu), (one_s, one_cpu) = got["folder"], got["one"]
+    print(f"batch: {n} x {small.name} ({n * len(data) / 1e6:.1f} MB) against one capture of "
+          f"them all, medians of {repeat}, load {os.getloadavg()[0]:.1f}:")
+    print(f"  folder of {n}, one call:  {folder_s:8.2f} s  CPU {folder_cpu:6.2f} s  "
+          f"({folder_s / n * 1e3:.1f} ms a file)")
+    print(f"  one capture, one call:    {one_s:8.2f} s  CPU {one_cpu:6.2f} s")
+    print(f"  ratio folder / one:       {folder_s / one_s:8.2f} x  (issue 28: under 3)")
+    shutil.rmtree(many, ignore_errors=True)
+    large.unlink()
+    return {"batch_files": n, "folder_s": folder_s, "one_capture_s": one_s,
+            "ratio": folder_s / one_s, "folder_cpu_s": folder_cpu, "one_capture_cpu_s": one_cpu}
 
 
 ENGINES = ("auto", "c", "python")
@@ -471,6 +554,9 @@ def main() -> None:
                     help="also time capture analyze of a small capture against python -c pass")
     ap.add_argument("--batch", type=int, default=0,
                     help="also time one call on N small captures against N calls")
+    ap.add_argument("--batch-files", type=int, default=0,
+                    help="also time one call on a folder of N small captures against one "
+                    "capture of the same total size (the ratio, issue 28: under 3)")
     ap.add_argument("--format", choices=("pcapng", "pcap", "both"), default="both")
     ap.add_argument("--no-tshark", action="store_true", help="skip the tshark comparison")
     ap.add_argument(
@@ -511,7 +597,7 @@ def main() -> None:
     try:
         formats = ("pcapng", "pcap") if args.format == "both" else (args.format,)
         sizes = [int(v) for v in args.lrw_bytes.split(",")]
-        for lrw_bytes, fmt in [(b, f) for b in sizes for f in formats]:
+        for lrw_bytes, fmt in [(b, f) for b in sizes for f in formats if args.frames]:
             path = folder / f"synthetic-{args.frames}-lrw{lrw_bytes}.{fmt}"
             t = time.perf_counter()
             expected = write_capture(
@@ -533,6 +619,8 @@ def main() -> None:
             results["startup"] = bench_startup()
         if args.batch:
             results["batch"] = bench_batch(args.batch, folder)
+        if args.batch_files:
+            results["batch_files"] = bench_batch_files(args.batch_files, folder)
         if args.corpus:
             results["corpus"] = bench_corpus(engines, args.repeat)
         if args.rss_gb:

@@ -1,4 +1,4 @@
-"""Capture analysis: one streaming pass of the scanner, then numpy statistics and verdicts.
+"""Capture analysis: one streaming pass of the scanner, then statistics and verdicts.
 
 :func:`analyze_file` maps the capture a window at a time (the C engine on a regular file)
 or reads it in bounded chunks into one reusable buffer (:mod:`lolacli.capture.source`),
@@ -18,19 +18,25 @@ infers the direction from the frames themselves and is kept when it pairs any. C
 stream: outgoing frames that carry a logical (LRD/LWR/LRW) datagram; when there are none,
 the outgoing frames with the most frequent (command, address key) sequence, found by one
 more pass.
+
+A small capture (up to :data:`SMALL_BYTES`, not asked for its series) is analysed
+without numpy: the C scanner's tables are ``array.array`` and the rows it drains Python
+lists, which costs less than importing numpy (~100 ms of a short command's start-up);
+a larger one drains into numpy arrays. Both give the same figures, to the last bit
+(the statistics are exact integer sums and order statistics either way).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import threading
+from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
-
-import numpy as np
 
 from lolacli.capture import scan as S
 from lolacli.capture.counters import CounterReads, CounterTracker
@@ -66,6 +72,8 @@ from lolacli.timing.stats import Summary, summarize_array, summarize_chunks
 from lolacli.wire.commands import mnemonic
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from lolacli.capture.sdo import SdoTracker
     from lolacli.eni.model import Eni
 
@@ -83,6 +91,9 @@ OUT_ROWS = 1 << 14  # > the kernel's minimum (CHECK_EVERY * (MAX_DGRAMS + 2) + .
 PAIR_SLOTS = 1 << 10  # grows when half full
 STREAM_SLOTS = 1 << 10
 OBS_SLOTS = 1 << 10
+#: captures up to this size are analysed without numpy (see the module docstring): their
+#: drained rows are at most a few 100,000 Python ints
+SMALL_BYTES = 16 * 1024 * 1024
 
 Progress = Callable[[int, int], None]
 
@@ -138,7 +149,7 @@ class CaptureReport:
 
     @property
     def lost_frames(self) -> int:
-        return int(self.fate.lost.size)
+        return len(self.fate.lost)
 
     @property
     def wkc_mismatches(self) -> int:
@@ -182,7 +193,7 @@ class CaptureReport:
             "unusable_stats": list(self.unusable_stats),
             "lost_frames": self.lost_frames,
             "late_frames": self.fate.late,
-            "in_flight_at_end": int(self.fate.in_flight.size),
+            "in_flight_at_end": len(self.fate.in_flight),
             "timeout_us": self.fate.timeout_ns / 1000.0,
             "timeout_source": self.fate.timeout_source,
             "wkc_mismatches": self.wkc_mismatches,
@@ -352,7 +363,7 @@ def _counter_findings(report: CaptureReport, counters: CounterReads | None) -> C
 #: ``on_pairs(frames_read, round_trip_ns, returned_at_ns, meta)`` of :func:`stream_pairs`:
 #: the pairs found since the last call, in return order; ``meta`` is the outgoing frame's
 #: number << 1 | 1 when it is cyclic; ``frames_read`` the frames scanned so far.
-OnPairs = Callable[[int, np.ndarray, np.ndarray, np.ndarray], None]
+OnPairs = Callable[[int, "np.ndarray", "np.ndarray", "np.ndarray"], None]
 
 
 def stream_pairs(report: CaptureReport, on_pairs: OnPairs, *, engine: str = "auto",
@@ -364,8 +375,8 @@ def stream_pairs(report: CaptureReport, on_pairs: OnPairs, *, engine: str = "aut
     reader = CaptureReader(report.path)
     eng = choose_engine(engine, os.path.getsize(reader.path))
     dirmode, mode, sig = report.rules
-    p = _Pass(reader, eng, dirmode, mode, sig, False, chunk_bytes, None, should_stop)
-    p.on_pairs = on_pairs
+    p = _Pass(reader, eng, dirmode, mode, sig, False, chunk_bytes, None, should_stop,
+              on_pairs=on_pairs)
     p.run()
 
 
@@ -393,12 +404,22 @@ def spool_stream(path: str | Path) -> Any:
     return copy
 
 
-def _zeros(n: int, py: bool) -> Any:
-    return [0] * n if py else np.zeros(n, np.int64)
+def _zeros(n: int, kind: str) -> Any:
+    """A zeroed scanner array: a list for the Python engine (``kind`` "list"), else
+    int64 ``array`` ("array": the C engine on a small capture) or numpy ("numpy")."""
+    if kind == "list":
+        return [0] * n
+    if kind == "array":
+        return array("q", [0]) * n
+    import numpy as np
+
+    return np.zeros(n, np.int64)
 
 
 def _np(values: Any) -> np.ndarray:
     """int64 numpy view of a scanner array (a copy only for the Python engine's lists)."""
+    import numpy as np
+
     return np.asarray(values, dtype=np.int64)
 
 
@@ -407,7 +428,36 @@ def _rows(out: Any, n: int) -> np.ndarray:
     next rows from 0 again after each drain, so a view kept past it would be overwritten
     (the c engine's outputs are numpy arrays; the Python engine's lists copy
     anyway)."""
+    import numpy as np
+
     return np.array(out[:n], dtype=np.int64)
+
+
+_OUTPUTS = threading.local()
+
+#: the scanner's output arrays and their rows' widths
+_OUTPUT_COLS = {"o_rt": 1, "o_rtts": 1, "o_rtfr": 1, "o_period": 1, "o_burst": 1, "o_dc": 1,
+                "o_mbx": S.MBX_COLS, "o_cfg": S.CFG_COLS, "o_evict": S.EVICT_COLS,
+                "o_ctr": S.CTR_COLS}
+
+
+def _outputs(kind: str) -> dict[str, Any]:
+    """The scanner's output arrays (:data:`OUT_ROWS` rows, ~4 MB). The kernel writes a
+    row before it is read and a pass drains them as it goes, so they need no zeroing and
+    one set serves every pass of a thread, one after the other: a batch of small captures
+    does not allocate (and fault in) them twice a file. The Python engine's lists are
+    made a pass."""
+    if kind == "list":
+        return {name: _zeros(OUT_ROWS * cols, kind) for name, cols in _OUTPUT_COLS.items()}
+    kept: dict[str, dict[str, Any]] = _OUTPUTS.__dict__.setdefault("by_kind", {})
+    if kind not in kept:
+        kept[kind] = {name: _zeros(OUT_ROWS * cols, kind) for name, cols in _OUTPUT_COLS.items()}
+    return kept[kind]
+
+
+def _plain(out: Any, n: int) -> list[int]:
+    """The first ``n`` values of a scanner output array as a list (a copy)."""
+    return out[:n] if isinstance(out, list) else out[:n].tolist()
 
 
 class _Pass:
@@ -425,6 +475,7 @@ class _Pass:
         progress: Progress | None,
         should_stop: Callable[[], bool] = never,
         mapped: bool = True,
+        on_pairs: OnPairs | None = None,
     ) -> None:
         from lolacli.capture.sdo import SdoTracker
 
@@ -433,6 +484,11 @@ class _Pass:
         self.k = kernels(engine)
         self.py = engine == "python"
         self.keep_series = keep_series
+        self.on_pairs = on_pairs
+        # the rows drained into Python lists, not numpy (a small capture, no series)
+        self.lite = (not keep_series and on_pairs is None
+                     and os.path.getsize(reader.path) <= SMALL_BYTES)
+        self.kind = "list" if self.py else "array" if self.lite else "numpy"
         self.chunk_bytes = None if chunk_bytes is None else max(chunk_bytes, 1 << 16)
         self.mapped = mapped
         self.mapped_read = False  # whether the pass read a mapped file
@@ -440,7 +496,7 @@ class _Pass:
         self.progress = progress
         self.should_stop = should_stop
         self.stopped_by_signal_at: int | None = None  # file offset where should_stop stopped
-        py = self.py
+        py = self.kind
         self.st = _zeros(S.S_SIZE, py)
         self.st[S.S_MODE] = mode
         self.st[S.S_STREAM_SIG] = stream_sig
@@ -451,16 +507,11 @@ class _Pass:
         self.sk, self.sc = _zeros(STREAM_SLOTS, py), _zeros(STREAM_SLOTS, py)
         self.wk, self.wn = _zeros(OBS_SLOTS, py), _zeros(OBS_SLOTS, py)
         self.wv = _zeros(OBS_SLOTS * S.OCOLS, py)
-        self.o_rt = _zeros(OUT_ROWS, py)
-        self.o_rtts = _zeros(OUT_ROWS, py)
-        self.o_rtfr = _zeros(OUT_ROWS, py)
-        self.o_period = _zeros(OUT_ROWS, py)
-        self.o_burst = _zeros(OUT_ROWS, py)
-        self.o_dc = _zeros(OUT_ROWS, py)
-        self.o_mbx = _zeros(OUT_ROWS * S.MBX_COLS, py)
-        self.o_cfg = _zeros(OUT_ROWS * S.CFG_COLS, py)
-        self.o_evict = _zeros(OUT_ROWS * S.EVICT_COLS, py)
-        self.o_ctr = _zeros(OUT_ROWS * S.CTR_COLS, py)
+        out = _outputs(py)
+        self.o_rt, self.o_rtts, self.o_rtfr = out["o_rt"], out["o_rtts"], out["o_rtfr"]
+        self.o_period, self.o_burst, self.o_dc = out["o_period"], out["o_burst"], out["o_dc"]
+        self.o_mbx, self.o_cfg = out["o_mbx"], out["o_cfg"]
+        self.o_evict, self.o_ctr = out["o_evict"], out["o_ctr"]
         self.ifs = _zeros(5 * 64, py)
         self.n_if = 0
         self.interfaces: list[Interface] = []
@@ -471,39 +522,40 @@ class _Pass:
             for j, v in enumerate((0, 1, 1, 0, link)):
                 self.ifs[j] = v
             self.n_if = 1
-        self.rt_cyclic: list[np.ndarray] = []  # round trips of cyclic frames
-        self.rt_other: list[np.ndarray] = []  # of all other pairs
+        # the drained rows: numpy arrays, or lists in a lite pass
+        self.rt_cyclic: list[Any] = []  # round trips of cyclic frames
+        self.rt_other: list[Any] = []  # of all other pairs
         self.rt_series: list[np.ndarray] = []  # all, in order (keep_series)
         self.rt_ts: list[np.ndarray] = []
-        self.odd_rt: list[np.ndarray] = []  # (frame, rt) of round trips <= 0 or >= 1 ms
-        self.periods: list[np.ndarray] = []
-        self.bursts = np.zeros(0, np.int64)
-        self.dc_values: list[np.ndarray] = []
-        self.evicted: list[np.ndarray] = []  # (frame << 1 | cyclic, ts)
+        self.odd_rt: list[Any] = []  # (frame, rt) of round trips <= 0 or >= 1 ms
+        self.periods: list[Any] = []
+        self.bursts: Any = [] if self.lite else _zeros(0, "numpy")  # bursts by size
+        self.dc_values: list[Any] = []
+        self.evicted: list[Any] = []  # (frame << 1 | cyclic, ts)
         self.layout = MasterLayout()
         self.sdo = SdoTracker()
         self.counters = CounterTracker()
         self.stopped_at: int | None = None
         self.cut_short = False
-        self.on_pairs: OnPairs | None = None
 
     # --- tables ----------------------------------------------------------------------
     def _new_pair_table(self, slots: int) -> None:
-        py = self.py
+        py = self.kind
         self.pk, self.pn = _zeros(slots, py), _zeros(slots, py)
         self.pv = _zeros(slots * S.DEPTH * S.PCOLS, py)
 
     def _grow(self) -> None:
-        st, py, k = self.st, self.py, self.k
+        st, py, k = self.st, self.kind, self.k
         if st[S.S_P_USED] * 2 > len(self.pk):
-            live = sum(1 for n in self.pn if n) if py else int(np.count_nonzero(self.pn))
+            pn = self.pn
+            live = len(pn) - (pn.count(0) if py != "numpy" else int((pn == 0).sum()))
             slots = len(self.pk) * (2 if live * 4 > len(self.pk) else 1)
             old = (self.pk, self.pn, self.pv)
             self._new_pair_table(slots)
             st[S.S_P_USED] = k.rehash(*old, self.pk, self.pn, self.pv, False)
         if st[S.S_S_USED] * 2 > len(self.sk):
-            nk, nn = _zeros(len(self.sk) * 2, self.py), _zeros(len(self.sk) * 2, self.py)
-            empty = _zeros(0, self.py)
+            nk, nn = _zeros(len(self.sk) * 2, py), _zeros(len(self.sk) * 2, py)
+            empty = _zeros(0, py)
             st[S.S_S_USED] = k.rehash(self.sk, self.sc, empty, nk, nn, empty, True)
             self.sk, self.sc = nk, nn
         if st[S.S_W_USED] * 2 > len(self.wk):
@@ -513,10 +565,10 @@ class _Pass:
             self.wk, self.wn, self.wv = nk, nn, nv
 
     def top_stream(self) -> int:
-        if self.py:
+        if self.kind != "numpy":
             best = max(range(len(self.sk)), key=lambda i: self.sc[i])
             return int(self.sk[best])
-        return int(self.sk[int(np.argmax(self.sc))])
+        return int(self.sk[int(self.sc.argmax())])
 
     # --- the pass ------------------------------------------------------------------------
     def run(self) -> None:
@@ -532,7 +584,7 @@ class _Pass:
             while True:
                 end, eof = src.end, src.eof
                 if view is None:
-                    view = src.buf[:end].tobytes() if self.py else src.buf
+                    view = src.bytes_at(0, end) if self.py else src.buf
                 stop_at = end if whole else min(end, pos + slice_bytes)
                 started = pos
                 pos, status = self.k.scan(
@@ -640,7 +692,7 @@ class _Pass:
     def _add_interface(self, iface: Interface) -> None:
         self.interfaces.append(iface)
         if self.n_if * 5 + 5 > len(self.ifs):
-            grown = _zeros(len(self.ifs) * 2, self.py)
+            grown = _zeros(len(self.ifs) * 2, self.kind)
             grown[: len(self.ifs)] = self.ifs[:]
             self.ifs = grown
         mode, a, b, off = iface.ts_params()
@@ -653,38 +705,10 @@ class _Pass:
         """Take the scanner's output rows; ``src`` holds the bytes of the datagrams they
         point at (None after the last call: no rows point at bytes then)."""
         st = self.st
-        n = int(st[S.S_N_RT])
-        if n:
-            rt = _rows(self.o_rt, n)
-            meta = _rows(self.o_rtfr, n)
-            cyc = (meta & 1) != 0
-            self.rt_cyclic.append(_compact(rt[cyc]))
-            self.rt_other.append(_compact(rt[~cyc]))
-            odd = (rt <= 0) | (rt >= MIN_TIMEOUT_NS)
-            if odd.any():
-                self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
-            if self.keep_series:
-                self.rt_series.append(rt)
-                self.rt_ts.append(_rows(self.o_rtts, n))
-            if self.on_pairs is not None:
-                self.on_pairs(int(st[S.S_FRAMES]), rt, _rows(self.o_rtts, n), meta)
-        n = int(st[S.S_N_PERIOD])
-        if n:
-            self.periods.append(_compact(_rows(self.o_period, n)))
-        n = int(st[S.S_N_BURST])
-        if n:
-            counts = np.bincount(_rows(self.o_burst, n))
-            if counts.size > self.bursts.size:
-                counts[: self.bursts.size] += self.bursts
-                self.bursts = counts
-            else:
-                self.bursts[: counts.size] += counts
-        n = int(st[S.S_N_DC])
-        if n:
-            self.dc_values.append(_rows(self.o_dc, n))
-        n = int(st[S.S_N_EVICT])
-        if n:
-            self.evicted.append(_rows(self.o_evict, n * S.EVICT_COLS).reshape(n, S.EVICT_COLS))
+        if self.lite:
+            self._drain_lite()
+        else:
+            self._drain_numpy()
         n = int(st[S.S_N_CFG])
         for r in range(n):
             frame, q, cmd, adp, ado, ln = (int(v) for v in
@@ -701,34 +725,127 @@ class _Pass:
         n = int(st[S.S_N_CTR])
         if n:
             assert src is not None
-            rows = _rows(self.o_ctr, n * S.CTR_COLS).reshape(n, S.CTR_COLS).tolist()
-            for _, q, cmd, adp, index, place, wkc, _ in rows:
+            flat = _plain(self.o_ctr, n * S.CTR_COLS)
+            for r in range(0, len(flat), S.CTR_COLS):
+                _, q, cmd, adp, index, place, wkc, _ = flat[r:r + S.CTR_COLS]
                 self.counters.feed(cmd, adp, index, place, wkc,
                                    partial(src.bytes_at, q + 10, S.ERROR_COUNTER_BYTES))
         for i in (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N_CFG,
                   S.S_N_EVICT, S.S_N_CTR):
             st[i] = 0
 
+    def _drain_numpy(self) -> None:
+        """The series rows into numpy arrays."""
+        import numpy as np
+
+        st = self.st
+        # views of the C engine's rows (the Python engine's lists: copies); whatever is
+        # kept below is a copy (boolean indexing, astype, _rows), taken before the kernel
+        # writes the rows again
+        view = (lambda out, n: out[:n]) if self.kind == "numpy" else _rows
+        n = int(st[S.S_N_RT])
+        if n:
+            rt, meta = view(self.o_rt, n), view(self.o_rtfr, n)
+            lo, hi = int(rt.min()), int(rt.max())
+            packed = _compact(rt, lo, hi)
+            cyc = (meta & 1) != 0
+            self.rt_cyclic.append(packed[cyc])
+            self.rt_other.append(packed[~cyc])
+            if lo <= 0 or hi >= MIN_TIMEOUT_NS:
+                odd = (rt <= 0) | (rt >= MIN_TIMEOUT_NS)
+                self.odd_rt.append(np.stack([meta[odd] >> 1, rt[odd]], 1))
+            if self.keep_series:
+                self.rt_series.append(_rows(rt, n))
+                self.rt_ts.append(_rows(self.o_rtts, n))
+            if self.on_pairs is not None:
+                self.on_pairs(int(st[S.S_FRAMES]), _rows(rt, n), _rows(self.o_rtts, n),
+                              _rows(meta, n))
+        n = int(st[S.S_N_PERIOD])
+        if n:
+            period = view(self.o_period, n)
+            packed = _compact(period, int(period.min()), int(period.max()))
+            self.periods.append(packed if packed is not period else _rows(period, n))
+        n = int(st[S.S_N_BURST])
+        if n:
+            counts = np.bincount(_rows(self.o_burst, n))
+            if counts.size > self.bursts.size:
+                counts[: self.bursts.size] += self.bursts
+                self.bursts = counts
+            else:
+                self.bursts[: counts.size] += counts
+        n = int(st[S.S_N_DC])
+        if n:
+            self.dc_values.append(_rows(self.o_dc, n))
+        n = int(st[S.S_N_EVICT])
+        if n:
+            self.evicted.append(_rows(self.o_evict, n * S.EVICT_COLS).reshape(n, S.EVICT_COLS))
+
+    def _drain_lite(self) -> None:
+        """The series rows into lists (a small capture: the same values, no numpy)."""
+        st = self.st
+        n = int(st[S.S_N_RT])
+        if n:
+            rt, meta = _plain(self.o_rt, n), _plain(self.o_rtfr, n)
+            self.rt_cyclic.append([r for r, m in zip(rt, meta, strict=True) if m & 1])
+            self.rt_other.append([r for r, m in zip(rt, meta, strict=True) if not m & 1])
+            self.odd_rt.extend((m >> 1, r) for r, m in zip(rt, meta, strict=True)
+                               if r <= 0 or r >= MIN_TIMEOUT_NS)
+        n = int(st[S.S_N_PERIOD])
+        if n:
+            self.periods.append(_plain(self.o_period, n))
+        n = int(st[S.S_N_BURST])
+        if n:
+            bursts = self.bursts
+            for size in _plain(self.o_burst, n):
+                if size >= len(bursts):
+                    bursts.extend([0] * (size + 1 - len(bursts)))
+                bursts[size] += 1
+        n = int(st[S.S_N_DC])
+        if n:
+            self.dc_values.append(_plain(self.o_dc, n))
+        n = int(st[S.S_N_EVICT])
+        if n:
+            flat = _plain(self.o_evict, n * S.EVICT_COLS)
+            self.evicted.extend(zip(flat[0::S.EVICT_COLS], flat[1::S.EVICT_COLS],
+                                    strict=True))
+
     # --- what the pass saw -------------------------------------------------------------
-    def _pending(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(frame, ts, cyclic) of every outgoing frame left unanswered."""
+    def _pending(self) -> tuple[Any, Any, Any]:
+        """(frame, ts, cyclic) of every outgoing frame left unanswered: numpy arrays, or
+        lists in a lite pass."""
+        if self.lite:
+            pn, pv = self.pn, self.pv
+            meta: list[int] = []
+            stamps: list[int] = []
+            width = S.DEPTH * S.PCOLS
+            for slot, depth in enumerate(pn):
+                for j in range(depth):
+                    at = slot * width + j * S.PCOLS
+                    stamps.append(pv[at])
+                    meta.append(pv[at + 1])
+            for m, t in self.evicted:
+                meta.append(m)
+                stamps.append(t)
+            return [m >> 1 for m in meta], stamps, [bool(m & 1) for m in meta]
+        import numpy as np
+
         pn = _np(self.pn)
         pv = _np(self.pv).reshape(pn.size, S.DEPTH, S.PCOLS)
         live = np.arange(S.DEPTH)[None, :] < pn[:, None]
-        meta, ts = pv[..., 1][live], pv[..., 0][live]
+        meta_a, ts = pv[..., 1][live], pv[..., 0][live]
         if self.evicted:
             rows = np.concatenate(self.evicted)
-            meta, ts = np.concatenate([meta, rows[:, 0]]), np.concatenate([ts, rows[:, 1]])
-        return meta >> 1, ts, (meta & 1) != 0
+            meta_a, ts = np.concatenate([meta_a, rows[:, 0]]), np.concatenate([ts, rows[:, 1]])
+        return meta_a >> 1, ts, (meta_a & 1) != 0
 
     def _observations(self, kind: int) -> list[tuple[int, ...]]:
         """Observation rows of one kind: the six fields after ``kind``... see scan.py."""
-        wk = _np(self.wk)
-        used = np.flatnonzero(wk)
-        wv = _np(self.wv).reshape(wk.size, S.OCOLS)[used]
-        wn = _np(self.wn)[used]
+        wk, wn, wv = (_plain(a, len(a)) for a in (self.wk, self.wn, self.wv))
         rows: list[tuple[int, ...]] = []
-        for v, n in zip(wv.tolist(), wn.tolist(), strict=True):
+        for i, key in enumerate(wk):
+            if not key:
+                continue
+            v, n = wv[i * S.OCOLS:(i + 1) * S.OCOLS], wn[i]
             if v[0] != kind:
                 continue
             if kind == S.KIND_WKC:
@@ -741,6 +858,9 @@ class _Pass:
     def report(self, eni: Eni | None, given_timeout_ns: int | None, max_lost: int,
                max_wkc: int, stopped_at: int | None = None) -> CaptureReport:
         st = [int(v) for v in self.st]
+        if not self.lite:  # the drained chunks (thousands) as one array each
+            self.rt_cyclic, self.rt_other, self.periods = (
+                [_take(parts)] for parts in (self.rt_cyclic, self.rt_other, self.periods))
         by_cmd = {mnemonic(c): int(n) for c, n in enumerate(self.cmd_counts) if n}
         counts = {
             "frames_total": st[S.S_FRAMES],
@@ -759,7 +879,7 @@ class _Pass:
             "snaplen_cut_frames": st[S.S_CUT],
             "non_ethernet_packets": st[S.S_NON_ETH],
             "skipped_blocks": st[S.S_SKIPPED],
-            "cyclic_pairs": sum(int(c.size) for c in self.rt_cyclic),
+            "cyclic_pairs": sum(len(c) for c in self.rt_cyclic),
             "brd_wkc_max": st[S.S_BRD_MAX],
             "cyclic_frame_bytes": st[S.S_CYC_BYTES],
         }
@@ -826,25 +946,32 @@ class _Pass:
         # (frames of other EtherCAT types count here too, not in S_ECAT)
         return "packet_type" if st[S.S_DIR_PT] >= st[S.S_ECAT] else "packet_type+mac"
 
-    def _fate(self, all_rt: list[np.ndarray], rt_stats: Summary | None,
+    def _fate(self, all_rt: list[Any], rt_stats: Summary | None,
               given: int | None, end_ts: int) -> FrameFate:
         median = None if rt_stats is None else rt_stats.median
         limit = timeout_ns(median, given)
-        odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
-        late_count = sum(int(np.count_nonzero(c > limit[0])) for c in all_rt)
-        late_frames = first(odd[odd[:, 1] > limit[0], 0])
+        late_count = _count(all_rt, lambda c: c > limit[0])
+        late_frames = first(self._odd_frames(lambda rt: rt > limit[0]))
         frames, ts, cyc = self._pending()
         return fates(frames, ts, cyc, end_ts, limit, late_count, late_frames)
 
-    def _timestamps(self, out: Findings, all_rt: list[np.ndarray], st: list[int]) -> list[str]:
-        zero = sum(int(np.count_nonzero(c == 0)) for c in all_rt)
-        negative = sum(int(np.count_nonzero(c < 0)) for c in all_rt)
+    def _odd_frames(self, keep: Callable[[Any], Any]) -> Any:
+        """The frames of the odd round trips ``keep`` selects (an array, a list)."""
+        if self.lite:
+            return [frame for frame, rt in self.odd_rt if keep(rt)]
+        import numpy as np
+
         odd = np.concatenate(self.odd_rt) if self.odd_rt else np.zeros((0, 2), np.int64)
-        bad_frames = first(odd[odd[:, 1] <= 0, 0])
+        return odd[keep(odd[:, 1]), 0]
+
+    def _timestamps(self, out: Findings, all_rt: list[Any], st: list[int]) -> list[str]:
+        zero = _count(all_rt, lambda c: c == 0)
+        negative = _count(all_rt, lambda c: c < 0)
+        bad_frames = first(self._odd_frames(lambda rt: rt <= 0))
         back = st[S.S_BACKWARDS]
         back_frames = tuple(st[S.S_BACK_F0:S.S_BACK_F0 + min(back, S.BACK_KEEP)])
-        periods_bad = sum(int(np.count_nonzero(c <= 0)) for c in self.periods)
-        pairs = sum(int(c.size) for c in all_rt)
+        periods_bad = _count(self.periods, lambda c: c <= 0)
+        pairs = sum(len(c) for c in all_rt)
         return timestamp_findings(out, zero, negative, bad_frames, pairs, back, back_frames,
                                   periods_bad)
 
@@ -872,8 +999,17 @@ class _Pass:
                     frames, malformed)
 
     def _dc_dict(self, st: list[int]) -> dict[str, Any]:
-        sizes = summarize_array(np.repeat(np.arange(self.bursts.size), self.bursts))
-        values = _cat(self.dc_values, np.int64)
+        values: Any
+        if self.lite:
+            sizes = summarize_array([k for k, c in enumerate(self.bursts) for _ in range(c)])
+            values = [v for part in self.dc_values for v in part]
+            biggest = max(map(abs, values)) if values else None
+        else:
+            import numpy as np
+
+            sizes = summarize_array(np.repeat(np.arange(self.bursts.size), self.bursts))
+            values = _cat(self.dc_values, np.int64)
+            biggest = int(np.abs(values).max()) if values.size else None
         return {
             "drift_compensation_datagrams": st[S.S_DC_DGRAMS],
             "drift_compensation_bursts": 0 if sizes is None else sizes.count,
@@ -881,9 +1017,9 @@ class _Pass:
             if sizes is None
             else {"min": int(sizes.min), "median": sizes.median, "max": int(sizes.max)},
             "burst_gap_us": S.BURST_GAP_NS / 1000.0,
-            "system_time_difference_reads": int(values.size),
-            "system_time_difference_max_abs_ns": int(np.abs(values).max()) if values.size else None,
-            "system_time_difference_last_ns": int(values[-1]) if values.size else None,
+            "system_time_difference_reads": len(values),
+            "system_time_difference_max_abs_ns": biggest,
+            "system_time_difference_last_ns": int(values[-1]) if len(values) else None,
         }
 
 
@@ -971,7 +1107,20 @@ def _runs_past_end(src: Source, pos: int, fmt: int, big: bool) -> bool:
     return 12 <= size <= S.MAX_RECORD and size % 4 == 0 and pos + size > end
 
 
+def _count(parts: list[Any], test: Callable[[Any], Any]) -> int:
+    """How many values of the chunks ``parts`` (arrays, or lists) pass ``test``."""
+    total = 0
+    for c in parts:
+        if isinstance(c, list):
+            total += sum(1 for v in c if test(v))
+        else:
+            total += int(test(c).sum())
+    return total
+
+
 def _cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:
+    import numpy as np
+
     if not parts:
         return np.zeros(0, dtype)
     return np.concatenate(parts).astype(dtype, copy=False)
@@ -980,6 +1129,8 @@ def _cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:
 def _take(parts: list[np.ndarray]) -> np.ndarray:
     """Concatenate drained chunks (numpy promotes mixed int32/int64 chunks to int64) and
     empty the list, so that the chunks are freed as soon as the whole is built."""
+    import numpy as np
+
     if not parts:
         return np.zeros(0, np.int64)
     whole = np.concatenate(parts)
@@ -987,8 +1138,9 @@ def _take(parts: list[np.ndarray]) -> np.ndarray:
     return whole
 
 
-def _compact(values: np.ndarray) -> np.ndarray:
-    """int32 when the nanosecond values fit (±2.1 s), halving the memory of long series."""
-    if values.size and -(2**31) < values.min() and values.max() < 2**31:
-        return values.astype(np.int32)
+def _compact(values: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """An int32 copy when the nanosecond values (from ``lo`` to ``hi``) fit (±2.1 s),
+    halving the memory of long series; else ``values`` themselves."""
+    if -(2**31) < lo and hi < 2**31:
+        return values.astype("int32")
     return values

@@ -7,17 +7,18 @@ so on stderr, once: :func:`lolacli.capture.fast.fallback_note`).
 
 The C code trusts the lengths it is given, so every call checks here, in Python, that
 the arrays are what the kernel assumes (dtype, contiguity, sizes); a mismatch raises
-instead of reading or writing out of bounds.
+instead of reading or writing out of bounds. The arrays are ``array.array("q")`` (a
+small capture: no numpy import) or int64 numpy arrays; the bytes a ``bytearray``, a
+mapped window (:class:`lolacli.capture.source.Mapping`) or a uint8 numpy array.
 """
 
 from __future__ import annotations
 
 import ctypes
 import importlib.util
+from array import array
 from functools import lru_cache
 from typing import Any
-
-import numpy as np
 
 from lolacli.capture import scan as S
 
@@ -64,12 +65,38 @@ def c_available() -> bool:
         return False
 
 
-def _ptr(a: np.ndarray, n: int | None = None) -> int:
-    if a.dtype != np.int64 or not a.flags.c_contiguous or not a.flags.writeable:
-        raise ValueError("scanner arrays must be writable contiguous int64")
-    if n is not None and a.size < n:
-        raise ValueError(f"scanner array too short ({a.size} < {n})")
-    return int(a.ctypes.data)
+def _ptr(a: Any, n: int | None = None) -> int:
+    """The address of an int64 array (``array("q")`` or numpy) of at least ``n`` values."""
+    if isinstance(a, array):
+        if a.typecode != "q" or a.itemsize != 8:
+            raise ValueError("scanner arrays must be writable contiguous int64")
+        address, size = a.buffer_info()
+    else:
+        face = getattr(a, "__array_interface__", None)
+        if (face is None or face["typestr"] != "<i8" or not a.flags.c_contiguous
+                or not a.flags.writeable):
+            raise ValueError("scanner arrays must be writable contiguous int64")
+        address, size = face["data"][0], a.size
+    if n is not None and size < n:
+        raise ValueError(f"scanner array too short ({size} < {n})")
+    return int(address)
+
+
+def _bytes(buf: Any, keep: list[Any]) -> tuple[int, int]:
+    """(address, size) of the bytes the scanner walks; ``keep`` holds what pins them."""
+    if isinstance(buf, bytearray):
+        if not buf:
+            return 0, 0
+        pin = (ctypes.c_char * len(buf)).from_buffer(buf)
+        keep.append(pin)
+        return ctypes.addressof(pin), len(buf)
+    mapped = getattr(buf, "address", None)
+    if mapped is not None:  # a mapped window (lolacli.capture.source.Mapping)
+        return int(mapped), int(buf.size)
+    face = getattr(buf, "__array_interface__", None)
+    if face is None or face["typestr"] != "|u1" or not buf.flags.c_contiguous:
+        raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
+    return int(face["data"][0]), int(buf.size)
 
 
 #: Open-addressing lookups end only when a table has a free slot. The pairing and stream
@@ -89,20 +116,24 @@ _ROW_COUNTERS = (S.S_N_RT, S.S_N_PERIOD, S.S_N_BURST, S.S_N_DC, S.S_N_MBX, S.S_N
                  S.S_N_EVICT, S.S_N_CTR)
 
 
-def _check_state(st: np.ndarray, pn: np.ndarray, ifs: np.ndarray, n_if: int) -> None:
+def _check_state(st: Any, pn: Any, ifs: Any, n_if: int) -> None:
     """The values the kernel indexes with or divides by, besides the array sizes: row
     counters, backward-step and malformed counts not negative, stack depths within
     DEPTH, interface rows as ts_params makes them (mode 0: a >= 0, b >= 1; mode 1:
     a >= 0; offsets bounded)."""
     if n_if < 0 or min(int(st[i]) for i in (*_ROW_COUNTERS, S.S_BACKWARDS, S.S_MALFORMED)) < 0:
         raise ValueError("scanner state: negative interface count or output row")
-    if pn.size and (int(pn.min()) < 0 or int(pn.max()) > S.DEPTH):
+    if isinstance(pn, array):
+        low, high = (min(pn), max(pn)) if len(pn) else (0, 0)
+    else:
+        low, high = (int(pn.min()), int(pn.max())) if pn.size else (0, 0)
+    if low < 0 or high > S.DEPTH:
         raise ValueError("scanner state: pairing stack depth out of range")
-    rows = ifs[: 5 * n_if].reshape(n_if, 5)
-    mode, a, b, off = rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
-    ok = ((mode == 0) & (b >= 1)) | (mode == 1)
-    if not (ok.all() and (a >= 0).all() and (np.abs(off) <= S.TS_OFFSET_LIMIT_NS).all()):
-        raise ValueError("scanner state: interface timestamp parameters out of range")
+    for j in range(0, 5 * n_if, 5):
+        mode, a, b, off = (int(v) for v in ifs[j : j + 4])
+        if not (((mode == 0 and b >= 1) or mode == 1) and a >= 0
+                and abs(off) <= S.TS_OFFSET_LIMIT_NS):
+            raise ValueError("scanner state: interface timestamp parameters out of range")
 
 
 class CKernels:
@@ -126,7 +157,9 @@ class CKernels:
         o_period: Any, o_burst: Any, o_dc: Any, o_mbx: Any, o_cfg: Any, o_evict: Any,
         o_ctr: Any,
     ) -> tuple[int, int]:
-        if buf.dtype != np.uint8 or not buf.flags.c_contiguous or not 0 <= pos <= end <= buf.size:
+        keep: list[Any] = []
+        address, size = _bytes(buf, keep)
+        if not 0 <= pos <= end <= size:
             raise ValueError("scanner buffer must be contiguous uint8 holding [pos, end)")
         arrays = (st, cmd_counts, pk, pn, pv, sk, sc, wk, wn, wv, o_rt, o_rtts, o_rtfr,
                   o_period, o_burst, o_dc, o_mbx, o_cfg, o_evict, o_ctr, ifs)
@@ -139,7 +172,7 @@ class CKernels:
         _check_state(st, pn, ifs, int(n_if))
         self._pos.value = int(pos)
         status = self._lib.lolacli_scan(
-            int(buf.ctypes.data), ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
+            address, ctypes.byref(self._pos), int(end), int(bool(eof)), int(fmt),
             int(bool(big)), int(bool(ns_res)), ctypes.byref(t),
         )
         return int(self._pos.value), int(status)
@@ -151,8 +184,8 @@ class CKernels:
     ) -> _Tables:
         """The kernel's table of array pointers, after checking every array's type and
         size (the arrays' sizes and places never change: a grown table is a new array)."""
-        rows = o_rt.size
-        p_len, s_len, w_len = pk.size, sk.size, wk.size
+        rows = len(o_rt)
+        p_len, s_len, w_len = len(pk), len(sk), len(wk)
         if not (_pow2(p_len) and _pow2(s_len) and _pow2(w_len)) or rows <= S.CHECK_EVERY * (
             S.MAX_DGRAMS + 2
         ) + S.MAX_DGRAMS + 2:
@@ -175,9 +208,9 @@ class CKernels:
     def rehash(
         self, ok: Any, on: Any, ov: Any, nk: Any, nn: Any, nv: Any, keep_empty: Any,
     ) -> int:
-        olen, nlen = ok.size, nk.size
-        width = ov.size // olen if olen else 0
-        if not _pow2(nlen) or nk.size < olen:
+        olen, nlen = len(ok), len(nk)
+        width = len(ov) // olen if olen else 0
+        if not _pow2(nlen) or nlen < olen:
             raise ValueError("the new table must be a power of two, not smaller")
         return int(self._lib.lolacli_rehash(
             _ptr(ok), _ptr(on, olen), _ptr(ov, olen * width), olen, width, _ptr(nk),

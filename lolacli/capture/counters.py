@@ -17,9 +17,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from lolacli.eni.model import Eni
 from lolacli.wire.commands import Command
 from lolacli.wire.error_counters import (
     ERROR_COUNTERS_BYTES,
@@ -31,6 +30,9 @@ from lolacli.wire.error_counters import (
     locate,
     rises,
 )
+
+if TYPE_CHECKING:
+    from lolacli.eni.model import Eni
 
 
 @dataclass(frozen=True, slots=True)

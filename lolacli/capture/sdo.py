@@ -31,28 +31,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from lolacli.errors import WireError
-from lolacli.od import Dictionary, ObjectCode, OdEntry, OdObject, info_entry, object_code
-from lolacli.od.lookup import TypeLookup, decode, format_value, json_value
-from lolacli.wire.coe import CoeService, decode_coe_header
-from lolacli.wire.mailbox import MailboxHeader, MailboxType, decode_mailbox
-from lolacli.wire.sdo import (
-    EntryDescriptionResponse,
-    ObjectDescriptionResponse,
-    SdoAbort,
-    SdoDownloadRequest,
-    SdoDownloadResponse,
-    SdoDownloadSegmentRequest,
-    SdoDownloadSegmentResponse,
-    SdoUploadRequest,
-    SdoUploadResponse,
-    SdoUploadSegmentResponse,
-    abort_text,
-    decode_sdo,
-)
-
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni
+    from lolacli.od import Dictionary, ObjectCode, OdEntry
+    from lolacli.od.lookup import TypeLookup
+    from lolacli.wire.mailbox import MailboxHeader
+    from lolacli.wire.sdo import SdoUploadResponse
+
+# The decoders (wire.mailbox, wire.coe, wire.sdo, od: ~35 ms to import) are imported by
+# the first mailbox message: most captures of a running bus have none.
 
 WRITE_COMMANDS = (2, 5)  # APWR, FPWR
 #: Decoded mailbox messages kept by their bytes (polling repeats the same requests).
@@ -87,6 +74,9 @@ class SdoTransaction:
     value_text: str = ""
 
     def to_dict(self) -> dict[str, object]:
+        from lolacli.od.lookup import json_value
+        from lolacli.wire.sdo import abort_text
+
         return {
             "slave": self.slave,
             "index": self.index,
@@ -151,6 +141,8 @@ class SdoTracker:
         self._info_objects: dict[int, dict[int, tuple[str, ObjectCode]]] = {}
 
     def feed(self, frame: int, ts_ns: int, cmd: int, address: int, data: bytes) -> None:
+        from lolacli.wire.mailbox import MailboxType
+
         slave = address & 0xFFFF
         decoded = self._cache.get(data)
         if decoded is None:
@@ -177,6 +169,8 @@ class SdoTracker:
     def _coe(
         self, frame: int, ts_ns: int, slave: int, service: int | None, message: object
     ) -> None:
+        from lolacli.wire.coe import CoeService
+
         if service is None:
             self.stats.undecodable += 1
             return
@@ -195,6 +189,17 @@ class SdoTracker:
                 self._sdo(frame, ts_ns, slave, message)
 
     def _sdo(self, frame: int, ts_ns: int, slave: int, message: object) -> None:
+        from lolacli.wire.sdo import (
+            SdoAbort,
+            SdoDownloadRequest,
+            SdoDownloadResponse,
+            SdoDownloadSegmentRequest,
+            SdoDownloadSegmentResponse,
+            SdoUploadRequest,
+            SdoUploadResponse,
+            SdoUploadSegmentResponse,
+        )
+
         if isinstance(message, SdoUploadRequest | SdoDownloadRequest):
             self._start(frame, ts_ns, slave, message)
             return
@@ -233,6 +238,8 @@ class SdoTracker:
                 self._close(txn, frame, ts_ns, "ok")
 
     def _start(self, frame: int, ts_ns: int, slave: int, message: object) -> None:
+        from lolacli.wire.sdo import SdoDownloadRequest, SdoUploadRequest
+
         assert isinstance(message, SdoUploadRequest | SdoDownloadRequest)
         kind = "upload" if isinstance(message, SdoUploadRequest) else "download"
         txn = SdoTransaction(slave, message.index, message.subindex, kind, frame, ts_ns)
@@ -273,6 +280,9 @@ class SdoTracker:
     def _info(self, slave: int, message: object) -> None:
         """Keep what an SDO Information answer says of an object or entry (answers in
         fragments are not joined here: an entry's description fits one mailbox)."""
+        from lolacli.od import info_entry, object_code
+        from lolacli.wire.sdo import EntryDescriptionResponse, ObjectDescriptionResponse
+
         if isinstance(message, EntryDescriptionResponse) and not message.incomplete:
             name = message.description().decode("utf-8", "replace")
             entry = info_entry(
@@ -290,6 +300,8 @@ class SdoTracker:
 
     def info_dictionary(self, slave: int) -> Dictionary | None:
         """What the capture's SDO Information answers describe of ``slave``'s objects."""
+        from lolacli.od import Dictionary, ObjectCode, OdObject
+
         entries = self._info_entries.get(slave)
         if not entries:
             return None
@@ -306,6 +318,10 @@ class SdoTracker:
     def describe(self, eni: Eni | None = None) -> None:
         """Name and type every completed transaction's entry and decode its bytes (see
         the module docstring); complete-access transfers stay bytes."""
+        if not self.transactions:
+            return
+        from lolacli.od.lookup import decode, format_value
+
         lookups: dict[int, TypeLookup] = {}
         for t in self.transactions:
             raw = t.raw
@@ -322,6 +338,7 @@ class SdoTracker:
 
     def _lookup(self, slave: int, eni: Eni | None) -> TypeLookup:
         from lolacli.eni.dictionary import from_eni
+        from lolacli.od.lookup import TypeLookup
 
         dictionaries = []
         found = next((s for s in eni.slaves if s.station_address == slave), None) if eni else None
@@ -333,6 +350,8 @@ class SdoTracker:
 
 
 def _type_name(mailbox_type: int) -> str:
+    from lolacli.wire.mailbox import MailboxType
+
     if isinstance(mailbox_type, MailboxType):
         return mailbox_type.name
     return f"type{int(mailbox_type)}"
@@ -341,6 +360,11 @@ def _type_name(mailbox_type: int) -> str:
 def _decode(data: bytes) -> tuple[MailboxHeader | None, int | None, object]:
     """Mailbox header, CoE service (None when not CoE or undecodable) and SDO message
     (None when not an SDO request/response or undecodable)."""
+    from lolacli.errors import WireError
+    from lolacli.wire.coe import CoeService, decode_coe_header
+    from lolacli.wire.mailbox import MailboxType, decode_mailbox
+    from lolacli.wire.sdo import decode_sdo
+
     try:
         mailbox = decode_mailbox(data)
     except WireError:

@@ -3,7 +3,8 @@
 Two sources, one interface (:class:`Source`), and the scanner walks either the same way:
 
 * :class:`MappedSource` maps a regular file a window at a time (``mmap``, read-only,
-  ``MADV_WILLNEED`` so that a file not in the page cache is read ahead), so that the C
+  ``MADV_WILLNEED`` so that a file not in the page cache is read ahead; made through libc,
+  so that the C scanner gets the window's address without numpy), so that the C
   scanner reads the record headers, the EtherCAT and datagram headers and the WKCs in
   place and no payload byte is ever copied; the window is unmapped before the next one
   is mapped, so that the file's pages do not pile up in the process (RSS stays about one
@@ -34,14 +35,14 @@ would not keep pages that a truncation removes either.
 
 from __future__ import annotations
 
+import ctypes
 import mmap
 import os
 import stat
+from functools import lru_cache
 from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
-
-import numpy as np
 
 #: read path: bytes per read() into the reusable buffer
 CHUNK_BYTES = 8 * 1024 * 1024
@@ -50,13 +51,54 @@ WINDOW_BYTES = 64 * 1024 * 1024
 _GRAN = mmap.ALLOCATIONGRANULARITY
 
 
+class Mapping:
+    """A read-only shared mapping of ``size`` bytes of a file at ``address`` (libc
+    ``mmap``): what the C scanner walks. Python reads its bytes by ``os.pread`` only."""
+
+    def __init__(self, fd: int, length: int, offset: int) -> None:
+        libc = _libc()
+        address = libc.mmap(None, length, mmap.PROT_READ, mmap.MAP_SHARED, fd, offset)
+        if address is None or address == _MAP_FAILED:
+            err = ctypes.get_errno()
+            raise OSError(err, os.strerror(err))
+        self.address: int = address
+        self.size = length
+        if hasattr(mmap, "MADV_WILLNEED"):  # a file not in the page cache: read ahead
+            libc.madvise(address, length, mmap.MADV_WILLNEED)
+
+    def __len__(self) -> int:
+        return self.size
+
+    def close(self) -> None:
+        if self.size:
+            _libc().munmap(self.address, self.size)
+            self.address, self.size = 0, 0
+
+
+_MAP_FAILED = ctypes.c_void_p(-1).value
+
+
+@lru_cache(maxsize=1)
+def _libc() -> ctypes.CDLL:
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.mmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int, ctypes.c_int,
+                          ctypes.c_int, ctypes.c_int64]
+    libc.mmap.restype = ctypes.c_void_p
+    libc.munmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t]
+    libc.munmap.restype = ctypes.c_int
+    libc.madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    libc.madvise.restype = ctypes.c_int
+    return libc
+
+
 class Source:
     """``buf[:end]`` holds the file's bytes from offset ``base``; ``eof`` when ``end`` is
-    the end of the file. Owns the open file ``f`` and closes it."""
+    the end of the file (a :class:`bytearray` read into, or a :class:`Mapping`). Owns the
+    open file ``f`` and closes it."""
 
     def __init__(self, f: BinaryIO) -> None:
         self.f = f
-        self.buf = np.zeros(0, np.uint8)
+        self.buf: bytearray | Mapping = bytearray()
         self.base = 0
         self.end = 0
         self.eof = False
@@ -87,16 +129,18 @@ class ChunkedSource(Source):
     """The file read forward in chunks into one buffer (grown for a record larger than
     half of it)."""
 
+    buf: bytearray
+
     def __init__(self, f: BinaryIO, chunk_bytes: int = CHUNK_BYTES) -> None:
         super().__init__(f)
-        self.buf = np.empty(max(chunk_bytes, 1 << 16), np.uint8)
+        self.buf = bytearray(max(chunk_bytes, 1 << 16))
         self.end, self.eof = _fill(f, self.buf, 0)
 
     def advance(self, pos: int) -> int:
         tail = self.end - pos
-        if tail * 2 > self.buf.size:
-            grown = np.empty(self.buf.size * 2, np.uint8)
-            grown[:tail] = self.buf[pos : self.end]
+        if tail * 2 > len(self.buf):
+            grown = bytearray(len(self.buf) * 2)
+            grown[:tail] = memoryview(self.buf)[pos : self.end]
             self.buf = grown
         else:
             self.buf[:tail] = self.buf[pos : self.end]
@@ -105,7 +149,7 @@ class ChunkedSource(Source):
         return 0
 
     def bytes_at(self, i: int, n: int) -> bytes:
-        return self.buf[i : min(i + n, self.end)].tobytes()
+        return bytes(memoryview(self.buf)[i : min(i + n, self.end)])
 
 
 class MappedSource(Source):
@@ -115,7 +159,7 @@ class MappedSource(Source):
         super().__init__(f)
         self._fd = f.fileno()
         self._window = max(-(-window_bytes // _GRAN) * _GRAN, _GRAN)
-        self._map: mmap.mmap | None = None
+        self._map: Mapping | None = None
         self._mapped_to = 0
         self._open(0, self._window)
 
@@ -125,23 +169,16 @@ class MappedSource(Source):
         length = min(length, size - offset)
         self.base = offset
         if length <= 0:
-            self.buf, self.end, self.eof = np.zeros(0, np.uint8), 0, True
+            self.buf, self.end, self.eof = bytearray(), 0, True
             return
-        self._map = mmap.mmap(self._fd, length, flags=mmap.MAP_SHARED, prot=mmap.PROT_READ,
-                              offset=offset)
-        if hasattr(mmap, "MADV_WILLNEED"):  # a file not in the page cache: read ahead
-            self._map.madvise(mmap.MADV_WILLNEED)
-        self.buf = np.frombuffer(self._map, np.uint8)
+        self._map = self.buf = Mapping(self._fd, length, offset)
         self.end, self.eof = length, offset + length >= size
         self._mapped_to = max(self._mapped_to, offset + length)
 
     def _release(self) -> None:
-        self.buf = np.zeros(0, np.uint8)
+        self.buf = bytearray()
         if self._map is not None:
-            try:
-                self._map.close()
-            except BufferError:  # a view of it is still alive: unmapped when it is freed
-                pass
+            self._map.close()
             self._map = None
 
     def advance(self, pos: int) -> int:
@@ -186,9 +223,9 @@ def open_source(path: str | Path, chunk_bytes: int | None = None, *,
         raise
 
 
-def _fill(f: Any, buf: np.ndarray, start: int) -> tuple[int, bool]:
+def _fill(f: Any, buf: bytearray, start: int) -> tuple[int, bool]:
     """Read into ``buf[start:]``; returns (end, eof)."""
-    view = buf.data[start:]
+    view = memoryview(buf)[start:]
     got = 0
     while got < len(view):
         n = f.readinto(view[got:])

@@ -13,8 +13,7 @@ Findings are the product's one model (:mod:`lolacli.findings`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-import numpy as np
+from typing import Any
 
 from lolacli.findings import Findings, Severity
 from lolacli.text import number, plural
@@ -42,23 +41,39 @@ class FrameFate:
 
     timeout_ns: int
     timeout_source: str
-    lost: np.ndarray  # outgoing frame numbers, sorted
-    in_flight: np.ndarray
+    lost: Any  # outgoing frame numbers, sorted (a numpy array, or a list)
+    in_flight: Any
     late: int
     late_frames: tuple[int, ...]
     lost_cyclic: int = 0
 
 
 def fates(
-    pending_frames: np.ndarray, pending_ts: np.ndarray, pending_cyclic: np.ndarray,
+    pending_frames: Any, pending_ts: Any, pending_cyclic: Any,
     end_ts: int, timeout: tuple[int, str], late_count: int, late_frames: tuple[int, ...],
 ) -> FrameFate:
+    """Lost and in-flight frames among the unanswered ones: numpy arrays in and out, or
+    lists (a small capture, without numpy; the same frames)."""
     t, source = timeout
-    flying = pending_ts > end_ts - t
-    order = np.argsort(pending_frames, kind="stable")
-    frames, flying, cyc = pending_frames[order], flying[order], pending_cyclic[order]
-    return FrameFate(t, source, frames[~flying], frames[flying], late_count, late_frames,
-                     int(np.count_nonzero(cyc & ~flying)))
+    if isinstance(pending_frames, list):
+        order = sorted(range(len(pending_frames)), key=pending_frames.__getitem__)
+        lost: list[int] = []
+        flying_frames: list[int] = []
+        lost_cyclic = 0
+        for i in order:
+            if pending_ts[i] > end_ts - t:
+                flying_frames.append(pending_frames[i])
+            else:
+                lost.append(pending_frames[i])
+                lost_cyclic += bool(pending_cyclic[i])
+        return FrameFate(t, source, lost, flying_frames, late_count, late_frames, lost_cyclic)
+    import numpy as np
+
+    in_air = pending_ts > end_ts - t
+    by_frame = np.argsort(pending_frames, kind="stable")
+    frames, in_air, cyc = pending_frames[by_frame], in_air[by_frame], pending_cyclic[by_frame]
+    return FrameFate(t, source, frames[~in_air], frames[in_air], late_count, late_frames,
+                     int(np.count_nonzero(cyc & ~in_air)))
 
 
 def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_lost: int,
@@ -75,12 +90,12 @@ def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_l
                 f"the bus never answered: {plural(sent, 'frame')} sent, none came back (no "
                 "slave connected or powered, cable, or a capture of the master's sending side "
                 "only)",
-                fate.lost if fate.lost.size else fate.in_flight, sent)
+                fate.lost if len(fate.lost) else fate.in_flight, sent)
     if back and not sent:
         out.add("direction-unknown", WARNING,
                 f"all {plural(back, 'frame')} look returned and none echoes another: the "
                 f"direction cannot be told ({direction_rule} rule); nothing is paired")
-    lost = int(fate.lost.size)
+    lost = len(fate.lost)
     if lost:
         cyc = f", {fate.lost_cyclic} of them cyclic" if fate.lost_cyclic else ""
         out.add("lost", FAILURE if lost > max_lost else WARNING,
@@ -93,12 +108,12 @@ def frame_findings(out: Findings, counts: dict[str, int], fate: FrameFate, max_l
                 f"{plural(fate.late, 'frame')} came back later than the timeout "
                 f"({number(fate.timeout_ns / 1000, 'µs', 2)}, {fate.timeout_source}); counted "
                 "apart from lost frames", fate.late_frames, fate.late)
-    if fate.in_flight.size:
+    if len(fate.in_flight):
         out.add("in-flight-at-end", INFO,
-                f"{plural(int(fate.in_flight.size), 'frame')} sent within the last "
+                f"{plural(len(fate.in_flight), 'frame')} sent within the last "
                 f"{number(fate.timeout_ns / 1000, 'µs', 2)} of the capture had no answer yet "
                 "(not lost)",
-                fate.in_flight, int(fate.in_flight.size))
+                fate.in_flight, len(fate.in_flight))
 
 
 def timestamp_findings(

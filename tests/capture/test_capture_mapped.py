@@ -268,10 +268,10 @@ def test_pipes_and_non_regular_files_are_read(tmp_path: Path,
     try:
         with open_source(fifo) as src:
             assert isinstance(src, ChunkedSource)
-            got = src.buf[: src.end].tobytes()
+            got = bytes(src.buf[: src.end])
             while not src.eof:
                 src.advance(src.end)
-                got += src.buf[: src.end].tobytes()
+                got += bytes(src.buf[: src.end])
     finally:
         writer.wait(timeout=30)
     assert got == data

@@ -66,3 +66,33 @@ def test_std_is_exact_over_the_whole_int64_range(seed):
     assert whole["std"] == pytest.approx(exact, rel=1e-15)
     for cuts in ([1], [7, 100, 101], list(range(0, 300, 13))):
         assert _us(stats.summarize_chunks(np.split(v, cuts))) == whole
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_python_ints_give_the_numpy_figures_to_the_last_bit(seed):
+    """A short series of Python ints (a small capture's rows) is summarised without numpy;
+    every figure is the one the numpy path gives for the same values, however cut."""
+    from array import array
+
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(1, 3000))
+    if seed % 3 == 0:
+        v = rng.integers(40_000, 90_000, n)
+    elif seed % 3 == 1:
+        v = rng.integers(-(2**62), 2**62, n)  # offsets beyond 2^63: the limbs' range
+    else:
+        v = rng.choice([0, 5, 1_000_000], n)
+    values = [int(x) for x in v]
+    cuts = sorted(int(c) for c in rng.integers(0, n, 4))
+    parts = [values[a:b] for a, b in zip([0, *cuts], [*cuts, n], strict=True)]
+    expected = stats.summarize_chunks([np.asarray(p, np.int64) for p in parts])
+    assert stats.summarize_chunks(parts) == expected
+    assert stats.summarize_chunks([array("q", p) for p in parts]) == expected
+    assert stats.summarize_array(values) == expected
+
+
+def test_python_values_that_are_not_ints_still_raise():
+    for bad in ([1.5, 2.0], [True, False], [1, 2.5]):
+        with pytest.raises(TypeError):
+            stats.summarize_array(bad)
+    assert stats.summarize_array([]) is None
