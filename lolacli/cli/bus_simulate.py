@@ -210,12 +210,11 @@ def simulate_cmd(
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
-    """Bring the ENI's chain (default: the embedded LOLA chain) to OP with our master in
-    virtual time, move every joint (a back-and-forth, or --move/--trajectory S-curves) and
-    report round trip, WKC, lost frames, DC error and the software sections with a verdict
-    (lolacli.simulate/1). --host-latency-us, --forwarding, --cable-m vary the round trip
-    (timing_sources says how). --iface: the same in real time on a live bus. Exit 1 when
-    the verdict fails, 2 bad options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
+    """Bring the ENI's chain (default: LOLA) to OP with our master in virtual time, move
+    every joint (or --move/--trajectory S-curves) and report round trip, WKC, lost frames,
+    DC error, CAN sensor ages and the software sections with a verdict (lolacli.simulate/1).
+    --iface: the same in real time on a live bus. Exit 1 when the verdict fails, 2 bad
+    options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
     from lolacli.simulate import options_from_cli, simulate
@@ -229,8 +228,7 @@ def simulate_cmd(
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
         moves=move or (), trajectory=trajectory, imu_rate_hz=imu_rate, fts_rate_hz=fts_rate,
-        can_bitrate=can_bitrate,
-    )  # fmt: skip
+        can_bitrate=can_bitrate)  # fmt: skip
     with stop_signals() as stop:
         # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
