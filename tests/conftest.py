@@ -6,6 +6,7 @@ import os
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -17,6 +18,20 @@ def corpus_files(kind: str, pattern: str = "*") -> list[Path]:
     """Files of one corpus folder (eni, pcap, esi, eds); empty when the corpus is absent."""
     folder = CORPUS / kind
     return sorted(folder.glob(pattern)) if folder.is_dir() else []
+
+
+def script_module(relative: str) -> Any:
+    """A script of the repository (``tools/…``, ``benchmarks/…``) imported as a module."""
+    import importlib.util
+    import sys
+
+    path = ROOT / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
 
 
 def corpus_ids(paths: list[Path]) -> list[str]:

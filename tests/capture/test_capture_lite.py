@@ -4,14 +4,13 @@ and damaged files, with both engines."""
 
 from __future__ import annotations
 
-import importlib.util
 import random
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from conftest import corpus_files, corpus_ids
+from conftest import corpus_files, corpus_ids, script_module
 
 import lolacli.capture.analyze as A
 from lolacli.errors import CaptureError
@@ -38,12 +37,7 @@ def test_lite_equals_numpy_on_every_corpus_capture(path, fast, monkeypatch):
 
 
 def _bench():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location(
-        "capture_throughput", ROOT / "benchmarks" / "capture_throughput.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script_module("benchmarks/capture_throughput.py")
 
 
 def test_lite_equals_numpy_on_a_lola_sized_capture_and_its_damage(tmp_path, fast, monkeypatch):

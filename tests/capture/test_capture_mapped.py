@@ -11,7 +11,6 @@ is read again).
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import struct
 import subprocess
@@ -19,7 +18,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import corpus_files, corpus_ids
+from conftest import corpus_files, corpus_ids, script_module
 
 from lolacli.capture import scan as S
 from lolacli.capture.analyze import analyze_file
@@ -43,12 +42,7 @@ def _doc(path: Path, **kw: object) -> object:
 
 
 def _bench() -> object:
-    spec = importlib.util.spec_from_file_location(
-        "capture_throughput", ROOT / "benchmarks" / "capture_throughput.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script_module("benchmarks/capture_throughput.py")
 
 
 @pytest.fixture(scope="module")

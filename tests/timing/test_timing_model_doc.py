@@ -3,23 +3,15 @@ fails when the model, the capture analysis or the corpus changed and the table d
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
-from conftest import CORPUS
+from conftest import CORPUS, script_module
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location(
-        "timing_model_check", ROOT / "tools" / "timing_model_check.py")
-    assert spec and spec.loader
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return script_module("tools/timing_model_check.py")
 
 
 def test_timing_model_table_is_current(corpus):
