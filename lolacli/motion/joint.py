@@ -29,8 +29,8 @@ unlimited resolution); the current at each 50 µs instant.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, fields
+from collections.abc import Callable, Sequence
+from dataclasses import MISSING, dataclass, fields
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -42,6 +42,12 @@ COULOMB_SMOOTHING_RAD_S = 0.01
 #: the seed's sampling times (Fig. 5): position and velocity 0.1 ms, current 50 µs
 POSITION_PERIOD_NS = 100_000
 CURRENT_PERIOD_NS = 50_000
+
+#: the motor encoder's increments per motor turn when a joints file does not say: a 19-bit
+#: single-turn absolute encoder (BiSS/EnDat class), the usual one on servo motors of this
+#: size; the drive counts motor-side, so a link radian is 2^19 × N / 2π increments
+#: (8.3 M at N = 100: 0.12 µrad a count, ±256 rad of link in the int32 position)
+DEFAULT_ENCODER_INCREMENTS_PER_REV = 524_288.0
 
 
 @dataclass(frozen=True)
@@ -70,6 +76,14 @@ class JointParams:
     velocity_ki_per_s: float
     current_kp_v_per_a: float
     current_ki_per_s: float
+    # the drive's position unit (optional in a joints file)
+    encoder_increments_per_rev: float = DEFAULT_ENCODER_INCREMENTS_PER_REV
+
+    @property
+    def increments_per_rad(self) -> float:
+        """The drive's position unit: encoder increments (motor side) per radian of the
+        link, ``encoder_increments_per_rev`` × N / 2π."""
+        return self.encoder_increments_per_rev * self.gear_ratio / (2.0 * math.pi)
 
     @property
     def inertia_kgm2(self) -> float:
@@ -86,7 +100,8 @@ class JointParams:
         problems = []
         positive = ("motor_inertia_kgm2", "torque_constant_nm_per_a", "resistance_ohm",
                     "inductance_h", "supply_v", "max_current_a", "gear_ratio",
-                    "position_kp_per_s", "velocity_kp_a_s_per_rad", "current_kp_v_per_a")
+                    "position_kp_per_s", "velocity_kp_a_s_per_rad", "current_kp_v_per_a",
+                    "encoder_increments_per_rev")
         for f in fields(self):
             if f.name == "name":
                 continue
@@ -157,6 +172,86 @@ class DriveInput:
     current: Any
 
 
+class Cascade:
+    """The drive's P-PI-PI cascade and the joint it moves, one 0.1 ms control period at a
+    time: the one implementation behind :func:`run_cascade` (whole trajectories) and the
+    emulated drives' joint load (:class:`lolacli.devices.joint_load.JointLoad`, a bus
+    cycle's periods at a time).
+
+    State: the motor current :attr:`current` (A), the joint angle :attr:`theta` (rad) and
+    velocity :attr:`omega` (rad/s), the velocity PI's integral part :attr:`vint` (A) and
+    the current PI's :attr:`iint` (V). ``kvel_ff`` multiplies the target velocity
+    (1 + k_e; 0 for none); ``substeps`` plant steps per 50 µs current period."""
+
+    __slots__ = ("p", "kvel_ff", "substeps", "_c", "current", "theta", "omega", "vint",
+                 "iint")
+
+    def __init__(self, p: JointParams, *, kvel_ff: float, substeps: int = 1,
+                 initial: tuple[float, float] = (0.0, 0.0)) -> None:
+        if substeps < 1:
+            raise ValueError("substeps must be >= 1")
+        self.p, self.kvel_ff, self.substeps = p, kvel_ff, substeps
+        tp = POSITION_PERIOD_NS * 1e-9
+        tc = CURRENT_PERIOD_NS * 1e-9
+        phi, gam = discretize(p, tc / substeps)
+        kv, kpc = p.velocity_kp_a_s_per_rad, p.current_kp_v_per_a
+        # the loop's constants, unpacked into locals by run()
+        self._c = (*phi.ravel().tolist(), *gam.ravel().tolist(),
+                   p.position_kp_per_s, kv, kpc, p.max_current_a, p.supply_v,
+                   p.coulomb_nm, COULOMB_SMOOTHING_RAD_S, p.gravity_nm,
+                   kv * p.velocity_ki_per_s * tp, kpc * p.current_ki_per_s * tc)
+        self.current = self.theta = self.omega = self.vint = self.iint = 0.0
+        self.reset(*initial)
+
+    def reset(self, theta: float, omega: float = 0.0) -> None:
+        """Start again at (θ, ω): no current, the integrators at their steady values for
+        that motion with no load (the current PI's holds the back-EMF)."""
+        self.theta, self.omega = theta, omega
+        self.current = 0.0
+        self.vint = 0.0
+        self.iint = self.p.torque_constant_nm_per_a * self.p.gear_ratio * omega
+
+    def run(self, position: Sequence[float], velocity: Sequence[float],
+            current: Sequence[float], out: list[float] | None = None) -> None:
+        """One control period per entry of the targets (position rad, velocity rad/s
+        before ``kvel_ff``, current feed-forward A, held over the period); ``out`` gets θ
+        at the start of each period, before its control update."""
+        (p00, p01, p02, p10, p11, p12, p20, p21, p22, g0v, g0t, g1v, g1t, g2v, g2t,
+         kp, kv, kpc, imax, vmax, fc, ws, grav, kvi_tp, kci_tc) = self._c
+        kvel_ff = self.kvel_ff
+        tanh, sin = math.tanh, math.sin
+        cur, th, w, vint, iint = self.current, self.theta, self.omega, self.vint, self.iint
+        inner = range(POSITION_PERIOD_NS // CURRENT_PERIOD_NS)
+        sub = range(self.substeps)
+        record = out.append if out is not None else None
+        for target, vel, ff in zip(position, velocity, current, strict=True):
+            if record is not None:
+                record(th)
+            ev = kp * (target - th) + kvel_ff * vel - w
+            icmd = kv * ev + vint + ff
+            if icmd > imax:
+                icmd = imax
+            elif icmd < -imax:
+                icmd = -imax
+            else:
+                vint += kvi_tp * ev  # integrate only when not saturated (anti-windup)
+            for _ in inner:
+                ei = icmd - cur
+                volts = kpc * ei + iint
+                if volts > vmax:
+                    volts = vmax
+                elif volts < -vmax:
+                    volts = -vmax
+                else:
+                    iint += kci_tc * ei
+                for _ in sub:
+                    tau = fc * tanh(w / ws) + grav * sin(th)
+                    cur, th, w = (p00 * cur + p01 * th + p02 * w + g0v * volts + g0t * tau,
+                                  p10 * cur + p11 * th + p12 * w + g1v * volts + g1t * tau,
+                                  p20 * cur + p21 * th + p22 * w + g2v * volts + g2t * tau)
+        self.current, self.theta, self.omega, self.vint, self.iint = cur, th, w, vint, iint
+
+
 def run_cascade(
     p: JointParams,
     drive: DriveInput,
@@ -166,8 +261,9 @@ def run_cascade(
     initial: tuple[float, float] = (0.0, 0.0),
     should_stop: Callable[[], bool] | None = None,
 ) -> np.ndarray:
-    """Run the cascade over the drive's targets; the joint angle θ (rad) at the start of
-    each 0.1 ms period, before its control update (numpy array, one per period).
+    """Run the cascade (:class:`Cascade`) over the drive's targets; the joint angle θ
+    (rad) at the start of each 0.1 ms period, before its control update (numpy array,
+    one per period).
 
     ``kvel_ff`` multiplies the target velocity (1 + k_e; 0 for none). ``initial`` is
     (θ, ω) at t = 0, the current and the integrators start at their steady values for
@@ -176,61 +272,16 @@ def run_cascade(
     """
     import numpy as np
 
-    if substeps < 1:
-        raise ValueError("substeps must be >= 1")
-    per_position = POSITION_PERIOD_NS // CURRENT_PERIOD_NS
-    tp = POSITION_PERIOD_NS * 1e-9
-    tc = CURRENT_PERIOD_NS * 1e-9
-    phi, gam = discretize(p, tc / substeps)
-    (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = phi.tolist()
-    (g0v, g0t), (g1v, g1t), (g2v, g2t) = gam.tolist()
-    kp, kv, ki = p.position_kp_per_s, p.velocity_kp_a_s_per_rad, p.velocity_ki_per_s
-    kpc, kic = p.current_kp_v_per_a, p.current_ki_per_s
-    imax, vmax = p.max_current_a, p.supply_v
-    fc, ws, grav = p.coulomb_nm, COULOMB_SMOOTHING_RAD_S, p.gravity_nm
-    kvi_tp, kci_tc = kv * ki * tp, kpc * kic * tc
-    tanh, sin = math.tanh, math.sin
-
-    th, w = initial
-    cur = 0.0
-    vint = 0.0  # velocity PI's integral part, A
-    iint = p.torque_constant_nm_per_a * p.gear_ratio * w  # current PI's: the back-EMF, V
+    cascade = Cascade(p, kvel_ff=kvel_ff, substeps=substeps, initial=initial)
     tt, vt, it = (np.asarray(a, dtype=float).tolist() for a in (drive.position,
                                                                   drive.velocity,
                                                                   drive.current))
-    out = [0.0] * len(tt)
-    inner = range(per_position)
-    sub = range(substeps)
-    n = 0
-    for n in range(len(tt)):
-        if should_stop is not None and n % 1000 == 0 and n and should_stop():
+    out: list[float] = []
+    for n in range(0, len(tt), 1000):
+        if should_stop is not None and n and should_stop():
             break
-        out[n] = th
-        ev = kp * (tt[n] - th) + kvel_ff * vt[n] - w
-        icmd = kv * ev + vint + it[n]
-        if icmd > imax:
-            icmd = imax
-        elif icmd < -imax:
-            icmd = -imax
-        else:
-            vint += kvi_tp * ev  # integrate only when not saturated (anti-windup)
-        for _ in inner:
-            ei = icmd - cur
-            volts = kpc * ei + iint
-            if volts > vmax:
-                volts = vmax
-            elif volts < -vmax:
-                volts = -vmax
-            else:
-                iint += kci_tc * ei
-            for _ in sub:
-                tau = fc * tanh(w / ws) + grav * sin(th)
-                cur, th, w = (p00 * cur + p01 * th + p02 * w + g0v * volts + g0t * tau,
-                              p10 * cur + p11 * th + p12 * w + g1v * volts + g1t * tau,
-                              p20 * cur + p21 * th + p22 * w + g2v * volts + g2t * tau)
-    else:
-        n = len(tt)
-    return np.array(out[:n])
+        cascade.run(tt[n:n + 1000], vt[n:n + 1000], it[n:n + 1000], out)
+    return np.array(out)
 
 
 #: the joint the ``joint`` commands use unless told: the hip flexion of seed 000's tables
@@ -257,18 +308,21 @@ def parse_joints(text: str, source: str) -> dict[str, JointParams]:
     if not isinstance(classes, dict) or not isinstance(joints, dict) or not joints:
         raise InputError("needs [class.NAME] tables and a [joints] table", path=source)
     keys = [f.name for f in fields(JointParams) if f.name != "name"]
+    optional = {f.name for f in fields(JointParams) if f.default is not MISSING}
     out = {}
     for joint, cls in joints.items():
         table = classes.get(cls) if isinstance(cls, str) else None
         if not isinstance(table, dict):
             raise InputError(f"joint {joint!r}: no class {cls!r}", path=source)
-        missing = [k for k in keys if k not in table]
+        missing = [k for k in keys if k not in table and k not in optional]
         unknown = [k for k in table if k not in keys]
         if missing or unknown:
             what = f"missing {', '.join(missing)}" if missing else f"unknown {', '.join(unknown)}"
             raise InputError(f"class {cls!r}: {what}", path=source)
         values = {}
         for k in keys:
+            if k not in table:
+                continue  # optional: its default
             v = table[k]
             if isinstance(v, bool) or not isinstance(v, int | float):
                 raise InputError(f"class {cls!r}: {k} is not a number", path=source)
@@ -297,6 +351,8 @@ def find_joint(joints: dict[str, JointParams], name: str) -> JointParams | None:
 
 __all__ = [
     "COULOMB_SMOOTHING_RAD_S",
+    "Cascade",
+    "DEFAULT_ENCODER_INCREMENTS_PER_REV",
     "DEFAULT_JOINT",
     "CURRENT_PERIOD_NS",
     "POSITION_PERIOD_NS",
