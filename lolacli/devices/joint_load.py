@@ -1,0 +1,96 @@
+"""A joint behind an emulated CiA 402 drive: the drive's :class:`~lolacli.devices.cia402.Load`
+that runs seed 000's P-PI-PI cascade on a motor, gear and link
+(:class:`lolacli.motion.joint.Cascade`, the one implementation the ``joint`` commands run).
+
+The drive counts position in motor encoder increments: a link radian is
+:attr:`~lolacli.motion.joint.JointParams.increments_per_rad` of them. Each bus cycle the
+drive's demand becomes the cascade's targets, held over the 0.1 ms control periods until
+the next cycle's step (a step first runs the periods since the last one on the targets
+held over them, then takes the new demand; a bus period that is not a whole number of
+periods carries its rest on):
+
+* position (CSP, profile position): the target position; the target velocity is the
+  difference of successive demands over the cycle (× ``kvel_ff`` = 1 + k_e in the
+  cascade), the current feed-forward the inverse dynamics of the target (J θ̈d +
+  G sin θd) / (N k_t) with θ̈d from successive target velocities. A velocity limit
+  (``limit``) limits how fast the target may move, as the kinematic follower does;
+* velocity (CSV): the target position integrates the demand velocity;
+* stop (quick stop, fault reaction): the target velocity ramps to rest at the
+  deceleration (0: at once) and the target position integrates it;
+* torque (CST): not modelled here; the joint holds still as with the kinematic
+  :class:`~lolacli.devices.cia402.Follower` (and starts again from where it stands).
+
+When the drive's actual values are not the ones this load gave last (the drive was
+disabled, its brake holding the joint, or another load moved it), the joint starts
+again at rest at the actual position.
+"""
+
+from __future__ import annotations
+
+import math
+
+from lolacli.devices.cia402 import POSITION, STOP, VELOCITY, Load
+from lolacli.motion.joint import POSITION_PERIOD_NS, Cascade, JointParams
+
+
+class JointLoad(Load):
+    """The joint ``params`` behind a drive (module docstring); ``kvel_ff`` = 1 + k_e."""
+
+    model = "joint"
+
+    def __init__(self, params: JointParams, *, kvel_ff: float = 1.0) -> None:
+        self.params = params
+        self.scale = params.increments_per_rad
+        self.cascade = Cascade(params, kvel_ff=kvel_ff)
+        self._inertia_per_a = params.inertia_kgm2 / params.link_torque_per_a
+        self._gravity_per_a = params.gravity_nm / params.link_torque_per_a
+        self.last: tuple[int, int] | None = None  # (position, velocity) given back last
+        self.pending_ns = 0  # time short of a whole control period, carried on
+        self.ref = 0.0  # target position, rad
+        self.ref_v = 0.0  # target velocity, rad/s
+        self.ff = 0.0  # current feed-forward, A
+
+    def follow(
+        self, kind: str, demand: int, position: int, velocity: int, limit: int, dt_ns: int
+    ) -> tuple[int, int]:
+        scale = self.scale
+        if self.last != (position, velocity):
+            self.cascade.reset(position / scale)
+            self.ref, self.ref_v, self.pending_ns = position / scale, velocity / scale, 0
+            self.ff = self._gravity_per_a * math.sin(self.ref)
+        if kind not in (POSITION, VELOCITY, STOP):  # torque: held still (module docstring)
+            self.last = None
+            return position, 0
+        if dt_ns <= 0:
+            self.last = (position, velocity)
+            return self.last
+        # the time since the last step ran on the targets the drive held over it
+        periods, self.pending_ns = divmod(self.pending_ns + dt_ns, POSITION_PERIOD_NS)
+        cascade = self.cascade
+        ref, ref_v = self.ref, self.ref_v
+        if periods:
+            cascade.run((ref,) * periods, (ref_v,) * periods, (self.ff,) * periods)
+        # the new demand: the targets until the next step
+        dt_s = dt_ns * 1e-9
+        if kind == POSITION:
+            target = demand / scale
+            if limit:
+                step = limit * dt_s / scale
+                target = max(ref - step, min(ref + step, target))
+            v = (target - ref) / dt_s
+            ref = target
+        elif kind == VELOCITY:
+            v = demand / scale
+            ref += v * dt_s
+        else:  # stop: ramp the target velocity to rest
+            step = limit * dt_s / scale if limit else math.inf
+            v = max(0.0, abs(ref_v) - step)
+            v = v if ref_v > 0 else -v
+            ref += v * dt_s
+        self.ff = self._inertia_per_a * (v - ref_v) / dt_s + self._gravity_per_a * math.sin(ref)
+        self.ref, self.ref_v = ref, v
+        self.last = (round(cascade.theta * scale), round(cascade.omega * scale))
+        return self.last
+
+
+__all__ = ["JointLoad"]
