@@ -17,6 +17,8 @@ from lolacli.cli.options import (
     EniOption,
     FtsRateOption,
     ImuRateOption,
+    JointsFileOption,
+    JointsFlag,
     MaxLostOption,
     MaxWkcOption,
     SeedOption,
@@ -207,6 +209,8 @@ def simulate_cmd(
     imu_rate: ImuRateOption = 200.0,
     fts_rate: FtsRateOption = 1000.0,
     can_bitrate: CanBitrateOption = 1_000_000,
+    joints: JointsFlag = False,
+    joints_file: JointsFileOption = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
@@ -218,7 +222,6 @@ def simulate_cmd(
     from lolacli.files import load_eni
     from lolacli.interrupt import stop_signals
     from lolacli.simulate import options_from_cli, simulate
-
     options = options_from_cli(
         rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down, bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
@@ -228,9 +231,8 @@ def simulate_cmd(
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
         moves=move or (), trajectory=trajectory, imu_rate_hz=imu_rate, fts_rate_hz=fts_rate,
-        can_bitrate=can_bitrate)  # fmt: skip
+        can_bitrate=can_bitrate, joints=joints, joints_file=joints_file)  # fmt: skip
     with stop_signals() as stop:
-        # live: no progress bar (its refresh thread would take the GIL mid-cycle)
         with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
             result = simulate(load_eni(eni or default_eni()), options, progress=progress, stop=stop)
     _finish(result, fmt, stop.exit_code)
@@ -251,7 +253,8 @@ def _finish(result: Any, fmt: OutputFormat, stop_code: int) -> None:
 
 
 class _progress:
-    """A rich progress bar on stderr (nothing when ``off``)."""
+    """A rich progress bar on stderr (nothing when ``off``; a live run has none: its
+    refresh thread would take the GIL mid-cycle)."""
 
     def __init__(self, off: bool) -> None:
         self.off = off
@@ -313,6 +316,7 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
         ("DC max error", f"{dc:,} ns" if dc is not None else
          ("not measured" if doc["dc_slaves"] else "no DC slaves")),
         ("drives enabled", f"{doc['drives_enabled']} of {doc['drives']}"),
+        ("drive loads", _loads(doc)),
         ("software per cycle", f"{software:g} µs" if software is not None else "not timed"),
         ("max rate", rates),
     ]
@@ -325,6 +329,17 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
     else:
         rows.append(("virtual / wall time", f"{doc['realtime_factor']:g}× real time"))
     return rows
+
+
+def _loads(doc: dict[str, Any]) -> str:
+    """What the drives move: kinematic followers, or --joints' joints behind some."""
+    from lolacli.text import plural
+
+    joints = doc.get("joints")
+    if not joints:
+        return "kinematic (a follower of the demand)"
+    return (f"a joint (motor, gear, link, cascade) behind {plural(len(joints['drives']), 'drive')}"
+            f", from {joints['file']}")
 
 
 def _sensor_rows(gateway: dict[str, Any]) -> list[tuple[str, str]]:

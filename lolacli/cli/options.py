@@ -125,6 +125,27 @@ CanBitrateOption = Annotated[
     ),
 ]
 
+# ---------------------------------------------------------------- the joints behind the drives
+
+JointsFlag = Annotated[
+    bool,
+    typer.Option(
+        "--joints",
+        help="A joint behind each drive the joints file names (motor, gear, link, the "
+        "drive's P-PI-PI cascade; lolacli/motion/joints.toml) instead of a kinematic "
+        "follower: moves show the joint's following error. Slower (Python, not the C core).",
+    ),
+]
+JointsFileOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--joints-file",
+        metavar="FILE",
+        help="The joints file of --joints (TOML, the form of the packaged "
+        "lolacli/motion/joints.toml; implies --joints). Default: the packaged LOLA joints.",
+    ),
+]
+
 # ---------------------------------------------------------------- verdict thresholds
 
 MaxLostOption = Annotated[

@@ -7,12 +7,15 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from lolacli.eni.model import Eni
 from lolacli.errors import EniError, UsageError
 from lolacli.simulate.moves import Goal
 from lolacli.timing.model import HostLatency
+
+if TYPE_CHECKING:
+    from lolacli.motion.joint import JointParams
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +58,18 @@ class SimulateOptions:
     imu_rate_hz: float = 200.0
     fts_rate_hz: float = 1000.0
     can_bitrate: int = 1_000_000
+    # --joints: a joint behind each drive these parameters name (lolacli.devices.joint_load;
+    # matched by slave name, lolacli.motion.joint.find_joint); empty: kinematic drives
+    joints: tuple[JointParams, ...] = ()
+    joints_source: str | None = None  # the file they came from (for messages)
+
+    def joint(self, slave: str) -> JointParams | None:
+        """The joint behind the drive ``slave`` (its ENI name) with --joints, else None."""
+        if not self.joints:
+            return None
+        from lolacli.motion.joint import find_joint
+
+        return find_joint({p.name: p for p in self.joints}, slave)
 
     def can_config(self) -> Any:
         """The emulated gateway's :class:`~lolacli.devices.can.CanConfig`."""
@@ -179,6 +194,9 @@ def _check_live(options: SimulateOptions) -> None:
             f"{', '.join(modelled)}: inputs of the simulated line; a live bus has its own "
             "delays and measures them"
         )
+    if options.joints:
+        raise UsageError("--joints: joints behind the emulated drives; a live bus's drives "
+                         "move what they move")
     if options.pace:
         raise UsageError("--pace: a live bus runs in real time anyway")
     busy = options.busy_wait_us
@@ -212,14 +230,18 @@ def options_from_cli(
     cable_m: Sequence[str] = (),
     moves: Sequence[str] = (),
     trajectory: Path | None = None,
+    joints: bool = False,
+    joints_file: Path | None = None,
     **fields: Any,
 ) -> SimulateOptions:
     """:class:`SimulateOptions` from the command line's spelling: ``duration`` (``10s``,
     ``500ms``; default 10 s) or ``cycles``, ``link_down`` as ``K[@T]``, ``set_values`` as
     ``VARIABLE=VALUE``, ``host_latency_us`` as ``MEAN[:STD]`` (µs), ``cable_m`` as ``M``
     or ``K=M`` items, ``moves`` as ``JOINT:DISTANCE[:V:A:J]`` and ``trajectory`` a goals
-    file (:mod:`lolacli.simulate.moves`); the other ``fields`` as they are. UsageError
-    for what does not parse or contradicts itself."""
+    file (:mod:`lolacli.simulate.moves`), ``joints`` (or a ``joints_file``) the packaged
+    joints behind the drives (or that file's: InputError when it does not parse); the
+    other ``fields`` as they are. UsageError for what does not parse or contradicts
+    itself."""
     from lolacli.emulator.run import parse_bad_link, parse_link_down
     from lolacli.timing.model import parse_cable_m, parse_duration_ns, parse_host_latency
 
@@ -251,8 +273,19 @@ def options_from_cli(
         else None,
         cable_m=_cable_items(tuple(cable_m), parse_cable_m),
         moves=_goals(moves, trajectory, fields.get("middleware", True)),
+        **_joints(joints, joints_file),
         **fields,
     )
+
+
+def _joints(joints: bool, path: Path | None) -> dict[str, Any]:
+    """``joints`` and ``joints_source`` of --joints/--joints-file (read and checked)."""
+    if not joints and path is None:
+        return {}
+    from lolacli.files import joints_path, load_joints
+
+    table = load_joints(path)
+    return {"joints": tuple(table.values()), "joints_source": str(path or joints_path())}
 
 
 def _goals(moves: Sequence[str], trajectory: Path | None, middleware: bool) -> tuple[Goal, ...]:

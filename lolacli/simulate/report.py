@@ -348,7 +348,8 @@ def report(
         "drives": len(app.drives),
         "drives_enabled": sum(1 for d in app.drives if d.enabled),
         "drive_faults": app.drive_faults,
-        "moves": _moves(master, app),
+        "moves": _moves(master, app, options),
+        "joints": _joints(master, app, options),
         "can_gateway": app.sensor_ages.report() if app.sensor_ages is not None else None,
         "watch": {name: _jsonable(v.value) for name, v in app.watch.items()},
         "faults": {
@@ -365,13 +366,28 @@ def report(
     }
 
 
-def _moves(master: Master, app: Application) -> list[dict[str, Any]] | None:
-    """Each moved joint's move and following error (None without --move/--trajectory)."""
+def _moves(
+    master: Master, app: Application, options: SimulateOptions
+) -> list[dict[str, Any]] | None:
+    """Each moved joint's move and following error (None without --move/--trajectory),
+    with the load behind its drive: ``joint`` (--joints) or ``kinematic``."""
     if app.moves is None:
         return None
     positions = {s.name: s.position for s in master.eni.slaves}
     names = [d.slave for d in app.drives]
-    return app.moves.report(names, [positions[n] for n in names])
+    moves = app.moves.report(names, [positions[n] for n in names])
+    for m in moves:
+        m["load"] = "joint" if options.joint(m["joint"]) is not None else "kinematic"
+    return moves
+
+
+def _joints(master: Master, app: Application, options: SimulateOptions) -> dict[str, Any] | None:
+    """--joints: the file and the drives with a joint behind them (None without)."""
+    if not options.joints:
+        return None
+    names = [d.slave for d in app.drives]
+    return {"file": options.joints_source,
+            "drives": [n for n in names if options.joint(n) is not None]}
 
 
 def _jsonable(value: Any) -> Any:

@@ -116,6 +116,7 @@ class Simulation:
             device = device_of(esc)
             if isinstance(device, CanGateway):
                 device.configure(config)
+        _attach_joints(eni, self.bus, options)
 
     def run(
         self, *, progress: Progress | None = None, stop: Stop | None = None
@@ -152,6 +153,29 @@ class Simulation:
             _close(recorders)
             if shm is not None:
                 shm.close()
+
+
+def _attach_joints(eni: Eni, bus: VirtualBus, options: SimulateOptions) -> None:
+    """--joints: a :class:`~lolacli.devices.joint_load.JointLoad` behind every drive the
+    joints name (those drives then run in Python, not in the chain core). UsageError
+    when no drive of the ENI has one."""
+    if not options.joints:
+        return
+    from lolacli.devices.cia402 import Cia402Drive
+    from lolacli.devices.joint_load import JointLoad
+
+    attached = 0
+    for slave, esc in zip(eni.slaves, bus.chain.slaves, strict=True):
+        device = device_of(esc)
+        params = options.joint(slave.name)
+        if isinstance(device, Cia402Drive) and params is not None:
+            device.load = JointLoad(params)
+            attached += 1
+    if not attached:
+        raise UsageError(
+            f"--joints: no drive of {eni.source} has a joint in {options.joints_source} "
+            f"(it names {len(options.joints)}, e.g. {options.joints[0].name!r})"
+        )
 
 
 def _with_series(

@@ -1,0 +1,73 @@
+"""`bus simulate --joints`: a joint (motor, gear, link, the drive's cascade) behind each
+drive the joints file names; a move's following error then carries the joint's dynamics
+on top of the bus's delay, and the joint settles on the target. Bad or foreign joints
+files are one-line errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from lolacli.files import joints_path, load_eni
+from lolacli.simulate import options_from_cli, simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+LOLA = ROOT / "lolacli" / "eni_examples" / "lola.xml"
+MOVES = ("L Hip Pitch:20000", "L Knee:-20000", "R Elbow:20000")
+
+
+def _sim(**kw: object) -> dict:
+    return simulate(load_eni(LOLA), options_from_cli(rate_hz=2000.0, duration="0.6s",
+                                                     moves=MOVES, **kw)).doc  # type: ignore[arg-type]
+
+
+def test_joints_follow_with_their_dynamics_and_settle_on_the_target() -> None:
+    kinematic, joints = _sim(), _sim(joints=True)
+    assert kinematic["joints"] is None
+    assert joints["joints"]["file"] == str(joints_path())
+    assert len(joints["joints"]["drives"]) == 21
+    for doc in (kinematic, joints):
+        assert doc["verdict"] == "pass", doc["findings"]
+    for k, j in zip(kinematic["moves"], joints["moves"], strict=True):
+        assert (k["load"], j["load"]) == ("kinematic", "joint")
+        assert k["joint"] == j["joint"] and k["complete"] and j["complete"]
+        assert j["following_error_rms"] > 1.1 * k["following_error_rms"], (k, j)
+        assert j["following_error_max"] > k["following_error_max"]
+        assert k["end_position"] == k["target_position"]
+        assert abs(j["end_position"] - j["target_position"]) <= 3, j
+
+
+def test_a_joints_file_puts_joints_only_behind_the_drives_it_names(tmp_path: Path) -> None:
+    text = joints_path().read_text()
+    head, _, table = text.partition("[joints]\n")
+    knee_only = tmp_path / "knee.toml"
+    knee_only.write_text(head + '[joints]\n"Joint04 L Knee" = "knee"\n')
+    doc = _sim(joints_file=knee_only)
+    assert doc["joints"] == {"file": str(knee_only), "drives": ["Joint04 L Knee"]}
+    assert {m["joint"]: m["load"] for m in doc["moves"]} == {
+        "Joint03 L Hip Pitch": "kinematic", "Joint04 L Knee": "joint",
+        "Joint21 R Elbow": "kinematic"}
+
+
+def test_bad_joints_are_one_line_errors(cli, tmp_path: Path) -> None:
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[class.x]\nmotor_inertia_kgm2 = = 1\n")
+    foreign = tmp_path / "foreign.toml"
+    foreign.write_text(joints_path().read_text().replace('"Joint', '"Arm'))
+    for args, code, said in (
+        (("--joints-file", broken), 3, f"{broken}:2:"),
+        (("--joints-file", tmp_path / "none.toml"), 3, "no such file"),
+        (("--joints-file", foreign), 2, "no drive of"),
+        (("--joints", "--iface", "lo"), 2, "--joints"),
+    ):
+        got, out, err = cli("bus", "simulate", "--duration", "10ms", *args)
+        assert (got, out) == (code, ""), err
+        assert err.count("\n") == 1 and said in err and "Traceback" not in err, err
+
+
+def test_the_json_says_the_load_of_each_move(cli) -> None:
+    code, out, err = cli("bus", "simulate", "--duration", "50ms", "--move", "L Knee:100",
+                         "--joints", "--format", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [m["load"] for m in doc["moves"]] == ["joint"]
