@@ -20,6 +20,11 @@ periods carries its rest on):
 * torque (CST): not modelled here; the joint holds still as with the kinematic
   :class:`~lolacli.devices.cia402.Follower` (and starts again from where it stands).
 
+A drive standing on its demand (actual = demand, velocity 0 in increments) is not
+stepped while its outputs stay the same (:meth:`Device.cycle`'s rest cache): the joint
+waits there as it is, within an increment of the demand. A drive with a joint runs in
+Python, not in the compiled chain core (:meth:`Cia402Drive.core_can_run`).
+
 When the drive's actual values are not the ones this load gave last (the drive was
 disabled, its brake holding the joint, or another load moved it), the joint starts
 again at rest at the actual position.
