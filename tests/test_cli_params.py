@@ -119,8 +119,6 @@ _MEANS_MORE_THAN_ONE_THING = {
     "an image's checks (bus sii write)",
     "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
     "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
-    "--joints": "the joint commands' parameter file, or bus simulate's switch to put joints "
-    "behind its drives (its file: --joints-file)",
 }
 
 

@@ -17,8 +17,8 @@ from lolacli.cli.options import (
     EniOption,
     FtsRateOption,
     ImuRateOption,
-    JointsFileOption,
-    JointsFlag,
+    JointModelFlag,
+    JointsOption,
     MaxLostOption,
     MaxWkcOption,
     SeedOption,
@@ -209,8 +209,8 @@ def simulate_cmd(
     imu_rate: ImuRateOption = 200.0,
     fts_rate: FtsRateOption = 1000.0,
     can_bitrate: CanBitrateOption = 1_000_000,
-    joints: JointsFlag = False,
-    joints_file: JointsFileOption = None,
+    joints: JointModelFlag = False,
+    joints_file: JointsOption = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
@@ -332,7 +332,7 @@ def _rows(doc: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def _loads(doc: dict[str, Any]) -> str:
-    """What the drives move: kinematic followers, or --joints' joints behind some."""
+    """What the drives move: kinematic followers, or --joint-model's joints behind some."""
     from lolacli.text import plural
 
     joints = doc.get("joints")

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from lolacli.cli.common import FormatOption, OutputFormat, emit_json
-from lolacli.cli.options import not_nan
+from lolacli.cli.options import JointsOption, not_nan
 
 if TYPE_CHECKING:
     from lolacli.motion.joint import JointParams
@@ -29,11 +29,6 @@ JointOption = Annotated[
     str,
     typer.Option("--joint", help="Joint: its ENI slave name, the name without its number "
                  "(\"L Knee\") or the number (\"Joint04\")."),
-]
-JointsOption = Annotated[
-    Path | None,
-    typer.Option("--joints", help="Joint parameters (TOML, the form of the packaged "
-                 "lolacli/motion/joints.toml). Default: the packaged LOLA joints."),
 ]
 StepOption = Annotated[
     float,

@@ -127,22 +127,22 @@ CanBitrateOption = Annotated[
 
 # ---------------------------------------------------------------- the joints behind the drives
 
-JointsFlag = Annotated[
+JointModelFlag = Annotated[
     bool,
     typer.Option(
-        "--joints",
+        "--joint-model",
         help="A joint behind each drive the joints file names (motor, gear, link, the "
-        "drive's P-PI-PI cascade; lolacli/motion/joints.toml) instead of a kinematic "
-        "follower: moves show the joint's following error. Slower (Python, not the C core).",
+        "drive's P-PI-PI cascade) instead of a kinematic follower: moves show the joint's "
+        "following error. Slower (Python, not the C core).",
     ),
 ]
-JointsFileOption = Annotated[
+JointsOption = Annotated[
     Path | None,
     typer.Option(
-        "--joints-file",
+        "--joints",
         metavar="FILE",
-        help="The joints file of --joints (TOML, the form of the packaged "
-        "lolacli/motion/joints.toml; implies --joints). Default: the packaged LOLA joints.",
+        help="Joint parameters (TOML, the form of the packaged lolacli/motion/joints.toml). "
+        "Default: the packaged LOLA joints. bus simulate: implies --joint-model.",
     ),
 ]
 

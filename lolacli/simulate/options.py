@@ -58,7 +58,7 @@ class SimulateOptions:
     imu_rate_hz: float = 200.0
     fts_rate_hz: float = 1000.0
     can_bitrate: int = 1_000_000
-    # --joints: a joint behind each drive these parameters name (lolacli.devices.joint_load;
+    # --joint-model: a joint behind each drive these parameters name (lolacli.devices.joint_load;
     # matched by slave name, lolacli.motion.joint.find_joint); empty: kinematic drives
     joints: tuple[JointParams, ...] = ()
     joints_source: str | None = None  # the file they came from (for messages)
@@ -195,7 +195,7 @@ def _check_live(options: SimulateOptions) -> None:
             "delays and measures them"
         )
     if options.joints:
-        raise UsageError("--joints: joints behind the emulated drives; a live bus's drives "
+        raise UsageError("--joint-model: joints behind the emulated drives; a live bus's drives "
                          "move what they move")
     if options.pace:
         raise UsageError("--pace: a live bus runs in real time anyway")
@@ -279,7 +279,7 @@ def options_from_cli(
 
 
 def _joints(joints: bool, path: Path | None) -> dict[str, Any]:
-    """``joints`` and ``joints_source`` of --joints/--joints-file (read and checked)."""
+    """``joints`` and ``joints_source`` of --joint-model/--joints (read and checked)."""
     if not joints and path is None:
         return {}
     from lolacli.files import joints_path, load_joints

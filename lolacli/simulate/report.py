@@ -370,7 +370,7 @@ def _moves(
     master: Master, app: Application, options: SimulateOptions
 ) -> list[dict[str, Any]] | None:
     """Each moved joint's move and following error (None without --move/--trajectory),
-    with the load behind its drive: ``joint`` (--joints) or ``kinematic``."""
+    with the load behind its drive: ``joint`` (--joint-model) or ``kinematic``."""
     if app.moves is None:
         return None
     positions = {s.name: s.position for s in master.eni.slaves}
@@ -382,7 +382,7 @@ def _moves(
 
 
 def _joints(master: Master, app: Application, options: SimulateOptions) -> dict[str, Any] | None:
-    """--joints: the file and the drives with a joint behind them (None without)."""
+    """--joint-model: the file and the drives with a joint behind them (None without)."""
     if not options.joints:
         return None
     names = [d.slave for d in app.drives]

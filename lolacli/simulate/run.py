@@ -156,7 +156,7 @@ class Simulation:
 
 
 def _attach_joints(eni: Eni, bus: VirtualBus, options: SimulateOptions) -> None:
-    """--joints: a :class:`~lolacli.devices.joint_load.JointLoad` behind every drive the
+    """--joint-model: a :class:`~lolacli.devices.joint_load.JointLoad` behind every drive the
     joints name (those drives then run in Python, not in the chain core). UsageError
     when no drive of the ENI has one."""
     if not options.joints:

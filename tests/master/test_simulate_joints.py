@@ -55,10 +55,10 @@ def test_bad_joints_are_one_line_errors(cli, tmp_path: Path) -> None:
     foreign = tmp_path / "foreign.toml"
     foreign.write_text(joints_path().read_text().replace('"Joint', '"Arm'))
     for args, code, said in (
-        (("--joints-file", broken), 3, f"{broken}:2:"),
-        (("--joints-file", tmp_path / "none.toml"), 3, "no such file"),
-        (("--joints-file", foreign), 2, "no drive of"),
-        (("--joints", "--iface", "lo"), 2, "--joints"),
+        (("--joints", broken), 3, f"{broken}:2:"),
+        (("--joints", tmp_path / "none.toml"), 3, "no such file"),
+        (("--joints", foreign), 2, "no drive of"),
+        (("--joint-model", "--iface", "lo"), 2, "--joint-model"),
     ):
         got, out, err = cli("bus", "simulate", "--duration", "10ms", *args)
         assert (got, out) == (code, ""), err
@@ -67,7 +67,7 @@ def test_bad_joints_are_one_line_errors(cli, tmp_path: Path) -> None:
 
 def test_the_json_says_the_load_of_each_move(cli) -> None:
     code, out, err = cli("bus", "simulate", "--duration", "50ms", "--move", "L Knee:100",
-                         "--joints", "--format", "json")
+                         "--joint-model", "--format", "json")
     assert code == 0, err
     doc = json.loads(out)
     assert [m["load"] for m in doc["moves"]] == ["joint"]
