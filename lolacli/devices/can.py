@@ -29,8 +29,9 @@ from __future__ import annotations
 
 import math
 import struct
+import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -429,12 +430,13 @@ class LiveSamples:
     ``latest[i]`` is replaced whole, so a reader sees one sample's values or the next's,
     never a mix."""
 
-    def __init__(self, config: CanConfig) -> None:
+    def __init__(self, config: CanConfig, clock: Callable[[], int] = time.monotonic_ns) -> None:
         if len(config.sensors) * TPDO_COB_BLOCK > 0x200 - TPDO_COB_BASE or any(
             len(s.frames()) > TPDO_COB_BLOCK for s in config.sensors
         ):
             raise ValueError("more sensors or values than the TPDO1 range's COB-IDs carry")
         self.config = config
+        self.clock = clock  # the arrivals' clock (ns), the emulator's frames' too
         n = len(config.sensors)
         self._frames = {
             tpdo_cob_id(i, f): (i, f, size)

@@ -188,15 +188,22 @@ class CanGateway(Device):
         receiving thread) instead of the model: each cycle takes every sensor's latest
         sample in (its counter: the samples received, mod 65536) and first adds to
         ``live.ages`` the age of the sample the master's frame of this cycle read (the
-        cycle runs after the frame, at its time). Only Python runs a bridged gateway
-        (:func:`~lolacli.devices.flat.flatten` gives ``None``). A sensor of this
-        gateway's configuration ``live`` does not have (by node ID) holds no sample."""
+        cycle runs after the frame, at its time ``t_ns``: the frame read what the cycles
+        that ran before ``t_ns`` took in, on ``live.clock``, the arrivals' clock; a cycle
+        the emulator held back while a frame was answered takes in after it). Only Python
+        runs a bridged gateway (:func:`~lolacli.devices.flat.flatten` gives ``None``). A
+        sensor of this gateway's configuration ``live`` does not have (by node ID) holds
+        no sample."""
         by_node = {s.node_id: j for j, s in enumerate(live.config.sensors)}
+        n = len(self.config.sensors)
         self.live = live
         self.live_index = [by_node.get(s.node_id) for s in self.config.sensors]
-        self.live_held: list[Held | None] = [None] * len(self.config.sensors)
-        self.live_read = [0] * len(self.config.sensors)  # the last sample counted read
-        self.held = [-1] * len(self.config.sensors)
+        # per sensor the samples in the process data: now and before, each with the time
+        # a cycle took it in
+        self.live_held: list[tuple[Held, int] | None] = [None] * n
+        self.live_before: list[tuple[Held, int] | None] = [None] * n
+        self.live_read = [0] * n  # the last sample counted read
+        self.held = [-1] * n
         self._cached = None
 
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
@@ -267,19 +274,22 @@ class CanGateway(Device):
 
     def _step_live(self, live: LiveSamples, t_ns: int) -> None:
         """The cycle of a bridged gateway (:meth:`bridge`)."""
-        held = self.live_held
+        held, before = self.live_held, self.live_before
+        now_ns = live.clock()
         for i, j in enumerate(self.live_index):
             if j is None:
                 continue
             now = held[i]
-            if now is not None:
-                live.ages[j].add(t_ns - now[2])  # what this cycle's frame read
-                if now[0] != self.live_read[i]:
-                    self.live_read[i] = now[0]
+            read = now if now is not None and now[1] <= t_ns else before[i]
+            if read is not None and read[1] <= t_ns:
+                sample = read[0]
+                live.ages[j].add(t_ns - sample[2])  # what this cycle's frame read
+                if sample[0] != self.live_read[i]:
+                    self.live_read[i] = sample[0]
                     live.read[j] += 1
             latest = live.latest[j]
-            if latest is not None and latest is not now:
-                held[i] = latest
+            if latest is not None and (now is None or latest is not now[0]):
+                before[i], held[i] = now, (latest, now_ns)
                 self._write(i, latest[0] - 1, [_REAL32(v) for v in latest[1]])
 
     def _write(self, i: int, k: int, packed: list[bytes]) -> None:

