@@ -297,7 +297,7 @@ def _sensor_lines(report: dict[str, Any]) -> list[str]:
     for s in report["sensors"]:
         rate = "" if s["rate_hz"] is None else f" at {number(s['rate_hz'], 'Hz')}"
         lines.append(f"CAN {s['name']}: {plural(s['samples_received'], 'sample')}{rate}, "
-                     f"{s['samples_read']} read by the master")
+                     f"{s['samples_read']:,} read by the master")
         age = s["age_us"]
         if age is not None:
             lines.append(f"  age at the master: mean {number(age['mean'] / 1e3, 'ms')}, "

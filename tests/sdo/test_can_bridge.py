@@ -16,6 +16,7 @@ import statistics
 import struct
 import time
 
+from lolacli.devices import device_for
 from lolacli.devices.can import (
     CanConfig,
     LiveSamples,
@@ -114,6 +115,42 @@ def test_a_bridged_gateway_leaves_the_c_core_and_says_so_in_its_summary() -> Non
     report = live.report()
     assert [s["name"] for s in report["sensors"]] == ["IMU", "FTS left", "FTS right"]
     assert all(s["samples_received"] == 0 and s["age_us"] is None for s in report["sensors"])
+
+
+def test_a_frame_reads_what_the_cycles_before_it_took_in() -> None:
+    """A frame's age is of the sample in the process data when it came: a cycle the
+    emulator held back while the next frame was answered takes its sample in after
+    that frame (clock in ns, the arrivals' and the frames')."""
+    now = [0]
+    config = CanConfig()
+    live = LiveSamples(config, clock=lambda: now[0])
+    gateway = device_for(next(s for s in load_eni(lola_path()).slaves if s.name == GATEWAY))
+    assert isinstance(gateway, CanGateway)
+    gateway.bridge(live)
+    imu = config.sensors[0]
+
+    def arrive(k: int, at: int) -> None:
+        for cob, data in sample_frames(config, 0, sample_values(imu, imu.sample_ns(k))):
+            live.frame(cob, data, at)
+
+    def cycle(t: int, runs_at: int) -> None:
+        now[0] = runs_at
+        gateway.cycle(b"", t)
+
+    arrive(0, 100)
+    cycle(1000, 1050)  # the frame at 1000 read nothing yet; sample 0 taken in
+    cycle(1500, 1550)  # read sample 0: 1400 old
+    arrive(1, 1700)
+    cycle(2000, 2600)  # held back past the frame at 2500: read sample 0 (1900), takes 1
+    cycle(2500, 2700)  # the frame at 2500 read sample 0 still: 2400
+    cycle(3000, 3050)  # read sample 1: 1300
+    assert live.ages[0].count == 4 and live.ages[0].total == 1400 + 1900 + 2400 + 1300
+    assert (live.ages[0].low, live.ages[0].high, live.read[0]) == (1300, 2400, 2)
+    assert gateway.od.get(0x6000, 2) == 2 and gateway.held[0] == 1  # counter: samples
+    values = tuple(struct.unpack("<f", gateway.od.entry(0x6010, sub).value)[0]
+                   for sub in range(1, 10))
+    assert values == _f32(sample_values(imu, imu.sample_ns(1)))
+    assert live.ages[1].count == 0  # no FTS sample came
 
 
 class RealTimeBus(Bus):
