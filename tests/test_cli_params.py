@@ -109,7 +109,7 @@ _MEANS_MORE_THAN_ONE_THING = {
     "--link-down": "counted from serving or from the cyclic run",
     "--eds": "one node's types (sdo) or each node served (sdo serve)",
     "--node": "one node (sdo) or one per --eds (sdo serve)",
-    "--can": "the channel to talk on or to serve on",
+    "--can": "the channel to talk on, to serve on, or the gateway's sensors come from",
     "--filter": "variable names or frame terms",
     "--format": "eni vars also writes csv; report writes an html or md page",
     "--capture": "bus timing's measured total, or one of a report's measurements",

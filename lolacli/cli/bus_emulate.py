@@ -16,6 +16,7 @@ from lolacli.cli.options import (
     EniOption,
     EsiOption,
     IfaceArgument,
+    InterfaceOption,
     SeedOption,
     StuckSafeopOption,
 )
@@ -129,6 +130,16 @@ CpuOption = Annotated[
     ),
 ]
 
+CanOption = Annotated[
+    str | None,
+    typer.Option(
+        "--can",
+        metavar="CHANNEL",
+        help="The CAN gateway's sensors from this python-can channel: their TPDOs "
+        "(sdo serve --gateway --pdo) held in its process data until the next arrives.",
+    ),
+]
+
 
 @app.command("emulate")
 def emulate_cmd(
@@ -148,10 +159,13 @@ def emulate_cmd(
     realtime_priority: PriorityOption = None,
     keep_cpus_awake: AwakeOption = True,
     cpu: CpuOption = "follow",
+    can: CanOption = None,
+    interface: InterfaceOption = None,
 ) -> None:
     """Serve the ENI's slave chain on IFACE so a real master (SOEM, KickCAT, TwinCAT) can
     drive it. Ctrl-C (SIGINT) or SIGTERM stops it, with exit 130 or 143; --duration ends
-    it with exit 0."""
+    it with exit 0. With --can the CAN gateway's samples come live from a CAN bus; at
+    the end each sensor's samples and their age at the master."""
     from lolacli.emulator.run import EmulateOptions, Emulation
     from lolacli.files import load_eni, load_esi
     from lolacli.interrupt import stop_signals
@@ -168,18 +182,42 @@ def emulate_cmd(
     )
     console = stderr_console()
     status = None if quiet else lambda stats: _status(console, emulation, stats)
-    with stop_signals() as stop, stop.polled():  # the server polls: a stop ends it whole
-        stats = emulation.serve(
-            iface, stop, duration_s=duration_s, on_status=status,
-            on_ready=lambda scheduling: _ready(console, emulation, iface, scheduling),
-            realtime_priority=realtime_priority, keep_cpus_awake=keep_cpus_awake,
-            cpu=cpu,  # follow, any or a CPU number from its callback
-        )
+    bridge = _bridge(emulation, can, interface) if can is not None else None
+    try:
+        with stop_signals() as stop, stop.polled():  # the server polls: a stop ends it
+            stats = emulation.serve(
+                iface, lambda: stop() or (bridge is not None and bridge.error is not None),
+                duration_s=duration_s, on_status=status,
+                on_ready=lambda scheduling: _ready(console, emulation, iface, scheduling),
+                realtime_priority=realtime_priority, keep_cpus_awake=keep_cpus_awake,
+                cpu=cpu,  # follow, any or a CPU number from its callback
+            )
+    finally:
+        if bridge is not None:
+            bridge.close()  # the receiving thread stopped, the bus shut down
     if status is not None:
         status(stats)
-    _stopped(console, stats)
+    _stopped(console, stats, emulation.live)
+    _end(stop, bridge)
+
+
+def _bridge(emulation: Any, can: str, interface: str | None) -> Any:
+    """The gateway bridged to the CAN bus (UsageError without a gateway, TransportError
+    when the bus does not open): its receiver, running."""
+    from lolacli.sdo.can_bridge import SensorBridge
+
+    live = emulation.bridge_gateway()
+    return SensorBridge(can, live, interface=interface)
+
+
+def _end(stop: Any, bridge: Any) -> None:
+    """The exit: the signal's code, 4 when the CAN bus failed, else 0."""
+    from lolacli.errors import TransportError
+
     if stop.signum is not None:
         raise typer.Exit(stop.exit_code)
+    if bridge is not None and bridge.error is not None:
+        raise TransportError(bridge.error)
 
 
 def _ready(console: Any, emulation: Any, iface: str, scheduling: str) -> None:
@@ -193,6 +231,11 @@ def _ready(console: Any, emulation: Any, iface: str, scheduling: str) -> None:
         soft_wrap=True,  # one line (a long path is not broken): scripts wait for it
     )
     console.print(f"scheduling: {scheduling}", highlight=False)
+    if emulation.live is not None:
+        console.print(  # the C core's gateway replays the model: a live one runs in Python
+            "CAN gateway: its sensors' TPDOs held as they arrive (its cycle in Python)",
+            highlight=False,
+        )
     if emulation.esi_files:
         exact = sum(1 for m in emulation.esi if m.exact_revision)
         console.print(
@@ -210,14 +253,17 @@ def _status(console: Any, emulation: Any, stats: Any) -> None:
     )
 
 
-def _stopped(console: Any, stats: Any) -> None:
-    """What the server did: frames, reply times, placement."""
+def _stopped(console: Any, stats: Any, live: Any = None) -> None:
+    """What the server did: frames, reply times, placement; the CAN sensors' samples."""
     drops = "" if stats.socket_drops is None else f", {stats.socket_drops} dropped at the socket"
     console.print(
         f"stopped: {stats.received} frames received, {stats.answered} answered{drops}"
     )
     if stats.answered:
         for line in _latency_lines(stats):
+            console.print(line, highlight=False, soft_wrap=True)  # whole lines: parsed
+    if live is not None:
+        for line in _sensor_lines(live.report()):
             console.print(line, highlight=False, soft_wrap=True)  # whole lines: parsed
     if stats.moves or stats.backoffs:
         console.print(
@@ -239,4 +285,24 @@ def _latency_lines(stats: object) -> list[str]:
                 f"reply time: {label} p50 {summary['p50_us']:.0f} µs, p99 "
                 f"{summary['p99_us']:.0f} µs, max {summary['max_us']:.0f} µs"
             )
+    return lines
+
+
+def _sensor_lines(report: dict[str, Any]) -> list[str]:
+    """Per CAN sensor (``LiveSamples.report``): samples received at what rate, read by
+    the master and their age at it; frames ignored and samples incomplete."""
+    from lolacli.text import number, plural
+
+    lines = []
+    for s in report["sensors"]:
+        rate = "" if s["rate_hz"] is None else f" at {number(s['rate_hz'], 'Hz')}"
+        lines.append(f"CAN {s['name']}: {plural(s['samples_received'], 'sample')}{rate}, "
+                     f"{s['samples_read']:,} read by the master")
+        age = s["age_us"]
+        if age is not None:
+            lines.append(f"  age at the master: mean {number(age['mean'] / 1e3, 'ms')}, "
+                         f"min {number(age['min'] / 1e3, 'ms')}, "
+                         f"max {number(age['max'] / 1e3, 'ms')}")
+    lines.append(f"CAN frames of no sensor ignored: {report['frames_ignored']}, samples "
+                 f"incomplete: {report['samples_incomplete']}")
     return lines

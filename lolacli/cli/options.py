@@ -100,6 +100,15 @@ SeedOption = Annotated[int, typer.Option("--seed", help="Seed of the fault gener
 
 # ---------------------------------------------------------------- the CAN gateway's sensors
 
+InterfaceOption = Annotated[
+    str | None,
+    typer.Option(
+        "--interface",
+        help="python-can interface: socketcan, pcan, kvaser, virtual, udp_multicast… "
+        "Default: python-can's configuration.",
+    ),
+]
+
 ImuRateOption = Annotated[
     float,
     typer.Option(

@@ -24,7 +24,10 @@ from lolacli.cli.options import (
     DurationOption,
     EniOption,
     EsiOption,
+    FtsRateOption,
     IfaceOption,
+    ImuRateOption,
+    InterfaceOption,
     not_nan,
 )
 
@@ -73,14 +76,6 @@ CanOption = Annotated[
         "--can",
         metavar="CHANNEL",
         help="CANopen through python-can on this channel (can0, a udp_multicast group…).",
-    ),
-]
-InterfaceOption = Annotated[
-    str | None,
-    typer.Option(
-        "--interface",
-        help="python-can interface: socketcan, pcan, kvaser, virtual, udp_multicast… "
-        "Default: python-can's configuration.",
     ),
 ]
 NodeOption = Annotated[
@@ -558,27 +553,73 @@ def serve_cmd(
             "(17) and right (18).",
         ),
     ] = False,
+    pdo: Annotated[
+        bool,
+        typer.Option(
+            "--pdo",
+            help="With --gateway: the sensors also send each sample as TPDOs at their "
+            "rates (COB-IDs 0x181-0x185, 0x189-0x18B, 0x191-0x193), for bus emulate --can.",
+        ),
+    ] = False,
+    imu_rate: ImuRateOption = 200.0,
+    fts_rate: FtsRateOption = 1000.0,
     duration_s: DurationOption = 0.0,
 ) -> None:
     """Serve CANopen nodes from EDS files (canopen LocalNode) for tests and for trying
     the CANopen commands without hardware: with --interface udp_multicast every process
     on this host sees them. Ctrl-C stops it with exit 130, SIGTERM with 143; --duration
     with 0."""
+    from lolacli.devices.can import CanConfig, lola_sensors
+    from lolacli.errors import UsageError
+    from lolacli.sdo.node import node_specs
+
+    if pdo and not gateway:
+        raise UsageError("--pdo: only the gateway's sensors (--gateway) send samples")
+    config = CanConfig(sensors=lola_sensors(imu_rate, fts_rate)) if pdo else None
+    specs = node_specs(list(eds or ()), list(node or ()), gateway=gateway)
+    _serve(can, interface, specs, config, duration_s)
+
+
+def _serve(can: str, interface: str | None, specs: Any, pdo: Any, duration_s: float) -> None:
+    """``sdo serve``'s run: the nodes on the bus until the end, a line each way."""
     import time
 
+    from lolacli.errors import TransportError
     from lolacli.interrupt import exit_code
-    from lolacli.sdo.node import NodeServer, node_specs
+    from lolacli.sdo.node import NodeServer
+    from lolacli.text import number
 
-    specs = node_specs(list(eds or ()), list(node or ()), gateway=gateway)
+    def say(text: str) -> None:
+        sys.stderr.write("".join(f"{line}\n" for line in wrapped(text)))
+        sys.stderr.flush()
+
     deadline = time.monotonic() + duration_s if duration_s > 0 else None
+    server = None
     try:
-        with NodeServer(can, specs, interface=interface):  # closed however the block ends
+        with NodeServer(can, specs, interface=interface, pdo=pdo) as server:  # closed at the end
             names = ", ".join(f"{s.node_id} ({s.eds.name})" for s in specs)
-            text = f"serving CANopen nodes {names} on {interface or 'CAN'} {can}"
-            sys.stderr.write("".join(f"{line}\n" for line in wrapped(text)))
-            sys.stderr.flush()
+            say(f"serving CANopen nodes {names} on {interface or 'CAN'} {can}")
+            sender = server.transmitter
+            if sender is not None:
+                say("sending TPDOs: " + ", ".join(
+                    f"{s.name} {number(s.rate_hz, 'Hz')}" for s in sender.config.sensors))
             while deadline is None or time.monotonic() < deadline:
                 time.sleep(0.05)  # the root's handlers raise a stop here at once
+                if sender is not None and sender.error is not None:
+                    raise TransportError(sender.error)
     except KeyboardInterrupt as exc:
+        _sent(server, say)
         sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}: nodes closed\n")
         raise typer.Exit(exit_code(exc)) from None
+    _sent(server, say)
+
+
+def _sent(server: Any, say: Any) -> None:
+    """What the TPDO sender did, a line (nothing without one)."""
+    from lolacli.text import plural
+
+    sender = server.transmitter if server is not None else None
+    if sender is not None:
+        say("TPDOs sent: " + ", ".join(
+            f"{r['name']} {plural(r['samples_sent'], 'sample')} "
+            f"({r['samples_skipped']} skipped)" for r in sender.report()))

@@ -28,9 +28,12 @@ The model is deterministic, in virtual time (nanoseconds):
 from __future__ import annotations
 
 import math
+import struct
+import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 from lolacli.errors import UsageError
 
@@ -134,18 +137,24 @@ class CanConfig:
         """UsageError (one line) for a configuration the bus cannot carry."""
         if not 10_000 <= self.bitrate <= 1_000_000:
             raise UsageError(f"--can-bitrate {self.bitrate}: give 10000 to 1000000 bit/s")
-        for s in self.sensors:
-            if not (math.isfinite(s.rate_hz) and 0 < s.rate_hz <= MAX_RATE_HZ):
-                raise UsageError(
-                    f"{s.name} rate {s.rate_hz:g} Hz: give a rate above 0 and up to "
-                    f"{MAX_RATE_HZ:g} Hz"
-                )
+        self.check_rates()
         load = self.load()
         if load >= 1.0:
             raise UsageError(
                 f"the sensors need {100 * load:.0f} % of the {self.bitrate} bit/s CAN bus: "
                 "lower a rate or raise --can-bitrate"
             )
+
+    def check_rates(self) -> None:
+        """UsageError (one line) for a sensor rate that is not above 0 and up to
+        :data:`MAX_RATE_HZ` (the bus's load aside: a bus without a bitrate, python-can's
+        ``virtual`` or ``udp_multicast``, takes any)."""
+        for s in self.sensors:
+            if not (math.isfinite(s.rate_hz) and 0 < s.rate_hz <= MAX_RATE_HZ):
+                raise UsageError(
+                    f"{s.name} rate {s.rate_hz:g} Hz: give a rate above 0 and up to "
+                    f"{MAX_RATE_HZ:g} Hz"
+                )
 
 
 class CanBus:
@@ -335,8 +344,178 @@ def arrivals(config: CanConfig, from_ns: int = 0, *, horizon_events: int = HORIZ
         bus.log.clear()
 
 
+# ---------------------------------------------------------------- the live bus's frames
+
+#: the sensors' TPDOs: COB-IDs in CANopen's TPDO1 range (0x181-0x1FF, so a CAN tool reads
+#: them as PDOs), a block of :data:`TPDO_COB_BLOCK` per sensor in the configuration's
+#: order and its frames in order within it; the lower COB-ID wins arbitration, so the
+#: priorities are the model's (:class:`CanBus`). CiA 301 lets a node's TPDO
+#: communication parameter (0x1800 + n, sub 1) give any; the predefined connection
+#: set's 0x180 + node ID would interleave the nodes' frames.
+TPDO_COB_BASE = 0x181
+TPDO_COB_BLOCK = 8  # frames a sensor may send a sample in: 16 REAL32 values
+_REAL32_LE = struct.Struct("<f")
+
+
+def tpdo_cob_id(sensor: int, frame: int) -> int:
+    """The COB-ID of the ``frame``-th TPDO (0-based) of the configuration's ``sensor``-th
+    sensor (0-based)."""
+    return TPDO_COB_BASE + TPDO_COB_BLOCK * sensor + frame
+
+
+def sample_values(sensor: CanSensor, sample_ns: int) -> list[float]:
+    """The values of ``sensor``'s sample taken at ``sample_ns`` (its channels in order):
+    :func:`sensor_value` at :func:`sample_seconds`, as the gateway's model holds them."""
+    t_s = sample_seconds(sample_ns)
+    return [
+        sensor_value(sensor.scale, sub, sensor.node_id, t_s)
+        for sub in range(1, sensor.channels + 1)
+    ]
+
+
+def sample_frames(config: CanConfig, sensor: int, values: list[float]) -> list[tuple[int, bytes]]:
+    """A sample of the configuration's ``sensor``-th sensor as its TPDOs: (COB-ID, data),
+    its REAL32 values little-endian in order, at most 8 bytes a frame
+    (:meth:`CanSensor.frames`)."""
+    data = b"".join(_REAL32_LE.pack(v) for v in values)
+    out, at = [], 0
+    for f, size in enumerate(config.sensors[sensor].frames()):
+        out.append((tpdo_cob_id(sensor, f), data[at : at + size]))
+        at += size
+    return out
+
+
+@dataclass
+class AgeStats:
+    """The ages (ns) of the samples the master's frames read: count, sum, min, max."""
+
+    count: int = 0
+    total: int = 0
+    low: int = 0
+    high: int = 0
+
+    def add(self, age_ns: int) -> None:
+        if self.count == 0 or age_ns < self.low:
+            self.low = age_ns
+        if self.count == 0 or age_ns > self.high:
+            self.high = age_ns
+        self.count += 1
+        self.total += age_ns
+
+    def summary_us(self) -> dict[str, float] | None:
+        """``{"mean", "min", "max"}`` in µs (3 decimals), None before a read."""
+        if not self.count:
+            return None
+        return {
+            "mean": round(self.total / self.count / 1e3, 3),
+            "min": round(self.low / 1e3, 3),
+            "max": round(self.high / 1e3, 3),
+        }
+
+
+Held = tuple[int, tuple[float, ...], int]  # (samples received so far, values, arrival ns)
+
+
+class LiveSamples:
+    """The samples of a live CAN bus as the gateway receives them (sample and hold):
+    :meth:`frame` takes each frame as it arrives (one receiving thread) and, when the
+    last TPDO of a sample completes it, makes it the sensor's :attr:`latest`; the
+    gateway's cycle (another thread) takes the latest in (:meth:`CanGateway.bridge
+    <lolacli.devices.io.CanGateway.bridge>`) and adds the age of what the master's
+    frame read to :attr:`ages`. No IO here: the bus is the caller's.
+
+    A frame whose COB-ID is no sensor's TPDO (another node, SDO, NMT, an extended
+    identifier) is :attr:`ignored`; a TPDO of the wrong length or out of order (a frame
+    of the sample lost) drops the sample being assembled (:attr:`incomplete`).
+    ``latest[i]`` is replaced whole, so a reader sees one sample's values or the next's,
+    never a mix."""
+
+    def __init__(self, config: CanConfig, clock: Callable[[], int] = time.monotonic_ns) -> None:
+        if len(config.sensors) * TPDO_COB_BLOCK > 0x200 - TPDO_COB_BASE or any(
+            len(s.frames()) > TPDO_COB_BLOCK for s in config.sensors
+        ):
+            raise ValueError("more sensors or values than the TPDO1 range's COB-IDs carry")
+        self.config = config
+        self.clock = clock  # the arrivals' clock (ns), the emulator's frames' too
+        n = len(config.sensors)
+        self._frames = {
+            tpdo_cob_id(i, f): (i, f, size)
+            for i, s in enumerate(config.sensors)
+            for f, size in enumerate(s.frames())
+        }
+        self._last = [len(s.frames()) - 1 for s in config.sensors]
+        self._parts: list[list[bytes]] = [[] for _ in range(n)]
+        self._lost = [False] * n  # the sample in flight is counted incomplete already
+        self.latest: list[Held | None] = [None] * n
+        self.received = [0] * n
+        self.first_ns: list[int | None] = [None] * n  # arrival of the first sample
+        self.ignored = 0
+        self.incomplete = 0
+        self.ages = [AgeStats() for _ in range(n)]
+        self.read = [0] * n  # distinct samples the master's frames read
+
+    def frame(self, cob_id: int, data: bytes, arrival_ns: int, *, extended: bool = False) -> bool:
+        """One frame off the bus at ``arrival_ns`` (monotonic); True when it completed a
+        sample."""
+        where = None if extended else self._frames.get(cob_id)
+        if where is None:
+            self.ignored += 1
+            return False
+        i, f, size = where
+        parts = self._parts[i]
+        fits = len(data) == size
+        if f == 0:
+            self._lost[i] = False  # a new sample begins (whole or not)
+        if not (fits and f == len(parts)):
+            if parts or not self._lost[i]:
+                self.incomplete += 1  # the sample in flight lost a frame: once a sample
+            parts.clear()
+            self._lost[i] = True
+            if not (fits and f == 0):
+                return False  # the rest of a lost sample, up to the next one's first
+            self._lost[i] = False
+        parts.append(bytes(data))
+        if f < self._last[i]:
+            return False
+        raw = b"".join(parts)
+        parts.clear()
+        values = tuple(v for (v,) in _REAL32_LE.iter_unpack(raw))
+        self.received[i] += 1
+        if self.first_ns[i] is None:
+            self.first_ns[i] = arrival_ns
+        self.latest[i] = (self.received[i], values, arrival_ns)
+        return True
+
+    def report(self) -> dict[str, Any]:
+        """Per sensor the samples received, the rate they came at (Hz, first to last),
+        the distinct samples the master read and their age at it (µs: mean, min, max,
+        from the sample's arrival at the gateway to the master's frame); the frames
+        ignored and samples left incomplete."""
+        sensors = []
+        for i, s in enumerate(self.config.sensors):
+            latest, first = self.latest[i], self.first_ns[i]
+            rate = None
+            if latest is not None and first is not None and latest[0] > 1:
+                span = latest[2] - first
+                rate = round((latest[0] - 1) * 1e9 / span, 1) if span > 0 else None
+            sensors.append({
+                "name": s.name,
+                "node_id": s.node_id,
+                "cob_ids": [tpdo_cob_id(i, f) for f in range(len(s.frames()))],
+                "samples_received": self.received[i],
+                "rate_hz": rate,
+                "samples_read": self.read[i],
+                "age_us": self.ages[i].summary_us(),
+            })
+        return {"sensors": sensors, "frames_ignored": self.ignored,
+                "samples_incomplete": self.incomplete}
+
+
 __all__ = [
     "CAN_BITRATE",
+    "TPDO_COB_BASE",
+    "AgeStats",
+    "LiveSamples",
     "FTS_RATE_HZ",
     "NEVER_NS",
     "IMU_RATE_HZ",
@@ -344,11 +523,15 @@ __all__ = [
     "CanConfig",
     "CanSchedule",
     "CanSensor",
+    "Held",
     "arrivals",
     "channel_phase",
     "frame_bits",
     "lola_sensors",
+    "sample_frames",
     "sample_seconds",
+    "sample_values",
     "schedule",
     "sensor_value",
+    "tpdo_cob_id",
 ]

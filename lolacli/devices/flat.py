@@ -20,7 +20,8 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
 code, a drive whose configuration needs what the core's mirror of its step lacks
 (``Cia402Drive.core_can_run``: a load other than the kinematic follower, the following-error
 monitor, software position limits, max motor speed, quick stop or fault reaction
-ramps), or a use the tables cannot hold without changing it (a value whose length the cycle
+ramps), a CAN gateway bridged to a live CAN bus (``CanGateway.bridge``),
+or a use the tables cannot hold without changing it (a value whose length the cycle
 would change, more than 64 bits where the core computes in 64). Python runs those.
 
 While the core holds a device's state, the entries' values and the device's scalars
@@ -152,6 +153,8 @@ class FlatDevice:
                 scalars.last_sample, scalars.has_last = last, True
         elif isinstance(device, CanGateway):
             held = device.held
+            if device.live is not None:
+                return None  # bridged to a live CAN bus since it was flattened
             if len(held) != self.aux[0] or not all(_bounded(k) for k in held):
                 return None
             for i, k in enumerate(held):
@@ -338,6 +341,8 @@ class _Builder:
         phases and scales, and its aux table (see the module)."""
         plan = device.schedule
         sensors = device.config.sensors
+        if device.live is not None:
+            raise _NotFlat  # its samples come from a live CAN bus (CanGateway.bridge)
         if plan is None or len(plan.log) > CAN_MAX_ROWS or not plan.hyper_ns < VALUE_LIMIT:
             raise _NotFlat  # a bus whose arrivals do not repeat soon enough: Python
         rows, phases = array("q"), array("d")

@@ -19,6 +19,8 @@ from lolacli.devices.can import (
     NEVER_NS,
     Arrival,
     CanConfig,
+    Held,
+    LiveSamples,
     arrivals,
     sample_seconds,
     schedule,
@@ -139,6 +141,7 @@ class CanGateway(Device):
 
     device_type = 0x00000000
     STATUS = 0x6000
+    live: LiveSamples | None = None  # the samples of a live CAN bus (bridge)
 
     def define(self) -> None:
         self.configure(CanConfig())
@@ -180,6 +183,29 @@ class CanGateway(Device):
         self._applied_ns = -(1 << 63)  # the last arrival taken in
         self._cached = None
 
+    def bridge(self, live: LiveSamples) -> None:
+        """From now on the sensors' samples come from a live CAN bus (``live``, fed by a
+        receiving thread) instead of the model: each cycle takes every sensor's latest
+        sample in (its counter: the samples received, mod 65536) and first adds to
+        ``live.ages`` the age of the sample the master's frame of this cycle read (the
+        cycle runs after the frame, at its time ``t_ns``: the frame read what the cycles
+        that ran before ``t_ns`` took in, on ``live.clock``, the arrivals' clock; a cycle
+        the emulator held back while a frame was answered takes in after it). Only Python
+        runs a bridged gateway (:func:`~lolacli.devices.flat.flatten` gives ``None``). A
+        sensor of this gateway's configuration ``live`` does not have (by node ID) holds
+        no sample."""
+        by_node = {s.node_id: j for j, s in enumerate(live.config.sensors)}
+        n = len(self.config.sensors)
+        self.live = live
+        self.live_index = [by_node.get(s.node_id) for s in self.config.sensors]
+        # per sensor the samples in the process data: now and before, each with the time
+        # a cycle took it in
+        self.live_held: list[tuple[Held, int] | None] = [None] * n
+        self.live_before: list[tuple[Held, int] | None] = [None] * n
+        self.live_read = [0] * n  # the last sample counted read
+        self.held = [-1] * n
+        self._cached = None
+
     def cycle(self, outputs: bytes, t_ns: int) -> bytes:
         """As :meth:`Device.cycle`; the inputs are packed again only when a sample arrived
         or the dictionary changed (the gateway's cycle at 2 kHz mostly holds)."""
@@ -187,6 +213,7 @@ class CanGateway(Device):
         od, cached = self.od, self._cached
         if (
             cached is not None
+            and self.live is None
             and self._applied_ns <= t_ns < self.next_arrival_ns
             and cached[1] == od.writes
             and cached[2] == od.version
@@ -220,6 +247,9 @@ class CanGateway(Device):
         self.next_arrival_ns = self._next[0] if self._next is not None else NEVER_NS
 
     def step(self, t_ns: int) -> None:
+        if self.live is not None:
+            self._step_live(self.live, t_ns)
+            return
         sensors, cache = self.config.sensors, self._samples
         if t_ns < self._applied_ns or (
             self._next is not None and t_ns - self._next[0] > 2_000_000_000
@@ -241,6 +271,26 @@ class CanGateway(Device):
                     cache[key] = packed
             self._write(i, k, packed)
             self._pull()
+
+    def _step_live(self, live: LiveSamples, t_ns: int) -> None:
+        """The cycle of a bridged gateway (:meth:`bridge`)."""
+        held, before = self.live_held, self.live_before
+        now_ns = live.clock()
+        for i, j in enumerate(self.live_index):
+            if j is None:
+                continue
+            now = held[i]
+            read = now if now is not None and now[1] <= t_ns else before[i]
+            if read is not None and read[1] <= t_ns:
+                sample = read[0]
+                live.ages[j].add(t_ns - sample[2])  # what this cycle's frame read
+                if sample[0] != self.live_read[i]:
+                    self.live_read[i] = sample[0]
+                    live.read[j] += 1
+            latest = live.latest[j]
+            if latest is not None and (now is None or latest is not now[0]):
+                before[i], held[i] = now, (latest, now_ns)
+                self._write(i, latest[0] - 1, [_REAL32(v) for v in latest[1]])
 
     def _write(self, i: int, k: int, packed: list[bytes]) -> None:
         """Sensor ``i``'s sample ``k`` (its values ``packed``) into the process data."""

@@ -7,12 +7,14 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from lolacli.devices.can import CanConfig, LiveSamples
+from lolacli.devices.io import CanGateway
 from lolacli.emulator.chain import Chain, Faults
 from lolacli.emulator.line import ChainTiming
 from lolacli.emulator.rawsock import RawSocketServer, ServerStats
 from lolacli.emulator.registers import AL_ERROR_INDICATOR, AL_STATE_MASK, AlState
 from lolacli.emulator.sii import sii_from_esi_device
-from lolacli.emulator.slave import build_chain
+from lolacli.emulator.slave import build_chain, device_of
 from lolacli.eni.esi import EsiDevice, EsiFile
 from lolacli.eni.model import Eni, Slave
 from lolacli.errors import EniError, UsageError
@@ -346,6 +348,27 @@ class Emulation:
         self.chain = make_chain(eni, options, esi=self.esi_files)
         #: the ENI's slaves that an ESI device describes
         self.esi = esi_matches(eni, self.esi_files) if self.esi_files else ()
+        #: the samples of a live CAN bus the gateway holds (:meth:`bridge_gateway`)
+        self.live: LiveSamples | None = None
+
+    def bridge_gateway(self) -> LiveSamples:
+        """Let the chain's CAN gateway take its sensors' samples from a live CAN bus
+        (``bus emulate --can``): the samples the caller's receiver feeds
+        (:class:`~lolacli.devices.can.LiveSamples` of the LOLA sensors' TPDOs), held by
+        the gateway's process data until the next arrives (its cycle then runs in Python,
+        the others' in the C core). UsageError when the ENI has no gateway; of several,
+        the first."""
+        gateway = next(
+            (d for d in map(device_of, self.chain.slaves) if isinstance(d, CanGateway)), None
+        )
+        if gateway is None:
+            raise UsageError(
+                "--can: the ENI has no CAN gateway (IMU, force/torque sensors) to bridge"
+            )
+        live = LiveSamples(CanConfig())
+        gateway.bridge(live)
+        self.live = live
+        return live
 
     def status(self, stats: ServerStats) -> EmulationStatus:
         s = self.chain.stats

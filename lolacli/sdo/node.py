@@ -5,7 +5,10 @@ udp_multicast --eds F --node N`` answers SDO requests from any other process on 
 (``virtual`` within one process). ``--gateway`` serves the LOLA CAN gateway's sensors:
 the IMU (node 0x10) and the left and right foot force/torque sensors (0x11, 0x12), from
 ``lolacli/eds_examples``; their measured values (0x6010, 0x6020) are sines of time with
-distinct phases, as the EtherCAT side of the gateway shows them (devices/io.py).
+distinct phases, as the EtherCAT side of the gateway shows them (devices/io.py); with
+``--pdo`` they also send their samples as TPDOs at their own rates
+(:mod:`lolacli.sdo.can_bridge`), which ``bus emulate --can`` bridges into the emulated
+gateway's process data.
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-from lolacli.devices.can import sensor_value
+from lolacli.devices.can import CanConfig, sensor_value
+from lolacli.sdo.can_bridge import SensorTransmitter
 from lolacli.sdo.canopen_client import NOTIFIER_CYCLE_S, open_bus, quiet_canopen
 from lolacli.sdo.files import load_eds_od
 
@@ -82,7 +86,11 @@ def sensor_callback(node_id: int, clock: Callable[[], float]) -> Callable[..., A
 
 
 class NodeServer:
-    """LocalNodes on one bus until :meth:`close`."""
+    """LocalNodes on one bus until :meth:`close`. With ``pdo`` (a
+    :class:`~lolacli.devices.can.CanConfig` of the gateway's sensors) the sensors also
+    send their samples as TPDOs at their rates (:class:`~lolacli.sdo.can_bridge.
+    SensorTransmitter`), their instants counted from :attr:`epoch_ns`, the instant the
+    SDO values' clock starts at (monotonic ns)."""
 
     def __init__(
         self,
@@ -92,13 +100,17 @@ class NodeServer:
         interface: str | None = None,
         bus: Any = None,
         clock: Callable[[], float] | None = None,
+        pdo: CanConfig | None = None,
         **bus_options: Any,
     ) -> None:
         import canopen
 
         quiet_canopen()
-        start = time.monotonic()
-        self.clock = clock or (lambda: time.monotonic() - start)
+        self.epoch_ns = time.monotonic_ns()  # again once the nodes are on the bus
+        self.clock = clock or (lambda: (time.monotonic_ns() - self.epoch_ns) / 1e9)
+        self.transmitter: SensorTransmitter | None = None
+        if pdo is not None:
+            pdo.check_rates()  # exit 2 before the bus
         dictionaries = [load_eds_od(n.eds, n.node_id) for n in nodes]  # exit 3 before the bus
         self.bus = bus if bus is not None else open_bus(channel, interface, **bus_options)
         self.network = canopen.Network(self.bus)
@@ -111,8 +123,15 @@ class NodeServer:
             self.network.add_node(node)
             self.nodes.append(node)
         self.network.connect()
+        self.epoch_ns = time.monotonic_ns()
+        if pdo is not None:
+            self.transmitter = SensorTransmitter(
+                self.network.send_message, pdo, self.epoch_ns
+            ).start()
 
     def close(self) -> None:
+        if self.transmitter is not None:
+            self.transmitter.close()  # before the bus goes
         try:
             self.network.disconnect()
         except Exception:  # the bus went away first
