@@ -116,6 +116,10 @@ class SdoTransaction:
         return data if data else None
 
 
+#: (slave, entry, bytes) described once each, up to this many (bounded memory)
+DESCRIBED_ENTRIES = 1 << 16
+
+
 @dataclass(slots=True)
 class MailboxStats:
     messages: int = 0
@@ -323,18 +327,26 @@ class SdoTracker:
         from lolacli.od.lookup import decode, format_value
 
         lookups: dict[int, TypeLookup] = {}
+        # a master polls the same entries again and again (a statusword, a counter):
+        # each (slave, entry, bytes) is named and decoded once
+        seen: dict[tuple[int, int, int, bytes], tuple[str, str, object, str, str]] = {}
         for t in self.transactions:
             raw = t.raw
             if raw is None or t.complete_access:
                 continue
-            lookup = lookups.get(t.slave)
-            if lookup is None:
-                lookup = lookups[t.slave] = self._lookup(t.slave, eni)
-            typed = lookup.entry_type(t.index, t.subindex, raw=raw)
-            value, code, _note = decode(raw, typed)
-            t.name, t.type_source, t.value = typed.name, typed.source, value
-            t.data_type = typed.type_label if code == typed.data_type else "OCTET_STRING"
-            t.value_text = format_value(value, code)
+            key = (t.slave, t.index, t.subindex, raw)
+            said = seen.get(key)
+            if said is None:
+                lookup = lookups.get(t.slave)
+                if lookup is None:
+                    lookup = lookups[t.slave] = self._lookup(t.slave, eni)
+                typed = lookup.entry_type(t.index, t.subindex, raw=raw)
+                value, code, _note = decode(raw, typed)
+                label = typed.type_label if code == typed.data_type else "OCTET_STRING"
+                said = (typed.name, typed.source, value, label, format_value(value, code))
+                if len(seen) < DESCRIBED_ENTRIES:
+                    seen[key] = said
+            t.name, t.type_source, t.value, t.data_type, t.value_text = said
 
     def _lookup(self, slave: int, eni: Eni | None) -> TypeLookup:
         from lolacli.eni.dictionary import from_eni
