@@ -96,3 +96,27 @@ def test_ke_sets_every_joints_velocity_feedforward_and_implies_the_joint_model(c
     for p, a in zip(plain["moves"], ahead["moves"], strict=True):
         assert a["load"] == "joint"
         assert a["following_error_rms"] != p["following_error_rms"], (p, a)
+
+
+def test_without_the_c_core_the_joints_run_in_python_and_stderr_says_so_once() -> None:
+    """No C core built: the whole chain, joints and all, runs the Python reference (the
+    fallback policy of lolacli.emulator.core), and stderr says so in one line, once."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import lolacli.emulator.core as c\n"
+        "c.core_available = lambda: False\n"
+        "from lolacli.cli.main import main\n"
+        "main(['bus', 'simulate', '--duration', '30ms', '--move', 'L Knee:100', '--ke', '0.2',"
+        " '--format', 'json'])\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "LOLACLI_CHAIN_ENGINE"}
+    env["PYTHONPATH"] = str(ROOT)
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("is not built") == 1 and done.stderr.count("\n") <= 2, done.stderr
+    doc = json.loads(done.stdout)
+    assert doc["joints"]["k_e"] == 0.2 and doc["moves"][0]["load"] == "joint"
