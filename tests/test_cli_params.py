@@ -119,6 +119,7 @@ _MEANS_MORE_THAN_ONE_THING = {
     "an image's checks (bus sii write)",
     "--host-latency-us": "a constant (bus timing) or MEAN[:STD] drawn a frame (bus simulate)",
     "--cable-m": "one length for all segments (bus timing) or M and K=M items (bus simulate)",
+    "--ke": "the one joint of joint bode, or every joint of bus simulate (which it switches on)",
 }
 
 

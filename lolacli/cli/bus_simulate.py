@@ -19,6 +19,7 @@ from lolacli.cli.options import (
     ImuRateOption,
     JointModelFlag,
     JointsOption,
+    KeOption,
     MaxLostOption,
     MaxWkcOption,
     SeedOption,
@@ -211,6 +212,7 @@ def simulate_cmd(
     can_bitrate: CanBitrateOption = 1_000_000,
     joints: JointModelFlag = False,
     joints_file: JointsOption = None,
+    ke: KeOption = None,
     quiet: Quiet = False,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:
@@ -219,9 +221,7 @@ def simulate_cmd(
     DC error, CAN sensor ages and the software sections with a verdict (lolacli.simulate/1).
     --iface: the same in real time on a live bus. Exit 1 when the verdict fails, 2 bad
     options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
-    from lolacli.files import load_eni
-    from lolacli.interrupt import stop_signals
-    from lolacli.simulate import options_from_cli, simulate
+    from lolacli.simulate import options_from_cli
     options = options_from_cli(
         rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down, bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
@@ -231,9 +231,20 @@ def simulate_cmd(
         max_wkc_mismatches=max_wkc, max_overruns=max_overruns,
         host_latency_us=host_latency_us, forwarding=forwarding, cable_m=cable_m or (),
         moves=move or (), trajectory=trajectory, imu_rate_hz=imu_rate, fts_rate_hz=fts_rate,
-        can_bitrate=can_bitrate, joints=joints, joints_file=joints_file)  # fmt: skip
+        can_bitrate=can_bitrate, joints=joints, joints_file=joints_file,
+        k_e=ke)  # fmt: skip
+    _run(eni, options, quiet or iface is not None, fmt)
+
+
+def _run(eni: Path | None, options: Any, quiet: bool, fmt: OutputFormat) -> None:
+    """The simulation with a progress bar (none when ``quiet`` or stderr is no terminal),
+    its report and exit code."""
+    from lolacli.files import load_eni
+    from lolacli.interrupt import stop_signals
+    from lolacli.simulate import simulate
+
     with stop_signals() as stop:
-        with _progress(quiet or iface is not None or not sys.stderr.isatty()) as progress:
+        with _progress(quiet or not sys.stderr.isatty()) as progress:
             result = simulate(load_eni(eni or default_eni()), options, progress=progress, stop=stop)
     _finish(result, fmt, stop.exit_code)
 
@@ -338,8 +349,9 @@ def _loads(doc: dict[str, Any]) -> str:
     joints = doc.get("joints")
     if not joints:
         return "kinematic (a follower of the demand)"
+    k_e = joints.get("k_e") or 0.0
     return (f"a joint (motor, gear, link, cascade) behind {plural(len(joints['drives']), 'drive')}"
-            f", from {joints['file']}")
+            f", from {joints['file']}" + (f", k_e {k_e:g}" if k_e else ""))
 
 
 def _sensor_rows(gateway: dict[str, Any]) -> list[tuple[str, str]]:

@@ -142,7 +142,16 @@ JointModelFlag = Annotated[
         "--joint-model",
         help="A joint behind each drive the joints file names (motor, gear, link, the "
         "drive's P-PI-PI cascade) instead of a kinematic follower: moves show the joint's "
-        "following error. Slower (Python, not the C core).",
+        "following error.",
+    ),
+]
+KeOption = Annotated[
+    float | None,
+    typer.Option(
+        "--ke",
+        metavar="K",
+        help="k_e of every joint's velocity feed-forward, k_vel,ff = 1 + k_e (-1 to 5, "
+        "default 0); implies --joint-model.",
     ),
 ]
 JointsOption = Annotated[

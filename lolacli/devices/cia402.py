@@ -8,7 +8,8 @@ position (1), cyclic synchronous position (8), velocity (9) and torque (10) (0x6
 actual values (0x6064, 0x606C, 0x6077, 0x60FC demand, 0x60F4 following error), the
 following-error monitor (0x6065 window, 0x6066 timeout: error code 0x8611 in 0x603F),
 software position limits (0x607D), max profile velocity 0x607F, max motor speed 0x6080,
-max torque 0x6072, profile velocity 0x6081. 0x1008 is a long name (segmented SDO).
+max torque 0x6072, motor rated torque 0x6076 (mN·m, what CST's ‰ are of), profile
+velocity 0x6081. 0x1008 is a long name (segmented SDO).
 
 Units are the drive's own (increments, increments/s, increments/s², torque in ‰ of rated).
 What moves is a *load* (:class:`Load`): the drive hands it the demand of the mode and
@@ -44,6 +45,7 @@ INTERPOLATION_PERIOD = 0x60C2
 
 TARGET_TORQUE = 0x6071
 MAX_TORQUE = 0x6072
+RATED_TORQUE = 0x6076
 MAX_MOTOR_SPEED = 0x6080
 PROFILE_VELOCITY = 0x6081
 PROFILE_DECELERATION = 0x6084
@@ -181,11 +183,15 @@ class Load:
 
     ``follow(kind, demand, position, velocity, limit, dt_ns)``: ``kind`` is
     ``"position"`` (demand in increments, ``limit`` the velocity limit, 0 none),
-    ``"velocity"`` (increments/s), ``"torque"`` (‰ of rated torque) or ``"stop"`` (a
+    ``"velocity"`` (increments/s), ``"torque"`` (‰ of rated torque, ``limit`` the rated
+    torque 0x6076 in mN·m, 0 not given) or ``"stop"`` (a
     ramp to rest, ``limit`` its deceleration in increments/s², 0 at once); ``position``
     and ``velocity`` are the actual values, ``dt_ns`` the time since the last step
     (0 on the first). Returns (position, velocity) after ``dt_ns``. A plant model (a
-    joint) subclasses this; the default :class:`Follower` is kinematic."""
+    joint) subclasses this; the default :class:`Follower` is kinematic.
+    ``torque_moves``: whether a torque moves it (then a drive in torque is never at rest)."""
+
+    torque_moves = False
 
     def follow(
         self, kind: str, demand: int, position: int, velocity: int, limit: int, dt_ns: int
@@ -245,6 +251,8 @@ _OBJECTS: tuple[tuple[int, str, int, str, int], ...] = (
     (FOLLOWING_ERROR_WINDOW, "Following error window", DataType.UNSIGNED32, "rw", WINDOW_OFF),
     (FOLLOWING_ERROR_TIMEOUT, "Following error time out", DataType.UNSIGNED16, "rw", 0),
     (MAX_MOTOR_SPEED, "Max motor speed", DataType.UNSIGNED32, "rw", 0),
+    # mN·m; 0: the load's own (a joint's N k_t I_max)
+    (RATED_TORQUE, "Motor rated torque", DataType.UNSIGNED32, "rw", 0),
     (PROFILE_DECELERATION, "Profile deceleration", DataType.UNSIGNED32, "rw", 0),
     (QUICK_STOP_DECELERATION, "Quick stop deceleration", DataType.UNSIGNED32, "rw", 0),
 )
@@ -334,6 +342,7 @@ class Cia402Drive(Device):
             max_motor_speed=g(MAX_MOTOR_SPEED),
             profile_deceleration=g(PROFILE_DECELERATION),
             quick_stop_deceleration=g(QUICK_STOP_DECELERATION),
+            rated_torque=g(RATED_TORQUE),
             limit_min=g(SOFTWARE_LIMITS, 1),
             limit_max=g(SOFTWARE_LIMITS, 2),
         )
@@ -351,17 +360,16 @@ class Cia402Drive(Device):
 
     def core_can_run(self) -> bool:
         """Whether the compiled chain core's mirror of :meth:`step` holds for this drive:
-        the kinematic load, no monitor or limit it lacks, stops that come at once."""
+        the kinematic load or a joint (:class:`~lolacli.devices.joint_load.JointLoad`,
+        not a subclass), no monitor or limit it lacks."""
+        from lolacli.devices.joint_load import JointLoad
+
         c = self.config()
-        qs_stays = 5 <= c.quick_stop <= 8
         return (
-            type(self.load) is Follower
+            type(self.load) in (Follower, JointLoad)
             and c.window == WINDOW_OFF
             and (c.limit_min, c.limit_max) == (LIMIT_MIN, LIMIT_MAX)
             and c.max_motor_speed == 0
-            and qs_stays
-            and self.ramp(c, S.QUICK_STOP_ACTIVE) == 0
-            and self.ramp(c, S.FAULT_REACTION_ACTIVE) == 0
             and self.following_since is None
         )
 
@@ -430,7 +438,8 @@ class Cia402Drive(Device):
                         torque = max(-most, min(most, torque))
                         limited = True
                     torque = _int16(torque)
-                    new, v = load.follow(TORQUE, torque, position, velocity, limit, dt_ns)
+                    new, v = load.follow(TORQUE, torque, position, velocity, c.rated_torque,
+                                         dt_ns)
                     reached = True
                 else:  # a mode this drive does not have: no motion
                     new, v = position, 0
@@ -485,6 +494,8 @@ class Cia402Drive(Device):
                 or e[POSITION_OFFSET].value == _ZERO4
                 and e[POSITION_DEMAND].value == e[TARGET_POSITION].value
             )
+        if mode == MODE_CST:
+            return not self.load.torque_moves
         return True
 
     def _update_status(
@@ -519,6 +530,7 @@ class _Config:
     max_motor_speed: int
     profile_deceleration: int
     quick_stop_deceleration: int
+    rated_torque: int
     limit_min: int
     limit_max: int
 

@@ -10,7 +10,10 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
   bytes)``, outputs and inputs, with the semantics of ``unpack_outputs``/``pack_inputs``
   (an output entry takes ``ceil(bits / 8)`` bytes, at least one; an input contributes its
   value's low ``bits`` bits, zero beyond its bytes);
-* the step's own rows: the CiA 402 drive's cyclic entries, the digital IO channels, the
+* the step's own rows: the CiA 402 drive's cyclic entries (and with a
+  :class:`~lolacli.devices.joint_load.JointLoad` behind it, ``joint``: the cascade's
+  constants and the load's state as doubles, ``J_*`` below, and ``rest_out``: the outputs
+  of its rest cache), the digital IO channels, the
   analog channels with their phases, the CAN gateway's sensor channels with their phases
   and scales and ``aux``: its sensors and the bus's schedule
   (:class:`~lolacli.devices.can.CanSchedule`: every arrival of three hyperperiods and
@@ -18,16 +21,17 @@ tables the C core (``lolacli/emulator/_ccore.c``) runs its cycle on:
 
 ``None`` when the core does not follow the device: a class with its own step or mapping
 code, a drive whose configuration needs what the core's mirror of its step lacks
-(``Cia402Drive.core_can_run``: a load other than the kinematic follower, the following-error
-monitor, software position limits, max motor speed, quick stop or fault reaction
-ramps), a CAN gateway bridged to a live CAN bus (``CanGateway.bridge``),
-or a use the tables cannot hold without changing it (a value whose length the cycle
-would change, more than 64 bits where the core computes in 64). Python runs those.
+(``Cia402Drive.core_can_run``: a load other than the kinematic follower or a joint, the
+following-error monitor, software position limits, max motor speed), a CAN gateway
+bridged to a live CAN bus (``CanGateway.bridge``), or a use the tables cannot hold
+without changing it (a value whose length the cycle would change, more than 64 bits
+where the core computes in 64). Python runs those.
 
 While the core holds a device's state, the entries' values and the device's scalars
 (time of the last cycle, CiA 402 power state and last controlword, last analog sample,
-the gateway's held samples) live in the tables; :meth:`FlatDevice.store` gives them back
-to the objects.
+the gateway's held samples, a joint's state and the drive's rest cache) live in the
+tables; :meth:`FlatDevice.store` gives them back to the objects. The drive's configuration
+the step reads (quick stop option, ramps, rated torque) goes in with every load.
 """
 
 from __future__ import annotations
@@ -39,8 +43,10 @@ from lolacli.devices.base import Device
 from lolacli.devices.can import channel_phase
 from lolacli.devices.cia402 import Cia402Drive, Cia402State
 from lolacli.devices.io import FLOAT_PACK, AnalogInput, CanGateway, DigitalIo
+from lolacli.devices.joint_load import JointLoad
 from lolacli.eni.model import Direction
 from lolacli.errors import LolaError
+from lolacli.motion.joint import CURRENT_PERIOD_NS, POSITION_PERIOD_NS
 from lolacli.od import OdEntry
 from lolacli.wire.datatypes import DataType
 
@@ -60,6 +66,16 @@ CAN_MAX_ROWS = 30_000
 CYCLIC_BYTES = (2, 2, 1, 1, 4, 4, 4, 4, 4, 2, 2, 2, 2, 4, 4, 4, 4, 4, 2)
 #: the core's arithmetic takes any state value below this in magnitude
 VALUE_LIMIT = 1 << 62
+
+#: a joint's doubles (``J_*`` of _ccore.c): the 25 constants of ``Cascade.constants``,
+#: then k_vel,ff, the increments per rad, J/(N k_t), G/(N k_t), k_t N (the back-EMF a reset
+#: starts the current PI's integral at), N k_t and the rated torque (mN·m) when 0x6076 is 0;
+#: then the state: current, θ, ω, the two integrals, the targets (position, velocity,
+#: current), the time carried on (ns), whether there is a last value given back, its
+#: position and velocity, whether the targets held are a torque's
+JOINT_CONSTANTS = 25
+JOINT_STATE = JOINT_CONSTANTS + 7
+JOINT_WORDS = JOINT_STATE + 13
 
 _STEPS = {
     Device.step: KIND_GENERIC,
@@ -105,6 +121,14 @@ class DeviceScalars:
     previous_cw: int = 0
     last_sample: int = 0
     has_last: bool = False
+    # CiA 402: the configuration its step reads (loaded, not given back), and the rest
+    # cache of a drive with a joint (1: at rest, with ``rest_n`` bytes of outputs)
+    quick_stop: int = 0
+    quick_stop_ramp: int = 0
+    fault_ramp: int = 0
+    rated_torque: int = 0
+    rest: int = 0
+    rest_n: int = 0
 
 
 @dataclass(slots=True)
@@ -126,6 +150,9 @@ class FlatDevice:
     period_ns: int = 0
     scale: float = 0.0
     aux: array[int] = field(default_factory=lambda: array("q"))  # CAN gateway (module)
+    drive_load: object = None  # CiA 402: the load the tables were made for
+    joint: array[float] = field(default_factory=lambda: array("d"))  # its JointLoad (module)
+    rest_out: bytearray = field(default_factory=bytearray)  # the rest cache's outputs
 
     def load(self) -> DeviceScalars | None:
         """The entries' values into ``vals`` and the device's scalars; ``None`` when the
@@ -141,11 +168,17 @@ class FlatDevice:
             vals[offset : offset + size] = value
         scalars = DeviceScalars(t_ns=device.t_ns)
         if isinstance(device, Cia402Drive):
-            if not device.core_can_run():
-                return None  # configured since it was flattened (an SDO write)
+            if device.load is not self.drive_load or not device.core_can_run():
+                return None  # another load, or configured since (an SDO write)
             scalars.power = int(device.power)
             scalars.previous_cw = device.previous_cw
             if scalars.power not in _POWER_STATES or not 0 <= scalars.previous_cw <= 0xFFFF:
+                return None
+            c = device.config()
+            scalars.quick_stop, scalars.rated_torque = c.quick_stop, c.rated_torque
+            scalars.quick_stop_ramp = device.ramp(c, Cia402State.QUICK_STOP_ACTIVE)
+            scalars.fault_ramp = device.ramp(c, Cia402State.FAULT_REACTION_ACTIVE)
+            if self.joint and not self._load_joint(device, scalars):
                 return None
         elif isinstance(device, AnalogInput):
             last = getattr(device, "last_sample", None)
@@ -175,6 +208,8 @@ class FlatDevice:
         if isinstance(device, Cia402Drive):
             device.power = Cia402State(scalars.power)
             device.previous_cw = scalars.previous_cw
+            if self.joint:
+                self._store_joint(device, scalars)
         elif isinstance(device, AnalogInput) and scalars.has_last:
             device.last_sample = scalars.last_sample
         elif isinstance(device, CanGateway):
@@ -183,6 +218,56 @@ class FlatDevice:
                 aux[CAN_HEADER_WORDS + i * CAN_SENSOR_WORDS + 7] for i in range(aux[0])
             ]
             device.resume(scalars.t_ns)
+
+    def _load_joint(self, device: Cia402Drive, scalars: DeviceScalars) -> bool:
+        """The JointLoad's constants and state into ``joint``, the drive's rest cache into
+        ``rest_out``; False when a value is not one the tables hold exactly."""
+        load = device.load
+        assert isinstance(load, JointLoad)
+        cascade, last = load.cascade, load.last
+        has_last = last is not None
+        position, velocity = last if last is not None else (0, 0)
+        if not (0 <= load.pending_ns < POSITION_PERIOD_NS and type(load.pending_ns) is int
+                and all(type(x) is int and float(x) == x for x in (position, velocity))
+                and type(load.rated_torque_mnm) is int and 0 <= load.rated_torque_mnm < 1 << 32
+                and cascade.substeps == 1):
+            return False
+        p = load.params
+        values = (*cascade.constants, cascade.kvel_ff, load.scale, load.inertia_per_a,
+                  load.gravity_per_a, p.torque_constant_nm_per_a * p.gear_ratio,
+                  p.link_torque_per_a, load.rated_torque_mnm,
+                  cascade.current, cascade.theta, cascade.omega, cascade.vint, cascade.iint,
+                  load.ref, load.ref_v, load.ff, load.pending_ns, has_last, position, velocity,
+                  load.torque)
+        try:
+            made = array("d", values)
+        except (TypeError, OverflowError):
+            return False
+        if len(made) != len(self.joint):
+            return False
+        self.joint[:] = made  # in place: the core has its address
+        rest = device.rest_cache
+        if rest is not None and rest[1] == device.od.writes and len(rest[0]) <= len(
+            self.rest_out
+        ):
+            scalars.rest, scalars.rest_n = 1, len(rest[0])
+            self.rest_out[: len(rest[0])] = rest[0]
+        return True
+
+    def _store_joint(self, device: Cia402Drive, scalars: DeviceScalars) -> None:
+        """The JointLoad's state and the drive's rest cache back from the tables."""
+        load = device.load
+        assert isinstance(load, JointLoad)
+        cascade = load.cascade
+        (cascade.current, cascade.theta, cascade.omega, cascade.vint, cascade.iint,
+         load.ref, load.ref_v, load.ff, pending, has_last, position, velocity,
+         torque) = self.joint[JOINT_STATE:]
+        load.pending_ns = int(pending)
+        load.last = (int(position), int(velocity)) if has_last else None
+        load.torque = bool(torque)
+        if scalars.rest:
+            device.rest_cache = (bytes(self.rest_out[: scalars.rest_n]), device.od.writes,
+                                 device.pack_inputs())
 
 
 def flatten(device: Device) -> FlatDevice | None:
@@ -246,10 +331,15 @@ class _Builder:
         cyclic: tuple[int, ...] = ()
         period_ns, scale = 0, 0.0
         aux = array("q")
+        joint, rest_out = array("d"), bytearray()
         if self.kind == KIND_CIA402:
             assert isinstance(device, Cia402Drive)
             if not device.core_can_run():
-                raise _NotFlat  # a load, monitor, limit or ramp the core lacks
+                raise _NotFlat  # a load, monitor or limit the core lacks
+            if isinstance(device.load, JointLoad):
+                if POSITION_PERIOD_NS != 2 * CURRENT_PERIOD_NS:
+                    raise _NotFlat  # the core runs the current loop twice a period
+                joint, rest_out = array("d", bytes(8 * JOINT_WORDS)), bytearray(out_bytes)
             entries = device.entries()
             cyclic = tuple(
                 self.slot(entry, size)
@@ -284,6 +374,9 @@ class _Builder:
             period_ns=period_ns,
             scale=scale,
             aux=aux,
+            drive_load=device.load if isinstance(device, Cia402Drive) else None,
+            joint=joint,
+            rest_out=rest_out,
         )
 
     def _map(self, direction: Direction, *, writes: bool) -> array[int]:

@@ -6,7 +6,8 @@
  *   - system_time_loop, Esc.system_time_ns, Esc.check_watchdog, Esc.cycle
  *     (lolacli/emulator/esc/),
  *   - Device.cycle / unpack_outputs / pack_inputs (lolacli/devices/base.py), the steps of
- *     Cia402Drive (devices/cia402.py), DigitalIo, AnalogInput and CanGateway
+ *     Cia402Drive (devices/cia402.py) with its kinematic Follower or its JointLoad
+ *     (devices/joint_load.py, the cascade of motion/joint.py), DigitalIo, AnalogInput and CanGateway
  *     (devices/io.py; the gateway's CAN bus as its CanSchedule, devices/can.py),
  *   - Chain._run_slots for frames of register reads and writes that only store bytes
  *     (lolacli/emulator/chain.py, esc/controller.py, esc/sm.py, esc/eeprom.py).
@@ -36,7 +37,7 @@ typedef int64_t i64;
 typedef uint64_t u64;
 typedef __int128 i128;
 
-#define ABI_VERSION 11
+#define ABI_VERSION 12
 #define MEMORY_BYTES 65536
 #define AL_STATUS 0x0130
 #define AL_STATE_MASK 0x0F
@@ -93,6 +94,15 @@ typedef struct {
     i64 dev_t_ns, power, prev_cw, last_sample, has_last, period;
     double scale;
     i64 e[N_CYCLIC];
+    /* CiA 402: the configuration the step reads (Cia402Drive.config): quick stop option
+     * code, the decelerations of quick stop and fault reaction (Cia402Drive.ramp), the
+     * rated torque 0x6076 */
+    i64 qs_option, qs_ramp, fr_ramp, rated_torque;
+    /* a drive with a joint: Device.cycle's rest cache (1: at rest with the rest_n bytes of
+     * outputs in rest_out, out_bytes long) and the JointLoad (J_WORDS doubles) */
+    i64 rest, rest_n;
+    uint8_t *rest_out;
+    double *joint; i64 joint_n;
 } slave_t;
 
 /* One frame plan: the program core.py compiles from a FramePlan, and its buffers. */
@@ -226,9 +236,18 @@ static int decode_controlword(i64 cw, i64 previous) {
     return C_NONE;
 }
 
-static i64 next_state(i64 state, int command) {
+/* next_state: ``option`` the quick stop option code, ``stopped`` whether the ramp of quick
+ * stop or fault reaction has come to rest */
+static i64 next_state(i64 state, int command, i64 option, int stopped) {
     if (state == NOT_READY) return SWITCH_ON_DISABLED;
-    if (state == FAULT_REACTION_ACTIVE) return FAULT;
+    if (state == FAULT_REACTION_ACTIVE) return stopped ? FAULT : state;
+    if (state == QUICK_STOP_ACTIVE) {
+        if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
+        if (option >= 5 && option <= 8) /* stays in quick stop active */
+            return command == C_ENABLE_OPERATION ? OPERATION_ENABLED : state;
+        return stopped ? SWITCH_ON_DISABLED : state;
+    }
+    if (command == C_NONE) return state;
     switch (state) {
     case SWITCH_ON_DISABLED:
         if (command == C_SHUTDOWN) return READY_TO_SWITCH_ON;
@@ -249,10 +268,6 @@ static i64 next_state(i64 state, int command) {
         if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
         if (command == C_QUICK_STOP) return QUICK_STOP_ACTIVE;
         break;
-    case QUICK_STOP_ACTIVE: /* option codes 5-8: stays (core_can_run) */
-        if (command == C_DISABLE_VOLTAGE) return SWITCH_ON_DISABLED;
-        if (command == C_ENABLE_OPERATION) return OPERATION_ENABLED;
-        break;
     case FAULT:
         if (command == C_FAULT_RESET) return SWITCH_ON_DISABLED;
         break;
@@ -271,22 +286,194 @@ static i64 status_bits(i64 state) {
 
 static inline i128 tighter(i128 a, i128 b) { return a && b ? (a < b ? a : b) : (a ? a : b); }
 
-/* Cia402Drive.step with the kinematic Follower, for the configurations core_can_run
- * admits (no following-error monitor, software limits or max motor speed; quick stop staying in quick
- * stop active and fault reaction, both stopping at once) */
+/* ---- the joint behind a drive: JointLoad.follow and Cascade.run, operation for operation
+ * (the same doubles: no contraction, libm's sin and tanh as Python's math) */
+
+/* the JointLoad's doubles: the cascade's constants in Cascade._c order, the load's own,
+ * then its state (flat.py writes and reads them) */
+enum { J_P00, J_P01, J_P02, J_P10, J_P11, J_P12, J_P20, J_P21, J_P22, J_G0V, J_G0T, J_G1V,
+       J_G1T, J_G2V, J_G2T, J_KP, J_KV, J_KPC, J_IMAX, J_VMAX, J_FC, J_WS, J_GRAV, J_KVI_TP,
+       J_KCI_TC, J_KVEL_FF, J_SCALE, J_INERTIA_PER_A, J_GRAVITY_PER_A, J_EMF, J_TORQUE_PER_A,
+       J_RATED, J_CUR, J_THETA, J_OMEGA, J_VINT, J_IINT, J_REF, J_REF_V, J_FF, J_PENDING,
+       J_HAS_LAST, J_LAST_POS, J_LAST_VEL, J_TORQUE, J_WORDS };
+#define POSITION_PERIOD_NS 100000 /* motion/joint.py; the current loop runs twice in one */
+enum { L_POSITION, L_VELOCITY, L_TORQUE, L_STOP };
+
+/* Python's min(a, b) and max(a, b) of two floats: the first unless the second is less
+ * (greater) */
+static inline double py_min(double a, double b) { return b < a ? b : a; }
+static inline double py_max(double a, double b) { return b > a ? b : a; }
+
+/* Cascade.run over ``periods`` control periods on the held targets */
+static void cascade_run(double *j, i64 periods, double target, double vel, double ff,
+                        int current_only) {
+    const double p00 = j[J_P00], p01 = j[J_P01], p02 = j[J_P02], p10 = j[J_P10],
+                 p11 = j[J_P11], p12 = j[J_P12], p20 = j[J_P20], p21 = j[J_P21],
+                 p22 = j[J_P22], g0v = j[J_G0V], g0t = j[J_G0T], g1v = j[J_G1V],
+                 g1t = j[J_G1T], g2v = j[J_G2V], g2t = j[J_G2T], kp = j[J_KP], kv = j[J_KV],
+                 kpc = j[J_KPC], imax = j[J_IMAX], vmax = j[J_VMAX], fc = j[J_FC],
+                 ws = j[J_WS], grav = j[J_GRAV], kvi_tp = j[J_KVI_TP], kci_tc = j[J_KCI_TC],
+                 kvel_ff = j[J_KVEL_FF];
+    double cur = j[J_CUR], th = j[J_THETA], w = j[J_OMEGA], vint = j[J_VINT], iint = j[J_IINT];
+    for (i64 n = 0; n < periods; n++) {
+        double icmd;
+        if (current_only) {
+            icmd = ff;
+            if (icmd > imax) icmd = imax;
+            else if (icmd < -imax) icmd = -imax;
+        } else {
+            double ev = kp * (target - th) + kvel_ff * vel - w;
+            icmd = kv * ev + vint + ff;
+            if (icmd > imax) icmd = imax;
+            else if (icmd < -imax) icmd = -imax;
+            else vint += kvi_tp * ev;
+        }
+        for (int k = 0; k < 2; k++) {
+            double ei = icmd - cur;
+            double volts = kpc * ei + iint;
+            if (volts > vmax) volts = vmax;
+            else if (volts < -vmax) volts = -vmax;
+            else iint += kci_tc * ei;
+            double tau = fc * tanh(w / ws) + grav * sin(th);
+            double c1 = p00 * cur + p01 * th + p02 * w + g0v * volts + g0t * tau;
+            double t1 = p10 * cur + p11 * th + p12 * w + g1v * volts + g1t * tau;
+            double w1 = p20 * cur + p21 * th + p22 * w + g2v * volts + g2t * tau;
+            cur = c1;
+            th = t1;
+            w = w1;
+        }
+    }
+    j[J_CUR] = cur;
+    j[J_THETA] = th;
+    j[J_OMEGA] = w;
+    j[J_VINT] = vint;
+    j[J_IINT] = iint;
+}
+
+/* JointLoad.last after a step: round(θ scale), round(ω scale) (half to even, as Python's
+ * round); where one is not finite, none (Python raises there; here the next step starts
+ * again from the actual values) */
+static void joint_measure(double *j, double *position, double *velocity) {
+    double p = nearbyint(j[J_THETA] * j[J_SCALE]), v = nearbyint(j[J_OMEGA] * j[J_SCALE]);
+    j[J_HAS_LAST] = isfinite(p) && isfinite(v) ? 1.0 : 0.0;
+    j[J_LAST_POS] = p;
+    j[J_LAST_VEL] = v;
+    *position = p;
+    *velocity = v;
+}
+
+/* JointLoad.follow: the new position and velocity (integers, as doubles) */
+static void joint_follow(double *j, int kind, i64 demand, i64 position, i64 velocity,
+                         i64 limit, i64 dt, double *new_position, double *new_velocity) {
+    double scale = j[J_SCALE];
+    if (!(j[J_HAS_LAST] != 0.0 && j[J_LAST_POS] == (double)position &&
+          j[J_LAST_VEL] == (double)velocity)) {
+        j[J_THETA] = (double)position / scale; /* Cascade.reset */
+        j[J_OMEGA] = 0.0;
+        j[J_CUR] = 0.0;
+        j[J_VINT] = 0.0;
+        j[J_IINT] = j[J_EMF] * 0.0;
+        j[J_REF] = (double)position / scale;
+        j[J_REF_V] = (double)velocity / scale;
+        j[J_PENDING] = 0.0;
+        j[J_FF] = j[J_GRAVITY_PER_A] * sin(j[J_REF]);
+        j[J_TORQUE] = 0.0;
+    }
+    if (dt <= 0) {
+        j[J_HAS_LAST] = 1.0;
+        j[J_LAST_POS] = *new_position = (double)position;
+        j[J_LAST_VEL] = *new_velocity = (double)velocity;
+        return;
+    }
+    i64 total = (i64)j[J_PENDING] + dt;
+    i64 periods = total / POSITION_PERIOD_NS; /* both >= 0 */
+    j[J_PENDING] = (double)(total % POSITION_PERIOD_NS);
+    double ref = j[J_REF], ref_v = j[J_REF_V];
+    if (periods) cascade_run(j, periods, ref, ref_v, j[J_FF], j[J_TORQUE] != 0.0);
+    if (kind == L_TORQUE) {
+        i64 rated = limit ? limit : (i64)j[J_RATED];
+        j[J_FF] = (double)(demand * rated) / 1e6 / j[J_TORQUE_PER_A];
+        j[J_TORQUE] = 1.0;
+        joint_measure(j, new_position, new_velocity);
+        return;
+    }
+    if (j[J_TORQUE] != 0.0) {
+        ref = j[J_THETA];
+        ref_v = j[J_OMEGA];
+        j[J_TORQUE] = 0.0;
+    }
+    double dt_s = (double)dt * 1e-9, v;
+    if (kind == L_POSITION) {
+        double target = (double)demand / scale;
+        if (limit) {
+            double step = (double)limit * dt_s / scale;
+            target = py_max(ref - step, py_min(ref + step, target));
+        }
+        v = (target - ref) / dt_s;
+        ref = target;
+    } else if (kind == L_VELOCITY) {
+        v = (double)demand / scale;
+        ref += v * dt_s;
+    } else {
+        double step = limit ? (double)limit * dt_s / scale : INFINITY;
+        v = py_max(0.0, fabs(ref_v) - step);
+        v = ref_v > 0 ? v : -v;
+        ref += v * dt_s;
+    }
+    j[J_FF] = j[J_INERTIA_PER_A] * (v - ref_v) / dt_s + j[J_GRAVITY_PER_A] * sin(ref);
+    j[J_REF] = ref;
+    j[J_REF_V] = v;
+    joint_measure(j, new_position, new_velocity);
+}
+
+/* _int32 of an integer held in a double (exact: fmod is); 0 where it is not finite */
+static i64 wrap32d(double x) {
+    if (!isfinite(x)) return 0;
+    return wrap32((i128)(i64)fmod(x, 4294967296.0));
+}
+
+static inline int int32_range(double x) { return x >= -2147483648.0 && x <= 2147483647.0; }
+
+/* Follower.follow for a stop: the ramp at ``limit`` (0: at once) */
+static void follower_stop(i128 actual, i128 velocity, i128 limit, i64 dt, i128 *new_position,
+                          i128 *new_velocity) {
+    if (!limit || !dt) {
+        *new_position = actual;
+        *new_velocity = 0;
+        return;
+    }
+    i128 step = floordiv(limit * dt, NS_PER_S);
+    if (step < 1) step = 1;
+    i128 speed = (velocity < 0 ? -velocity : velocity) - step;
+    if (speed < 0) speed = 0;
+    i128 v = velocity > 0 ? speed : -speed;
+    *new_position = actual + floordiv(v * dt, NS_PER_S);
+    *new_velocity = v;
+}
+
+/* Cia402Drive.step with the kinematic Follower or a JointLoad, for the configurations
+ * core_can_run admits (no following-error monitor, software limits or max motor speed) */
 static void cia402_step(slave_t *s, i64 t) {
     uint8_t *v = s->vals;
     const i64 *e = s->e;
+    double *joint = s->joint;
     i64 cw = (i64)get_le(v + e[E_CW], 2);
     i64 previous = s->prev_cw;
     s->prev_cw = cw;
-    i64 power = s->power = next_state(s->power, decode_controlword(cw, previous));
+    i128 actual = (int32_t)(uint32_t)get_le(v + e[E_POSITION], 4);
+    i64 actual_velocity = (int32_t)(uint32_t)get_le(v + e[E_VELOCITY], 4);
+    i64 state = s->power;
+    int stopping = state == QUICK_STOP_ACTIVE || state == FAULT_REACTION_ACTIVE;
+    i64 ramp = state == QUICK_STOP_ACTIVE ? s->qs_ramp : s->fr_ramp;
+    int stopped = actual_velocity == 0 || (stopping && ramp == 0);
+    i64 power = s->power =
+        next_state(state, decode_controlword(cw, previous), s->qs_option, stopped);
     if (power == SWITCH_ON_DISABLED && get_le(v + e[E_ERROR], 2) != 0) put_le(v + e[E_ERROR], 2, 0);
     v[e[E_MODES_DISPLAY]] = v[e[E_MODES]];
     i64 dt = s->dev_t_ns ? t - s->dev_t_ns : 0;
     i64 mode = (int8_t)v[e[E_MODES]];
-    i128 actual = (int32_t)(uint32_t)get_le(v + e[E_POSITION], 4);
     i128 target = actual, velocity = 0, demand = actual;
+    double jp = 0.0, jv = 0.0; /* the joint's new position and velocity */
     i64 torque = 0, reached = 0, limited = 0;
     if (power == OPERATION_ENABLED) {
         i128 limit = (i128)get_le(v + e[E_MAX_VELOCITY], 4);
@@ -305,6 +492,12 @@ static void cia402_step(slave_t *s, i64 t) {
             demand = wrap32(demand);
             if (mode == 1 && (cw & 0x100)) {
                 target = actual; /* halt */
+            } else if (joint) {
+                joint_follow(joint, L_POSITION, (i64)demand, (i64)actual, actual_velocity,
+                             (i64)limit, dt, &jp, &jv);
+                target = wrap32d(jp); /* beyond int32 Python's pack raises */
+                velocity = wrap32d(jv);
+                reached = jp == (double)demand;
             } else {
                 target = demand;
                 if (limit && dt) {
@@ -317,16 +510,22 @@ static void cia402_step(slave_t *s, i64 t) {
                 }
                 velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
             }
-            reached = target == demand || (mode == 1 && (cw & 0x100));
+            reached = reached || target == demand || (mode == 1 && (cw & 0x100));
         } else {
             if (mode == 9) { /* CSV */
                 i128 want = (i128)(int32_t)(uint32_t)get_le(v + e[E_TARGET_VELOCITY], 4) +
                             (int32_t)(uint32_t)get_le(v + e[E_VELOCITY_OFFSET], 4);
                 if (limit) want = want > limit ? limit : (want < -limit ? -limit : want);
-                target = actual + floordiv(want * dt, NS_PER_S);
-                velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
-                reached = velocity == want;
-            } else if (mode == 10) { /* CST: the follower holds still */
+                if (joint) {
+                    joint_follow(joint, L_VELOCITY, (i64)want, (i64)actual, actual_velocity,
+                                 (i64)limit, dt, &jp, &jv);
+                    reached = jv == (double)want;
+                } else {
+                    target = actual + floordiv(want * dt, NS_PER_S);
+                    velocity = dt > 0 ? floordiv((target - actual) * NS_PER_S, dt) : 0;
+                    reached = velocity == want;
+                }
+            } else if (mode == 10) { /* CST: the follower holds still, a joint moves */
                 i64 want = (i64)(int16_t)(uint16_t)get_le(v + e[E_TARGET_TORQUE], 2) +
                            (int16_t)(uint16_t)get_le(v + e[E_TORQUE_OFFSET], 2);
                 i64 most = (i64)get_le(v + e[E_MAX_TORQUE], 2);
@@ -335,10 +534,37 @@ static void cia402_step(slave_t *s, i64 t) {
                     limited = 1;
                 }
                 torque = (int16_t)(uint16_t)(u64)want;
+                if (joint)
+                    joint_follow(joint, L_TORQUE, torque, (i64)actual, actual_velocity,
+                                 s->rated_torque, dt, &jp, &jv);
                 reached = 1;
+            }
+            if (joint && (mode == 9 || mode == 10)) {
+                if (int32_range(jp)) {
+                    target = (i128)jp;
+                    velocity = wrap32d(jv);
+                } else { /* beyond the position limits: held there (no software limits) */
+                    target = jp > 0 ? INT32_MAX : INT32_MIN;
+                    velocity = 0;
+                    limited = 1;
+                }
+            } else if (target < INT32_MIN || target > INT32_MAX) {
+                target = target > 0 ? INT32_MAX : INT32_MIN;
+                velocity = 0;
+                limited = 1;
             }
             target = demand = wrap32(target);
         }
+    } else if (power == QUICK_STOP_ACTIVE || power == FAULT_REACTION_ACTIVE) {
+        i64 slope = power == QUICK_STOP_ACTIVE ? s->qs_ramp : s->fr_ramp;
+        if (joint) {
+            joint_follow(joint, L_STOP, 0, (i64)actual, actual_velocity, slope, dt, &jp, &jv);
+            target = wrap32d(jp);
+            velocity = wrap32d(jv);
+        } else {
+            follower_stop(actual, actual_velocity, slope, dt, &target, &velocity);
+        }
+        target = demand = wrap32(target);
     }
     put_le(v + e[E_POSITION], 4, (u64)wrap32(target));
     put_le(v + e[E_VELOCITY], 4, (u64)wrap32(velocity));
@@ -352,6 +578,27 @@ static void cia402_step(slave_t *s, i64 t) {
     }
     if (limited) status |= 0x0800;
     put_le(v + e[E_SW], 2, (u64)status);
+}
+
+/* Cia402Drive.at_rest after a step (for the configurations core_can_run admits) */
+static int cia402_at_rest(const slave_t *s) {
+    i64 power = s->power;
+    if (power == NOT_READY || power == FAULT_REACTION_ACTIVE) return 0;
+    i64 cw = s->prev_cw;
+    if (next_state(power, decode_controlword(cw, cw), s->qs_option, 1) != power) return 0;
+    const uint8_t *v = s->vals;
+    const i64 *e = s->e;
+    if (get_le(v + e[E_VELOCITY], 4) != 0) return 0;
+    if (power != OPERATION_ENABLED) return 1;
+    i64 mode = (int8_t)v[e[E_MODES]];
+    if (mode == 9)
+        return get_le(v + e[E_TARGET_VELOCITY], 4) == 0 && get_le(v + e[E_VELOCITY_OFFSET], 4) == 0;
+    if (mode == 8 || mode == 1)
+        return get_le(v + e[E_POSITION], 4) == get_le(v + e[E_DEMAND], 4) &&
+               (mode == 1 || (get_le(v + e[E_POSITION_OFFSET], 4) == 0 &&
+                              get_le(v + e[E_DEMAND], 4) == get_le(v + e[E_TARGET], 4)));
+    if (mode == 10) return !s->joint; /* a torque moves a joint */
+    return 1;
 }
 
 static inline u64 low_mask(i64 bits) { return bits >= 64 ? ~(u64)0 : ((u64)1 << bits) - 1; }
@@ -442,17 +689,27 @@ static void slave_cycle(slave_t *s, i64 t) {
     int state = s->mem[AL_STATUS] & AL_STATE_MASK;
     if (state != AL_SAFEOP && state != AL_OP) return;
     s->cycles += 1;
-    if (state == AL_OP && s->out_bytes) {
-        const uint8_t *image = s->mem + s->out_start;
-        for (i64 k = 0; k < s->omap_n; k++) {
+    const uint8_t *outputs = s->mem + s->out_start;
+    i64 n_out = state == AL_OP && s->out_bytes ? s->out_bytes : 0;
+    /* a drive with a joint keeps Device.cycle's rest cache: at rest, the same outputs
+     * (and no write to its dictionary: Python would have it back) skip the step */
+    int rests = s->joint && s->rest && s->rest_n == n_out &&
+                (n_out == 0 || memcmp(s->rest_out, outputs, (size_t)n_out) == 0);
+    if (!rests) {
+        for (i64 k = 0; k < (n_out ? s->omap_n : 0); k++) {
             const i64 *row = s->omap + k * MAP_WORDS;
-            get_bits(s->vals + row[2], row[3], image, row[0], row[1]);
+            get_bits(s->vals + row[2], row[3], outputs, row[0], row[1]);
+        }
+        if (s->kind == K_CIA402) cia402_step(s, t);
+        else if (s->kind == K_DIGITAL_IO) digital_io_step(s, t);
+        else if (s->kind == K_ANALOG) analog_step(s, t);
+        else if (s->kind == K_CAN_GATEWAY) can_step(s, t);
+        if (s->joint) {
+            s->rest = cia402_at_rest(s);
+            s->rest_n = s->rest ? n_out : 0;
+            if (s->rest && n_out) memcpy(s->rest_out, outputs, (size_t)n_out);
         }
     }
-    if (s->kind == K_CIA402) cia402_step(s, t);
-    else if (s->kind == K_DIGITAL_IO) digital_io_step(s, t);
-    else if (s->kind == K_ANALOG) analog_step(s, t);
-    else if (s->kind == K_CAN_GATEWAY) can_step(s, t);
     s->dev_t_ns = t;
     if (s->in_bytes) {
         uint8_t *image = s->mem + s->in_start;
@@ -993,6 +1250,7 @@ i64 lolacli_core_check_slave(const slave_t *s) {
         return 2;
     if (s->kind < K_NONE || s->kind > K_CAN_GATEWAY) return 3;
     if (s->kind < K_GENERIC) return 0;
+    if (s->kind != K_CIA402 && (s->joint || s->joint_n)) return 19;
     if (!within(s->out_start, s->out_bytes, MEMORY_BYTES) ||
         !within(s->in_start, s->in_bytes, MEMORY_BYTES))
         return 4;
@@ -1016,6 +1274,23 @@ i64 lolacli_core_check_slave(const slave_t *s) {
         for (int k = 0; k < N_CYCLIC; k++)
             if (!within(s->e[k], CYCLIC_BYTES[k], s->vals_len)) return 9;
         if (s->prev_cw < 0 || s->prev_cw > 0xFFFF) return 10;
+        if (s->qs_option < -0x8000 || s->qs_option > 0x7FFF || s->qs_ramp < 0 ||
+            s->qs_ramp > 0xFFFFFFFFLL || s->fr_ramp < 0 || s->fr_ramp > 0xFFFFFFFFLL ||
+            s->rated_torque < 0 || s->rated_torque > 0xFFFFFFFFLL)
+            return 18;
+        if (s->joint_n != (s->joint ? J_WORDS : 0)) return 19;
+        if (s->joint) {
+            const double *j = s->joint;
+            double pending = j[J_PENDING];
+            if (!(pending >= 0 && pending < POSITION_PERIOD_NS && pending == floor(pending)) ||
+                (j[J_HAS_LAST] != 0.0 && j[J_HAS_LAST] != 1.0) ||
+                (j[J_TORQUE] != 0.0 && j[J_TORQUE] != 1.0) ||
+                !(j[J_RATED] >= 0 && j[J_RATED] <= 0xFFFFFFFFLL && j[J_RATED] == floor(j[J_RATED])))
+                return 19;
+            if ((s->rest != 0 && s->rest != 1) || s->rest_n < 0 || s->rest_n > s->out_bytes ||
+                (s->out_bytes && !s->rest_out))
+                return 20;
+        }
         switch (s->power) {
         case NOT_READY: case SWITCH_ON_DISABLED: case READY_TO_SWITCH_ON: case SWITCHED_ON:
         case OPERATION_ENABLED: case QUICK_STOP_ACTIVE: case FAULT_REACTION_ACTIVE: case FAULT:

@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from lolacli.devices.base import Device
     from lolacli.emulator.esc import Esc
 
-ABI_VERSION = 11
+ABI_VERSION = 12
 _I64 = ctypes.c_int64
 _VP = ctypes.c_void_p
 _MASK64 = (1 << 64) - 1
@@ -103,6 +103,15 @@ class SlaveTable(ctypes.Structure):
         ("period", _I64),
         ("scale", ctypes.c_double),
         ("e", _I64 * len(CYCLIC_BYTES)),
+        ("qs_option", _I64),
+        ("qs_ramp", _I64),
+        ("fr_ramp", _I64),
+        ("rated_torque", _I64),
+        ("rest", _I64),
+        ("rest_n", _I64),
+        ("rest_out", _VP),
+        ("joint", _VP),
+        ("joint_n", _I64),
     ]
 
 
@@ -122,6 +131,9 @@ F_AUX, F_AUX_N = _WORD["aux"], _WORD["aux_n"]
 F_DEV_T, F_POWER, F_PREV_CW = _WORD["dev_t_ns"], _WORD["power"], _WORD["prev_cw"]
 F_LAST_SAMPLE, F_HAS_LAST = _WORD["last_sample"], _WORD["has_last"]
 F_PERIOD, F_SCALE, F_E = _WORD["period"], _WORD["scale"], _WORD["e"]
+F_QS_OPTION, F_QS_RAMP, F_FR_RAMP = _WORD["qs_option"], _WORD["qs_ramp"], _WORD["fr_ramp"]
+F_RATED_TORQUE, F_REST, F_REST_N = _WORD["rated_torque"], _WORD["rest"], _WORD["rest_n"]
+F_REST_OUT, F_JOINT, F_JOINT_N = _WORD["rest_out"], _WORD["joint"], _WORD["joint_n"]
 
 
 class PlanTable(ctypes.Structure):
@@ -698,6 +710,9 @@ class ChainCore:
             self._doubles[b + F_SCALE] = flat.scale
             for k, offset in enumerate(flat.cyclic):
                 w[b + F_E + k] = offset
+            w[b + F_JOINT] = _address(flat.joint, keep)
+            w[b + F_JOINT_N] = len(flat.joint)
+            w[b + F_REST_OUT] = _address(flat.rest_out, keep)
             w[b + F_KIND] = flat.kind
             self._device_pins[i] = (flat, keep)
         w[b + F_OUT_START], w[b + F_OUT_BYTES] = out_start, flat.out_bytes
@@ -708,6 +723,9 @@ class ChainCore:
             loaded.previous_cw,
         )
         w[b + F_LAST_SAMPLE], w[b + F_HAS_LAST] = loaded.last_sample, int(loaded.has_last)
+        w[b + F_QS_OPTION], w[b + F_QS_RAMP] = loaded.quick_stop, loaded.quick_stop_ramp
+        w[b + F_FR_RAMP], w[b + F_RATED_TORQUE] = loaded.fault_ramp, loaded.rated_torque
+        w[b + F_REST], w[b + F_REST_N] = loaded.rest, loaded.rest_n
         if self.lib.lolacli_core_check_slave(self.address + 8 * b):
             self._device_pins[i] = (None, [])
             return False
@@ -725,6 +743,8 @@ class ChainCore:
                 w[b + F_PREV_CW],
                 w[b + F_LAST_SAMPLE],
                 w[b + F_HAS_LAST] != 0,
+                rest=w[b + F_REST],
+                rest_n=w[b + F_REST_N],
             )
         )
         w[b + F_DEV_OWNED] = 0

@@ -203,6 +203,13 @@ class Cascade:
         self.current = self.theta = self.omega = self.vint = self.iint = 0.0
         self.reset(*initial)
 
+    @property
+    def constants(self) -> tuple[float, ...]:
+        """The loop's constants as :meth:`run` uses them: Φ (row by row), Γ (row by row),
+        the P, PI and PI gains, the current and voltage limits, F_c, ω_s, G, and the two
+        integral gains times their periods (the compiled chain core's copy of a joint)."""
+        return self._c
+
     def reset(self, theta: float, omega: float = 0.0) -> None:
         """Start again at (θ, ω): no current, the integrators at their steady values for
         that motion with no load (the current PI's holds the back-EMF)."""
@@ -212,10 +219,14 @@ class Cascade:
         self.iint = self.p.torque_constant_nm_per_a * self.p.gear_ratio * omega
 
     def run(self, position: Sequence[float], velocity: Sequence[float],
-            current: Sequence[float], out: list[float] | None = None) -> None:
+            current: Sequence[float], out: list[float] | None = None, *,
+            current_only: bool = False) -> None:
         """One control period per entry of the targets (position rad, velocity rad/s
         before ``kvel_ff``, current feed-forward A, held over the period); ``out`` gets θ
-        at the start of each period, before its control update."""
+        at the start of each period, before its control update. ``current_only``: the
+        position and velocity loops are bypassed, the current entry is the current
+        command itself (clamped at the current limit; a drive in cyclic synchronous
+        torque), the current PI runs as ever."""
         (p00, p01, p02, p10, p11, p12, p20, p21, p22, g0v, g0t, g1v, g1t, g2v, g2t,
          kp, kv, kpc, imax, vmax, fc, ws, grav, kvi_tp, kci_tc) = self._c
         kvel_ff = self.kvel_ff
@@ -227,14 +238,21 @@ class Cascade:
         for target, vel, ff in zip(position, velocity, current, strict=True):
             if record is not None:
                 record(th)
-            ev = kp * (target - th) + kvel_ff * vel - w
-            icmd = kv * ev + vint + ff
-            if icmd > imax:
-                icmd = imax
-            elif icmd < -imax:
-                icmd = -imax
+            if current_only:
+                icmd = ff
+                if icmd > imax:
+                    icmd = imax
+                elif icmd < -imax:
+                    icmd = -imax
             else:
-                vint += kvi_tp * ev  # integrate only when not saturated (anti-windup)
+                ev = kp * (target - th) + kvel_ff * vel - w
+                icmd = kv * ev + vint + ff
+                if icmd > imax:
+                    icmd = imax
+                elif icmd < -imax:
+                    icmd = -imax
+                else:
+                    vint += kvi_tp * ev  # integrate only when not saturated (anti-windup)
             for _ in inner:
                 ei = icmd - cur
                 volts = kpc * ei + iint

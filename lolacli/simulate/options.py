@@ -62,6 +62,7 @@ class SimulateOptions:
     # matched by slave name, lolacli.motion.joint.find_joint); empty: kinematic drives
     joints: tuple[JointParams, ...] = ()
     joints_source: str | None = None  # the file they came from (for messages)
+    k_e: float = 0.0  # --ke: every joint's velocity feed-forward k_vel,ff = 1 + k_e
 
     def joint(self, slave: str) -> JointParams | None:
         """The joint behind the drive ``slave`` (its ENI name) with --joints, else None."""
@@ -105,6 +106,10 @@ class SimulationResult:
 Progress = Callable[[int, int], None]
 
 
+#: --ke: the k_e a joint's velocity feed-forward may have (k_vel,ff = 1 + k_e from 0, none,
+#: to 6; seed 000's learning ends well inside, at 0.5 to 1)
+K_E_RANGE = (-1.0, 5.0)
+
 #: the most cycle slots one run takes: the per-cycle figures are kept for the statistics
 #: (about 100 B a cycle), so a longer run would outgrow the memory of a small host
 MAX_CYCLES = 20_000_000
@@ -127,6 +132,9 @@ def check(eni: Eni, options: SimulateOptions) -> None:
             f"--cycles {options.cycles}: expected 1 to {MAX_CYCLES:,} cycles (a --duration "
             "shorter than one cycle is 0 cycles)"
         )
+    if not K_E_RANGE[0] <= options.k_e <= K_E_RANGE[1]:
+        raise UsageError(f"--ke {options.k_e:g}: expected {K_E_RANGE[0]:g} to {K_E_RANGE[1]:g} "
+                         "(the joints' velocity feed-forward is 1 + k_e)")
     if not 0.0 <= options.drop_probability <= 1.0:
         raise UsageError(f"--drop-p {options.drop_probability:g}: expected 0 to 1")
     if abs(options.drift_ppb) > MAX_DRIFT_PPB:
@@ -195,8 +203,8 @@ def _check_live(options: SimulateOptions) -> None:
             "delays and measures them"
         )
     if options.joints:
-        raise UsageError("--joint-model: joints behind the emulated drives; a live bus's drives "
-                         "move what they move")
+        raise UsageError("--joint-model (--joints, --ke): joints behind the emulated drives; "
+                         "a live bus's drives move what they move")
     if options.pace:
         raise UsageError("--pace: a live bus runs in real time anyway")
     busy = options.busy_wait_us
@@ -232,14 +240,16 @@ def options_from_cli(
     trajectory: Path | None = None,
     joints: bool = False,
     joints_file: Path | None = None,
+    k_e: float | None = None,
     **fields: Any,
 ) -> SimulateOptions:
     """:class:`SimulateOptions` from the command line's spelling: ``duration`` (``10s``,
     ``500ms``; default 10 s) or ``cycles``, ``link_down`` as ``K[@T]``, ``set_values`` as
     ``VARIABLE=VALUE``, ``host_latency_us`` as ``MEAN[:STD]`` (µs), ``cable_m`` as ``M``
     or ``K=M`` items, ``moves`` as ``JOINT:DISTANCE[:V:A:J]`` and ``trajectory`` a goals
-    file (:mod:`lolacli.simulate.moves`), ``joints`` (or a ``joints_file``) the packaged
-    joints behind the drives (or that file's: InputError when it does not parse); the
+    file (:mod:`lolacli.simulate.moves`), ``joints`` (or a ``joints_file``, or a ``k_e``:
+    each implies it) the packaged joints behind the drives (or that file's: InputError when
+    it does not parse) with k_vel,ff = 1 + ``k_e`` (default 0); the
     other ``fields`` as they are. UsageError for what does not parse or contradicts
     itself."""
     from lolacli.emulator.run import parse_bad_link, parse_link_down
@@ -273,19 +283,21 @@ def options_from_cli(
         else None,
         cable_m=_cable_items(tuple(cable_m), parse_cable_m),
         moves=_goals(moves, trajectory, fields.get("middleware", True)),
-        **_joints(joints, joints_file),
+        **_joints(joints or k_e is not None, joints_file, k_e),
         **fields,
     )
 
 
-def _joints(joints: bool, path: Path | None) -> dict[str, Any]:
-    """``joints`` and ``joints_source`` of --joint-model/--joints (read and checked)."""
+def _joints(joints: bool, path: Path | None, k_e: float | None) -> dict[str, Any]:
+    """``joints``, ``joints_source`` and ``k_e`` of --joint-model/--joints/--ke (read; the
+    range of k_e is :func:`check`'s)."""
     if not joints and path is None:
         return {}
     from lolacli.files import joints_path, load_joints
 
     table = load_joints(path)
-    return {"joints": tuple(table.values()), "joints_source": str(path or joints_path())}
+    return {"joints": tuple(table.values()), "joints_source": str(path or joints_path()),
+            "k_e": 0.0 if k_e is None else float(k_e)}
 
 
 def _goals(moves: Sequence[str], trajectory: Path | None, middleware: bool) -> tuple[Goal, ...]:

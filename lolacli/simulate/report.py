@@ -382,12 +382,14 @@ def _moves(
 
 
 def _joints(master: Master, app: Application, options: SimulateOptions) -> dict[str, Any] | None:
-    """--joint-model: the file and the drives with a joint behind them (None without)."""
+    """--joint-model: the file, the drives with a joint behind them and their velocity
+    feed-forward's k_e (k_vel,ff = 1 + k_e) (None without)."""
     if not options.joints:
         return None
     names = [d.slave for d in app.drives]
     return {"file": options.joints_source,
-            "drives": [n for n in names if options.joint(n) is not None]}
+            "drives": [n for n in names if options.joint(n) is not None],
+            "k_e": options.k_e, "kvel_ff": 1.0 + options.k_e}
 
 
 def _jsonable(value: Any) -> Any:

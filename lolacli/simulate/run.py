@@ -157,8 +157,8 @@ class Simulation:
 
 def _attach_joints(eni: Eni, bus: VirtualBus, options: SimulateOptions) -> None:
     """--joint-model: a :class:`~lolacli.devices.joint_load.JointLoad` behind every drive the
-    joints name (those drives then run in Python, not in the chain core). UsageError
-    when no drive of the ENI has one."""
+    joints name, k_vel,ff = 1 + --ke (the chain core runs them as the kinematic drives).
+    UsageError when no drive of the ENI has one."""
     if not options.joints:
         return
     from lolacli.devices.cia402 import Cia402Drive
@@ -169,7 +169,7 @@ def _attach_joints(eni: Eni, bus: VirtualBus, options: SimulateOptions) -> None:
         device = device_of(esc)
         params = options.joint(slave.name)
         if isinstance(device, Cia402Drive) and params is not None:
-            device.load = JointLoad(params)
+            device.load = JointLoad(params, kvel_ff=1.0 + options.k_e)
             attached += 1
     if not attached:
         raise UsageError(

@@ -224,7 +224,7 @@ def test_the_load_is_a_seam_and_a_plant_keeps_the_drive_in_python() -> None:
             return position + (demand - position) // 2, 0
 
     drive.load = Half()
-    assert flatten(drive) is None  # the C core mirrors only the Follower
+    assert flatten(drive) is None  # the C core mirrors only the Follower and JointLoad
     _enable(drive)
     _run(drive, 0x0F, 10 * MS, target=1000)
     assert drive.od.get_int(0x6064) == 500

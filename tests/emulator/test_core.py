@@ -1159,8 +1159,8 @@ def test_held_flag_for_every_example_device() -> None:
 
 # ------------------------------------------------------------------ sanitizers
 SANITIZED_TESTS = (
-    "(examples or give_way or refuses or moved or per_slave or corpus_enis and planned)"
-    " and not sanitizers"
+    "(examples or give_way or refuses or moved or per_slave or corpus_enis and planned"
+    " or joints_in_the_core) and not sanitizers"
 )
 
 
@@ -1196,7 +1196,8 @@ def test_kernel_under_address_and_undefined_behaviour_sanitizers() -> None:
         )  # fmt: skip
         arguments = ["-q", "-x", "-p", "no:cacheprovider", "--capture=sys"]  # reports on fd 2
         arguments += ["--basetemp", str(work / "tmp")]
-        arguments += ["tests/emulator/test_core.py", "-k", SANITIZED_TESTS]
+        arguments += ["tests/emulator/test_core.py", "tests/emulator/test_core_joints.py"]
+        arguments += ["-k", SANITIZED_TESTS]
         driver = work / "run.py"
         driver.write_text(
             "import sys\n"

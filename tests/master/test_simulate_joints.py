@@ -43,7 +43,8 @@ def test_a_joints_file_puts_joints_only_behind_the_drives_it_names(tmp_path: Pat
     knee_only = tmp_path / "knee.toml"
     knee_only.write_text(head + '[joints]\n"Joint04 L Knee" = "knee"\n')
     doc = _sim(joints_file=knee_only)
-    assert doc["joints"] == {"file": str(knee_only), "drives": ["Joint04 L Knee"]}
+    assert doc["joints"] == {"file": str(knee_only), "drives": ["Joint04 L Knee"],
+                             "k_e": 0.0, "kvel_ff": 1.0}
     assert {m["joint"]: m["load"] for m in doc["moves"]} == {
         "Joint03 L Hip Pitch": "kinematic", "Joint04 L Knee": "joint",
         "Joint21 R Elbow": "kinematic"}
@@ -59,6 +60,11 @@ def test_bad_joints_are_one_line_errors(cli, tmp_path: Path) -> None:
         (("--joints", tmp_path / "none.toml"), 3, "no such file"),
         (("--joints", foreign), 2, "no drive of"),
         (("--joint-model", "--iface", "lo"), 2, "--joint-model"),
+        (("--ke", "0.5", "--iface", "lo"), 2, "--ke"),
+        (("--ke", "5.5"), 2, "--ke 5.5: expected -1 to 5"),
+        (("--ke", "-1.01"), 2, "--ke -1.01: expected -1 to 5"),
+        (("--ke", "nan"), 2, "--ke nan"),
+        (("--ke", "much"), 2, "'--ke'"),
     ):
         got, out, err = cli("bus", "simulate", "--duration", "10ms", *args)
         assert (got, out) == (code, ""), err
@@ -71,3 +77,46 @@ def test_the_json_says_the_load_of_each_move(cli) -> None:
     assert code == 0, err
     doc = json.loads(out)
     assert [m["load"] for m in doc["moves"]] == ["joint"]
+
+
+def test_ke_sets_every_joints_velocity_feedforward_and_implies_the_joint_model(cli) -> None:
+    """--ke K: k_vel,ff = 1 + K in every joint's cascade (seed 000 eq. 2), the joint model
+    on without --joint-model; the JSON's joints say both. A larger velocity feed-forward
+    changes how the joints follow: the following errors differ from k_e = 0's."""
+    code, out, err = cli("bus", "simulate", "--duration", "300ms", "--move", "L Knee:20000",
+                         "--ke", "0.5", "--format", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["joints"]["k_e"] == 0.5 and doc["joints"]["kvel_ff"] == 1.5
+    assert len(doc["joints"]["drives"]) == 21 and doc["moves"][0]["load"] == "joint"
+    plain = _sim(joints=True)
+    assert plain["joints"]["k_e"] == 0.0 and plain["joints"]["kvel_ff"] == 1.0
+    ahead = _sim(k_e=1.0)
+    assert ahead["joints"]["k_e"] == 1.0
+    for p, a in zip(plain["moves"], ahead["moves"], strict=True):
+        assert a["load"] == "joint"
+        assert a["following_error_rms"] != p["following_error_rms"], (p, a)
+
+
+def test_without_the_c_core_the_joints_run_in_python_and_stderr_says_so_once() -> None:
+    """No C core built: the whole chain, joints and all, runs the Python reference (the
+    fallback policy of lolacli.emulator.core), and stderr says so in one line, once."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import lolacli.emulator.core as c\n"
+        "c.core_available = lambda: False\n"
+        "from lolacli.cli.main import main\n"
+        "main(['bus', 'simulate', '--duration', '30ms', '--move', 'L Knee:100', '--ke', '0.2',"
+        " '--format', 'json'])\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "LOLACLI_CHAIN_ENGINE"}
+    env["PYTHONPATH"] = str(ROOT)
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count("is not built") == 1 and done.stderr.count("\n") <= 2, done.stderr
+    doc = json.loads(done.stdout)
+    assert doc["joints"]["k_e"] == 0.2 and doc["moves"][0]["load"] == "joint"
