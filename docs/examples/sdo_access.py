@@ -12,4 +12,4 @@ with open_session(TransportOptions()) as bus:  # the embedded LOLA chain, brough
     velocity = read(drive.client, 0x607F, 0, data_type=DataType.UNSIGNED32)
     print(velocity.value, velocity.raw.hex())  # 250000 90d00300
     objects = drive.client.dictionary()  # the slave's SDO Information service
-    print(len(objects), objects.entry(0x6041, 0).name)  # 39 Statusword
+    print(len(objects), objects.entry(0x6041, 0).name)  # 40 Statusword

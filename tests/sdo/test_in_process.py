@@ -273,4 +273,4 @@ def test_the_library_example_of_the_docs() -> None:
         timeout=120,
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split("\n")[:3] == ["198948", "250000 90d00300", "39 Statusword"]
+    assert done.stdout.split("\n")[:3] == ["198948", "250000 90d00300", "40 Statusword"]
