@@ -236,11 +236,14 @@ def test_the_master_reads_live_samples_held_at_2_khz() -> None:
         assert taken is not None and taken <= t, (t, counter, imu_values)
         taken = _sample_at(fts, epoch, t, fts_values)
         assert taken is not None and taken <= t, (t, fts_values)
-    # sample and hold: the IMU's values change with its counter only, every 10th frame
+    # sample and hold: the IMU's values change with its counter only, every 5 ms (every
+    # 10th frame while the loop keeps its 2 kHz; a loaded host delays some frames and
+    # sends the late ones back to back, so the gaps are timed by the frames' clock)
     changes = [n for n in range(1, len(read)) if read[n][2] != read[n - 1][2]]
     assert all(read[n][3] == read[n - 1][3] for n in range(1, len(read)) if n not in changes)
-    gaps = [b - a for a, b in itertools.pairwise(changes)]
-    assert statistics.median(gaps) in (9, 10, 11) and 9 <= statistics.mean(gaps) <= 11, gaps
+    gaps_ms = [(read[b][0] - read[a][0]) / 1e6 for a, b in itertools.pairwise(changes)]
+    assert 4.5 <= statistics.median(gaps_ms) <= 5.5, gaps_ms
+    assert 4.5 <= statistics.mean(gaps_ms) <= 7.0, gaps_ms  # (a late sender skips samples)
     assert read[-1][2] == by_name["IMU"]["samples_received"] or (
         read[-1][2] == by_name["IMU"]["samples_received"] - 1  # one arrived after the last
     )
