@@ -35,6 +35,7 @@ from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
+from itertools import compress
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -89,6 +90,10 @@ SLICE_BYTES = 2 * 1024 * 1024
 SLICE_BYTES_PYTHON = 256 * 1024
 OUT_ROWS = 1 << 14  # > the kernel's minimum (CHECK_EVERY * (MAX_DGRAMS + 2) + ...)
 PAIR_SLOTS = 1 << 10  # grows when half full
+#: a small capture's (the C engine without numpy): its table of pending frames (DEPTH
+#: rows a slot) is then 96 kB, not 384 kB, which a batch of small captures would
+#: otherwise allocate and fault in twice a file (~20 us each time)
+PAIR_SLOTS_SMALL = 1 << 8
 STREAM_SLOTS = 1 << 10
 OBS_SLOTS = 1 << 10
 #: captures up to this size are analysed without numpy (see the module docstring): their
@@ -503,7 +508,7 @@ class _Pass:
         self.st[S.S_DIRMODE] = dirmode
         self.cmd_counts = _zeros(256, py)
         self.dg = _zeros(S.MAX_DGRAMS, py)
-        self._new_pair_table(PAIR_SLOTS)
+        self._new_pair_table(PAIR_SLOTS_SMALL if self.kind == "array" else PAIR_SLOTS)
         self.sk, self.sc = _zeros(STREAM_SLOTS, py), _zeros(STREAM_SLOTS, py)
         self.wk, self.wn = _zeros(OBS_SLOTS, py), _zeros(OBS_SLOTS, py)
         self.wv = _zeros(OBS_SLOTS * S.OCOLS, py)
@@ -565,9 +570,8 @@ class _Pass:
             self.wk, self.wn, self.wv = nk, nn, nv
 
     def top_stream(self) -> int:
-        if self.kind != "numpy":
-            best = max(range(len(self.sk)), key=lambda i: self.sc[i])
-            return int(self.sk[best])
+        if self.kind != "numpy":  # the first slot of the largest count, as argmax
+            return int(self.sk[self.sc.index(max(self.sc))])
         return int(self.sk[int(self.sc.argmax())])
 
     # --- the pass ------------------------------------------------------------------------
@@ -818,8 +822,8 @@ class _Pass:
             meta: list[int] = []
             stamps: list[int] = []
             width = S.DEPTH * S.PCOLS
-            for slot, depth in enumerate(pn):
-                for j in range(depth):
+            for slot in compress(range(len(pn)), pn):  # the slots holding frames
+                for j in range(pn[slot]):
                     at = slot * width + j * S.PCOLS
                     stamps.append(pv[at])
                     meta.append(pv[at + 1])
@@ -840,12 +844,10 @@ class _Pass:
 
     def _observations(self, kind: int) -> list[tuple[int, ...]]:
         """Observation rows of one kind: the six fields after ``kind``... see scan.py."""
-        wk, wn, wv = (_plain(a, len(a)) for a in (self.wk, self.wn, self.wv))
+        wk, wn, wv = self.wk, self.wn, self.wv
         rows: list[tuple[int, ...]] = []
-        for i, key in enumerate(wk):
-            if not key:
-                continue
-            v, n = wv[i * S.OCOLS:(i + 1) * S.OCOLS], wn[i]
+        for i in compress(range(len(wk)), wk):  # the slots in use
+            v, n = [int(x) for x in wv[i * S.OCOLS:(i + 1) * S.OCOLS]], int(wn[i])
             if v[0] != kind:
                 continue
             if kind == S.KIND_WKC:
