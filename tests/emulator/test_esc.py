@@ -368,3 +368,29 @@ def test_a_register_write_stores_the_writable_bytes_run_by_run_or_masked_alike(
     shared = bytearray(before)
     plan.store_bits(shared, start, plan.writable_bits(payload))
     assert shared == runs
+
+
+def test_register_classes_say_what_a_write_of_each_byte_does() -> None:
+    """The C core's class of each register byte (made by ranges) is what
+    register_write of that byte alone says, flag for flag."""
+    from lolacli.emulator import registers as r
+    from lolacli.emulator.esc import memory as m
+
+    classes = m.register_classes()
+    assert len(classes) == r.PROCESS_RAM
+    for a in range(r.PROCESS_RAM):
+        w = m.register_write.__wrapped__(a, a + 1)
+        want = (m.REGISTER_READONLY if m._READONLY[a] else 0)
+        for flag, cls in (("configuration", m.REGISTER_CONFIGURATION),
+                          ("watchdog", m.REGISTER_CONFIGURATION),
+                          ("sync_managers", m.REGISTER_SYNC_MANAGER),
+                          ("eeprom", m.REGISTER_EEPROM), ("al_control", m.REGISTER_AL_CONTROL),
+                          ("addressing", m.REGISTER_ADDRESSING), ("latch", m.REGISTER_DC),
+                          ("system_time", m.REGISTER_DC)):
+            if getattr(w, flag):
+                want |= cls
+        if w.clear_groups:
+            want |= m.REGISTER_CLEAR
+        assert classes[a] == want, hex(a)
+    assert classes[r.AL_CONTROL] & m.REGISTER_AL_CONTROL
+    assert classes[r.STATION_ADDRESS] & m.REGISTER_ADDRESSING

@@ -236,6 +236,32 @@ class RegisterWrite:
         mem[start:end] = (old | bits).to_bytes(self.span, "little")
 
 
+# what a master's write to a register byte does, for the C core's register path
+# (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration or watchdog times (both
+# worked out again, Esc.configuration_written), sync manager registers, the DC
+# receive-time latch or system time (the kernel tells them apart by address), the EEPROM
+# command, the AL control request, the station address and alias enable, an error counter
+# group cleared (COUNTER_CLEAR_GROUPS)
+REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
+REGISTER_DC, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
+REGISTER_CLEAR = 128
+
+#: the registers whose write does more than store bytes: each of RegisterWrite's flags,
+#: its ranges, and the class register_classes gives their bytes
+_EFFECTS: tuple[tuple[str, tuple[tuple[int, int], ...], int], ...] = (
+    ("configuration", ((r.FMMU, _SM_REGISTERS_END),), REGISTER_CONFIGURATION),
+    ("watchdog", ((r.WATCHDOG_DIVIDER, r.WD_TIME_PD + 2),), REGISTER_CONFIGURATION),
+    ("addressing", ((r.STATION_ADDRESS, r.STATION_ADDRESS + 2),
+                    (r.DL_CONTROL_ALIAS_ENABLE_BYTE, r.DL_CONTROL_ALIAS_ENABLE_BYTE + 1)),
+     REGISTER_ADDRESSING),
+    ("eeprom", ((r.SII_CONTROL_STATUS, r.SII_CONTROL_STATUS + 2),), REGISTER_EEPROM),
+    ("latch", ((r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4),), REGISTER_DC),
+    ("system_time", ((r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),), REGISTER_DC),
+    ("sync_managers", ((r.SM, r.SM + 16 * 8),), REGISTER_SYNC_MANAGER),
+    ("al_control", ((r.AL_CONTROL, r.AL_CONTROL + 1),), REGISTER_AL_CONTROL),
+)
+
+
 @lru_cache(maxsize=4096)
 def register_write(start: int, end: int) -> RegisterWrite:
     segments: list[tuple[int, int]] = []
@@ -259,59 +285,28 @@ def register_write(start: int, end: int) -> RegisterWrite:
         return overlaps(start, end, lo, hi)
 
     clear_groups = tuple(g for g in COUNTER_CLEAR_GROUPS if hit(*g))
-    flags = (
-        hit(r.FMMU, _SM_REGISTERS_END),
-        hit(r.WATCHDOG_DIVIDER, r.WD_TIME_PD + 2),
-        hit(r.STATION_ADDRESS, r.STATION_ADDRESS + 2)
-        or hit(r.DL_CONTROL_ALIAS_ENABLE_BYTE, r.DL_CONTROL_ALIAS_ENABLE_BYTE + 1),
-        hit(r.SII_CONTROL_STATUS, r.SII_CONTROL_STATUS + 2),
-        hit(r.DC_RECEIVE_TIME_PORT0, r.DC_RECEIVE_TIME_PORT0 + 4),
-        hit(r.DC_SYSTEM_TIME, r.DC_SYSTEM_TIME + 8),
-        hit(r.SM, r.SM + 16 * 8),
-        hit(r.AL_CONTROL, r.AL_CONTROL + 1),
-    )
+    flags = {name: any(hit(lo, hi) for lo, hi in ranges) for name, ranges, _ in _EFFECTS}
     span = segments[-1][1] - start if segments else 0
     keep = 0
     for a in range(start, start + span):
         if a < r.PROCESS_RAM and _READONLY[a]:
             keep |= 0xFF << (8 * (a - start))
     return RegisterWrite(
-        tuple(segments), clear_groups, *flags, bool(clear_groups) or any(flags), span, keep
+        tuple(segments), clear_groups, **flags,
+        effects=bool(clear_groups) or any(flags.values()), span=span, keep=keep,
     )
-
-
-# what a master's write to a register byte does, for the C core's register path
-# (_ccore.c, lolacli_core_registers): kept, FMMU/SM configuration or watchdog times (both
-# worked out again, Esc.configuration_written), sync manager registers, the DC
-# receive-time latch or system time (the kernel tells them apart by address), the EEPROM
-# command, the AL control request, the station address and alias enable, an error counter
-# group cleared (COUNTER_CLEAR_GROUPS)
-REGISTER_READONLY, REGISTER_CONFIGURATION, REGISTER_SYNC_MANAGER = 1, 2, 4
-REGISTER_DC, REGISTER_EEPROM, REGISTER_AL_CONTROL, REGISTER_ADDRESSING = 8, 16, 32, 64
-REGISTER_CLEAR = 128
 
 
 @lru_cache(maxsize=1)
 def register_classes() -> bytes:
     """One class per register byte (0x0000-0x0FFF), from :func:`register_write` of that
     byte alone: a write's effects are those of its bytes together."""
-    out = bytearray(r.PROCESS_RAM)
-    for a in range(r.PROCESS_RAM):
-        w = register_write.__wrapped__(a, a + 1)
-        c = REGISTER_READONLY if _READONLY[a] else 0
-        if w.configuration or w.watchdog:
-            c |= REGISTER_CONFIGURATION
-        if w.sync_managers:
-            c |= REGISTER_SYNC_MANAGER
-        if w.eeprom:
-            c |= REGISTER_EEPROM
-        if w.al_control:
-            c |= REGISTER_AL_CONTROL
-        if w.addressing:
-            c |= REGISTER_ADDRESSING
-        if w.clear_groups:
-            c |= REGISTER_CLEAR
-        if w.latch or w.system_time:
-            c |= REGISTER_DC
-        out[a] = c
+    out = bytearray(REGISTER_READONLY if ro else 0 for ro in _READONLY)
+    for _, ranges, cls in _EFFECTS:
+        for lo, hi in ranges:
+            for a in range(max(lo, 0), min(hi, r.PROCESS_RAM)):
+                out[a] |= cls
+    for lo, hi in COUNTER_CLEAR_GROUPS:
+        for a in range(max(lo, 0), min(hi, r.PROCESS_RAM)):
+            out[a] |= REGISTER_CLEAR
     return bytes(out)
