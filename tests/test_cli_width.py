@@ -168,3 +168,14 @@ def test_bus_simulate_fits_80_columns(case: str) -> None:
     code, out = human("bus", "simulate", "-q", *SIMULATE_CASES[case])
     assert_fits(code, out)
     assert "Verdict: " in out
+
+
+def test_names_are_printed_as_given_not_as_emoji_codes(capsys) -> None:
+    """Rich would print ``:100:`` in a name as an emoji; names come from ENIs and
+    file names, so the consoles print them as they are."""
+    from lolacli.cli.common import stderr_console, stdout_console
+
+    stdout_console().print("slave Drive:100: in OP")
+    stderr_console().print("file :smile:.pcapng")
+    out, err = capsys.readouterr()
+    assert "Drive:100: in OP" in out and ":smile:.pcapng" in err

@@ -69,7 +69,8 @@ def stdout_console() -> Any:
                     kwargs.update(width=need, crop=False)
             super().print(*objects, **kwargs)
 
-    return _Console(highlight=False, soft_wrap=False)
+    # no emoji codes: a name such as "Drive:100:" in an ENI is printed as it is
+    return _Console(highlight=False, soft_wrap=False, emoji=False)
 
 
 def fit_table(table: Any, console: Any = None, width: int | None = None) -> None:
@@ -103,15 +104,18 @@ def _share_width(table: Any, console: Any, width: int) -> None:
     wide = console.options.update(width=1 << 16)
     if any(c.width is not None for c in table.columns):
         return  # widths chosen by the command
+    whole = Measurement.get(console, wide, table).maximum
+    if whole <= width:
+        return  # fits as it is (most tables: no cell measured one by one)
     most = [
         max(Measurement.get(console, wide, cell).maximum for cell in (c.header, *c.cells))
         for c in table.columns
     ]
     least = [min(c.min_width or 0, m) for c, m in zip(table.columns, most, strict=True)]
-    extra = Measurement.get(console, wide, table).maximum - sum(most)  # padding, rules
+    extra = whole - sum(most)  # padding, rules
     room = width - extra - sum(least)
-    if sum(most) + extra <= width or room < 0:
-        return  # fits as it is; or cannot fit, and is printed whole, wider
+    if room < 0:
+        return  # cannot fit, and is printed whole, wider
     given = list(least)
     wanting = sorted(range(len(most)), key=lambda i: most[i] - least[i])
     for n, i in enumerate(wanting):
@@ -203,7 +207,7 @@ def _breaks(plain: str, width: int, hang: int) -> list[int]:
 def stderr_console() -> Any:
     from rich.console import Console
 
-    return Console(stderr=True, highlight=False)
+    return Console(stderr=True, highlight=False, emoji=False)
 
 
 def text_width() -> int:
