@@ -14,7 +14,9 @@ the rest (the master), and the ratio of simulated time to wall time:
     engines      the defaults with the chain's C core and with its Python reference
                  (``c_over_python``: what the C twin is worth on this figure)
     cli          ``lolacli bus simulate`` in a new process, as a user runs it: the factor
-                 it prints, and over the whole process's wall time (start-up included)
+                 it prints, and over the whole process's wall time (start-up included);
+                 also with ``--move all:20000`` (a move on every joint), with and without
+                 ``--joint-model``
 
 The real-time factor is the report's (simulated time over the wall time of bring-up, run
 and report, as ``bus simulate`` prints it), and the same over CPU time. Since the host is
@@ -146,20 +148,27 @@ def engines(eni, args: argparse.Namespace) -> dict[str, object]:  # type: ignore
     }
 
 
-def cli(args: argparse.Namespace) -> dict[str, float]:
+def cli(args: argparse.Namespace, *extra: str) -> dict[str, float]:
     """``lolacli bus simulate`` as a user runs it (a new process, the defaults but for
-    ``--eni``/``--rate``/``--cycles``): the factor it prints, and simulated time over the
-    whole process's wall time (interpreter start-up and imports too); best of
-    ``--repeat``."""
+    ``--eni``/``--rate``/``--cycles`` and ``extra``): the factor it prints, and simulated
+    time over the whole process's wall time (interpreter start-up and imports too); best
+    of ``--repeat``. Bytecode is cached, as an installed package has it (this
+    environment may set PYTHONDONTWRITEBYTECODE: every run would compile every module)."""
+    import os
     import subprocess
 
     command = [sys.executable, "-m", "lolacli", "bus", "simulate", "--eni", str(args.eni),
                "--rate", str(args.rate), "--cycles", str(args.cycles), "--quiet",
-               "--format", "json"]
+               "--format", "json", *extra]
+    env = dict(os.environ, PYTHONPYCACHEPREFIX=os.path.join(tempfile.gettempdir(),
+                                                             "lolacli-bench-pycache"))
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    subprocess.run(command, capture_output=True, cwd=ROOT, env=env)  # (compiles once)
     runs = []
     for _ in range(args.repeat):
         t0 = time.perf_counter()
-        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, check=True)
+        done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, check=True,
+                              env=env)
         wall = time.perf_counter() - t0
         doc = json.loads(done.stdout)
         runs.append({"realtime_factor": doc["realtime_factor"],
@@ -194,6 +203,9 @@ def main() -> None:
         for name in configs:
             out[name] = best(runs[name])
     out["cli"] = cli(args)
+    # issue 26: a move on every joint, with the kinematic drives and with the joint model
+    out["cli moves"] = cli(args, "--move", "all:20000")
+    out["cli moves joint-model"] = cli(args, "--move", "all:20000", "--joint-model")
     out["engines"] = engines(eni, args)
     alone = master_only(eni, args.cycles)
     out["master-only"] = {

@@ -176,7 +176,9 @@ def test_negative_or_out_of_range_option_is_usage_error(cli, corpus: Path, args)
     code, out, err = cli(*args)
     assert code == 2
     assert out == ""
-    assert "Invalid value" in err and "Traceback" not in err
+    option = {"-c": "-c/--count"}.get(args[-2], args[-2])
+    assert f"error: {option}: " in err and "Traceback" not in err
+    assert len(err.rstrip("\n").splitlines()) == 1 and len(err.rstrip("\n")) <= 80, err
 
 
 def test_list_frames_refuses_a_negative_count(corpus: Path) -> None:

@@ -62,13 +62,13 @@ def test_a_short_command_does_not_import_pydantic() -> None:
 @pytest.mark.parametrize(
     ("args", "said"),
     [
-        (("sdo", "read", "5", "0x1000", "--timeout", "nan"), "'--timeout'"),
-        (("sdo", "read", "5", "0x1000", "--timeout", "0"), "'--timeout'"),
-        (("sdo", "read", "5", "0x1000", "--timeout", "soon"), "'--timeout'"),
-        (("bus", "timing", "--link-mbit", "nan"), "'--link-mbit'"),
-        (("bus", "timing", "--statistic", "mean"), "'--statistic'"),
-        (("eni", "inspect", "/nonexistent/lola.xml", "--format", "yaml"), "'--format' / '-f'"),
-        (("capture", "list", "x.pcap", "--count", "many"), "'-c' / '--count'"),
+        (("sdo", "read", "5", "0x1000", "--timeout", "nan"), "--timeout: "),
+        (("sdo", "read", "5", "0x1000", "--timeout", "0"), "--timeout: "),
+        (("sdo", "read", "5", "0x1000", "--timeout", "soon"), "--timeout: "),
+        (("bus", "timing", "--link-mbit", "nan"), "--link-mbit: "),
+        (("bus", "timing", "--statistic", "mean"), "--statistic: "),
+        (("eni", "inspect", "/nonexistent/lola.xml", "--format", "yaml"), "--format/-f: "),
+        (("capture", "list", "x.pcap", "--count", "many"), "-c/--count: "),
         (("sdo", "read", "5"), "Missing argument"),
     ],
 )
@@ -76,7 +76,7 @@ def test_a_bad_value_is_one_line_and_exit_2(cli, args: tuple[str, ...], said: st
     code, out, err = cli(*args)
     assert (code, out) == (2, "")
     assert err.count("\n") == 1 and "Traceback" not in err
-    assert said in err, err
+    assert said in err and len(err) <= 81, err  # one line of at most 80 columns
 
 
 def _commands():  # type: ignore[no-untyped-def]
@@ -149,3 +149,17 @@ def test_no_command_function_is_long() -> None:
         if lines > 60:
             long[path] = lines
     assert long == {}
+
+
+def test_a_servers_duration_is_a_time_as_bus_simulate_spells_it() -> None:
+    """``bus emulate``/``sdo serve --duration`` take ``30s`` and ``500ms`` as ``bus
+    simulate --duration`` does, and a bare number of seconds as before."""
+    import typer
+
+    from lolacli.cli.options import seconds
+
+    assert [seconds(t) for t in ("1.5", "500ms", "2s", "250us", "0")] == [1.5, 0.5, 2.0,
+                                                                           0.00025, 0.0]
+    for bad in ("-1", "nan", "inf", "soon", "1e400", "5 parsecs"):
+        with pytest.raises(typer.BadParameter):
+            seconds(bad)

@@ -61,8 +61,36 @@ class _LolaGroup(TyperGroup):
                 raise typer.Exit(2) from None  # its help, as the root's (no_args_is_help)
             path = usage_ctx.command_path if usage_ctx is not None else "lolacli"
             message = " ".join(exc.format_message().split())
+            # click's "Invalid value for '--ke': 'abc' is not…" as "--ke: 'abc' is not…":
+            # the line fits 80 columns
+            if message.startswith("Invalid value for '") and "': " in message:
+                name, _, rest = message.removeprefix("Invalid value for '").partition("': ")
+                name = name.replace("' / '", "/")  # "'-c' / '--count'": -c/--count
+                message = f"{name}: {_short_range(rest)}"
             sys.stderr.write(f"{path}: error: {message} (see --help)\n")
             raise typer.Exit(2) from None
+
+
+def _short_range(message: str) -> str:
+    """click's words for a bad value, shorter, so that the error line fits 80 columns:
+    "-1 is not in the range x>=0." as "-1 is below 0", "100 is not in the range
+    0<=x<=99." as "100 is not 0 to 99", "'x' is not a valid float range." as "'x' is
+    not a number", "'a' is not one of 'b', 'c'." as "'a' is not b|c"."""
+    import re
+
+    message = message.rstrip(".")
+    if m := re.fullmatch(r"(.*) is not a valid (float|integer|int)( range)?", message):
+        return f"{m[1]} is not {'a number' if m[2] == 'float' else 'an integer'}"
+    if m := re.fullmatch(r"(.*) is not one of (.*)", message):
+        return f"{m[1]} is not {'|'.join(c.strip(chr(39)) for c in m[2].split(', '))}"
+    value, found, bounds = message.partition(" is not in the range ")
+    if not found:
+        return message
+    if m := re.fullmatch(r"(\S+?)<=?x<=?(\S+)", bounds):
+        return f"{value} is not {m[1]} to {m[2]}"
+    if m := re.fullmatch(r"x(>=?|<=?)(\S+)", bounds):
+        return f"{value} is {'below' if m[1].startswith('>') else 'above'} {m[2]}"
+    return f"{value} is not {bounds}"
 
 
 def _traceback_if_debug() -> None:

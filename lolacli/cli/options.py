@@ -176,13 +176,25 @@ MaxWkcOption = Annotated[
 
 # ---------------------------------------------------------------- servers
 
+def seconds(text: str | float) -> float:
+    """A server's --duration in seconds: ``30s``, ``500ms`` as ``bus simulate`` spells a
+    time, or a bare number of seconds."""
+    from lolacli.errors import UsageError
+    from lolacli.timing.model import parse_duration_ns
+
+    try:
+        return parse_duration_ns(str(text), "s") / 1e9
+    except UsageError:
+        raise typer.BadParameter(f"{str(text)[:20]!r} is not a time >= 0") from None
+
+
 DurationOption = Annotated[
     float,
     typer.Option(
         "--duration",
-        min=0.0,
-        callback=not_nan,
-        help="Stop after this many seconds (0: until Ctrl-C).",
+        parser=seconds,
+        metavar="TIME",
+        help="Stop after this long: 30s, 500ms, or seconds (0: until Ctrl-C).",
     ),
 ]
 
