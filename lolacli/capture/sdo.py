@@ -349,12 +349,13 @@ class SdoTracker:
             t.name, t.type_source, t.value, t.data_type, t.value_text = said
 
     def _lookup(self, slave: int, eni: Eni | None) -> TypeLookup:
-        from lolacli.eni.dictionary import from_eni
         from lolacli.od.lookup import TypeLookup
 
         dictionaries = []
         found = next((s for s in eni.slaves if s.station_address == slave), None) if eni else None
         if found is not None and eni is not None:
+            from lolacli.eni.dictionary import from_eni  # (the ENI model: ~20 ms to import)
+
             described = from_eni(found, eni.source or "")
             if described is not None:
                 dictionaries.append(described)
