@@ -244,14 +244,14 @@ def test_cli_human_fits_80_columns_with_units(tmp_path: Path) -> None:
         (("--v-start", "100"), "above vmax"),
         (("--jmax", "0"), "jmax must be greater than 0"),
         (("--amax", "-5"), "amax must be greater than 0"),
-        (("--vmax", "nan"), "'--vmax'"),
+        (("--vmax", "nan"), "--vmax: "),
         (("--distance", "1e300"), "out of range"),
         (("--distance", "inf"), "finite"),
         (("--jmax", "1e-300"), "at least 1e-12"),
         (("--distance", "1e12", "--vmax", "1e-6", "--cycle", "1ms"), "cycles in the profile"),
         (("--cycle", "0s"), "a cycle lasts more than 0 s"),
         (("--distance", "1", "--v-end", "90"), "without reversing"),
-        (("--v-start", "-1"), "'--v-start'"),
+        (("--v-start", "-1"), "--v-start: "),
     ],
 )
 def test_cli_bad_input_is_one_line_exit_2(cli, extra: tuple[str, ...], said: str) -> None:
