@@ -17,59 +17,71 @@ _RULES = {"mac": "by the source MAC", "packet_type": "by packet type (Linux cook
 _CONFIGURED = ("FPRD", "FPWR", "FPRW", "FRMW")  # adp is a station address
 
 
-def _table(**kwargs: Any) -> Any:
-    from rich import box
-    from rich.table import Table
+class _Out:
+    """The lines of the report, laid out at the width of human output."""
 
-    return Table(box=box.SIMPLE_HEAD, title_justify="left", **kwargs)
+    def __init__(self) -> None:
+        from lolacli.cli.common import text_width
+
+        self.width = text_width()
+        self.lines: list[str] = []
+
+    def say(self, text: str) -> None:
+        """A line of prose, wrapped between words."""
+        from lolacli.cli.plain import fill
+
+        self.lines += fill(text, self.width)
+
+    def table(self, table: Any) -> None:
+        """A table, after a blank line."""
+        self.lines += ["", *table.lines(self.width)]
 
 
-def _grid() -> Any:
-    from rich.table import Table
+def _table(title: str, *, header: bool = True) -> Any:
+    from lolacli.cli.plain import Table
 
-    return Table.grid(padding=(0, 1))
-
-
-def _text(text: str) -> Any:
-    """Plain text for rich: no markup (a message may hold brackets)."""
-    from rich.text import Text
-
-    return Text(text)
-
-
-def _say(console: Any, text: str) -> None:
-    """A line of prose, wrapped between words at the console's width."""
-    console.print(_text(text), soft_wrap=False)
+    return Table(title, header=header)
 
 
 def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
-    from lolacli.cli.common import stdout_console
+    from lolacli.cli.plain import write
 
-    console = stdout_console()
-    console.print(_text(d["file"]))  # whole, however long (soft wrap)
-    _say(console,
-         f"{d['format']}, {number(d['time_span_us'] / 1e6, 's')}, "
-         f"{plural(d['frames_total'], 'packet')}, engine {d['engine']}; direction "
-         f"{_RULES.get(d['direction_rule'], d['direction_rule'])}")
-    _verdict(console, d)
-    _frames(console, d)
-    _timing(console, d)
-    _wkc(console, d)
-    _al_status(console, d)
-    _say(console, "Datagrams by command: " + (", ".join(
+    out = _Out()
+    out.lines.append(d["file"])  # whole, however long
+    out.say(f"{d['format']}, {number(d['time_span_us'] / 1e6, 's')}, "
+            f"{plural(d['frames_total'], 'packet')}, engine {d['engine']}; direction "
+            f"{_RULES.get(d['direction_rule'], d['direction_rule'])}")
+    _verdict(out, d)
+    _frames(out, d)
+    _timing(out, d)
+    _wkc(out, d)
+    _al_status(out, d)
+    out.say("Datagrams by command: " + (", ".join(
         f"{k} {v}" for k, v in d["datagrams_by_cmd"].items()) or "none"))
-    _dc(console, d["dc"])
-    _sdo(console, d, show_all)
+    _dc(out, d["dc"])
+    _sdo(out, d, show_all)
+    write(out.lines)
 
 
-def _verdict(console: Any, d: dict[str, Any]) -> None:
-    from lolacli.cli.verdict import render_verdict
+def _keep(text: str) -> str:
+    from lolacli.cli.plain import keep
+
+    return keep(text)
+
+
+def _station(address: int) -> str:
+    """A station address, never broken across lines."""
+    return _keep(station(address))
+
+
+def _verdict(out: _Out, d: dict[str, Any]) -> None:
+    from lolacli.cli.verdict import verdict_lines
 
     note = ", of the part read before the stop" if d.get("interrupted") else ""
-    render_verdict(console, d["verdict"], d["findings"], note)
+    out.lines += verdict_lines(d["verdict"], d["findings"], note, min(out.width, 80))
 
 
-def _frames(console: Any, d: dict[str, Any]) -> None:
+def _frames(out: _Out, d: dict[str, Any]) -> None:
     rows = [
         ("EtherCAT frames", d["ecat_frames"], "other packets", d["non_ecat_frames"]),
         ("outgoing", d["outgoing_frames"], "returned", d["returned_frames"]),
@@ -77,33 +89,33 @@ def _frames(console: Any, d: dict[str, Any]) -> None:
         ("lost", d["lost_frames"], "late", d["late_frames"]),
         ("in flight at end", d["in_flight_at_end"], "malformed", d["malformed_frames"]),
     ]
-    grid = _table(title="Frames", show_header=False)
-    for justify in ("left", "right", "left", "right"):
-        grid.add_column(justify=justify)
+    grid = _table("Frames", header=False)
+    for right in (False, True, False, True):
+        grid.add_column(right=right)
     for a, x, b, y in rows:
         grid.add_row(a, str(x), b, str(y))
-    console.print(grid)
-    _say(console, f"A frame unanswered for {number(d['timeout_us'], 'µs', 2)} "
+    out.table(grid)
+    out.say(f"A frame unanswered for {number(d['timeout_us'], 'µs', 2)} "
                   f"({d['timeout_source']}) is lost, or late when its answer comes later.")
 
 
-def _timing(console: Any, d: dict[str, Any]) -> None:
-    table = _table(title=f"Timing (µs), cyclic stream: {d['cyclic_stream']}")
+def _timing(out: _Out, d: dict[str, Any]) -> None:
+    table = _table(f"Timing (µs), cyclic stream: {d['cyclic_stream']}")
     table.add_column("")
     for col in _STATS:
-        table.add_column(col, justify="right")
+        table.add_column(col, right=True)
     for label, key in (("round trip", "round_trip_us"), ("cyclic round trip",
                        "round_trip_cyclic_us"), ("cycle period", "cycle_period_us")):
         s = d[key]
         cells = ["—"] * 7 if s is None else [str(s["count"])] + [
             _us(s[k]) for k in _STATS[1:]]
         table.add_row(label + (" (unusable)" if key in d["unusable_stats"] else ""), *cells)
-    console.print(table)
+    out.table(table)
     if d["unusable_stats"]:
-        _say(console, "unusable: built on quantised or backward timestamps (see findings)")
+        out.say("unusable: built on quantised or backward timestamps (see findings)")
     if d["cycle_jitter_us"] and "cycle_period_us" not in d["unusable_stats"]:
         j = d["cycle_jitter_us"]
-        _say(console, f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
+        out.say(f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
                       f"{j['max_deviation']:.2f} µs")
 
 
@@ -119,50 +131,49 @@ def _datagram(g: dict[str, Any]) -> str:
     if g["logical_address"] is not None:
         where = f"0x{g['logical_address']:08X}"
     elif g["adp"] and g["cmd"] in _CONFIGURED:
-        where = f"0x{g['ado']:04X} of {station(g['adp'])}"
+        where = f"0x{g['ado']:04X} of {_station(g['adp'])}"
     elif g["adp"]:
         where = f"0x{g['adp']:04X}:0x{g['ado']:04X}"
     else:
         where = f"0x{g['ado']:04X}"
-    return f"{g['cmd']} {where} {g['length_bytes']} B"
+    return f"{g['cmd']} {where} {_keep(str(g['length_bytes']) + ' B')}"
 
 
-def _wkc(console: Any, d: dict[str, Any]) -> None:
+def _wkc(out: _Out, d: dict[str, Any]) -> None:
     w = d["wkc"]
     checked = (f"{plural(d['wkc_checked'], 'return')} checked, "
                f"{plural(d['wkc_mismatches'], 'mismatch', 'mismatches')}")
     if not w["datagrams"]:
-        _say(console, f"WKC (reference: {d['wkc_reference']}; {checked}): no cyclic "
+        out.say(f"WKC (reference: {d['wkc_reference']}; {checked}): no cyclic "
                       "datagram came back")
         return
-    table = _table(title=f"WKC per cyclic datagram (reference: {d['wkc_reference']}; "
-                         f"{checked})")
-    for col, justify in (("datagram", "left"), ("expected", "right"), ("from", "left"),
-                         ("returns", "right"), ("bad", "right"), ("seen (WKC ×count)", "left")):
-        table.add_column(col, justify=justify)
+    table = _table(f"WKC per cyclic datagram (reference: {d['wkc_reference']}; {checked})")
+    for col, right in (("datagram", False), ("expected", True), ("from", False),
+                       ("returns", True), ("bad", True), ("seen (WKC ×count)", False)):
+        table.add_column(col, right=right)
     for g in w["datagrams"]:
         seen = ", ".join(f"{o['wkc']}×{o['count']}" for o in g["observed"])
         table.add_row(_datagram(g), "?" if g["expected"] is None else str(g["expected"]),
                       g["basis"] or "cannot tell", str(g["returns"]), str(g["mismatches"]), seen)
-    console.print(table)
+    out.table(table)
 
 
-def _al_status(console: Any, d: dict[str, Any]) -> None:
+def _al_status(out: _Out, d: dict[str, Any]) -> None:
     reads = d["al_status"]
     if not reads:
         return
     by_state: dict[str, list[str]] = {}
     for r in reads:
-        who = "BRD" if r["station"] is None else station(r["station"])
+        who = "BRD" if r["station"] is None else _station(r["station"])
         by_state.setdefault(r["state"], []).append(who)
     parts = []
     for state, names in by_state.items():
         shown = ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else "")
         parts.append(f"{state}: {shown}")
-    _say(console, "AL status, last read per slave — " + "; ".join(parts))
+    out.say("AL status, last read per slave — " + "; ".join(parts))
 
 
-def _dc(console: Any, dc: dict[str, Any]) -> None:
+def _dc(out: _Out, dc: dict[str, Any]) -> None:
     reads = dc["system_time_difference_reads"]
     text = (f"DC: {plural(dc['drift_compensation_datagrams'], 'drift-compensation datagram')}"
             f" in {plural(dc['drift_compensation_bursts'], 'burst')}; ")
@@ -171,19 +182,19 @@ def _dc(console: Any, dc: dict[str, Any]) -> None:
                  f"{number(dc['system_time_difference_max_abs_ns'], 'ns')}")
     else:
         text += "no read of the system time difference (0x092C)"
-    _say(console, text)
+    out.say(text)
 
 
-def _sdo(console: Any, d: dict[str, Any], show_all: bool) -> None:
+def _sdo(out: _Out, d: dict[str, Any], show_all: bool) -> None:
     transactions = d["sdo_transaction_list"]
     aborts = d["sdo_aborts"]
     if not transactions:
-        _say(console, f"SDO: none ({plural(d['mailbox']['messages'], 'mailbox message')})")
+        out.say(f"SDO: none ({plural(d['mailbox']['messages'], 'mailbox message')})")
         return
-    table = _table(title=f"SDO transactions ({d['sdo_transactions']}, "
-                         f"{plural(len(aborts), 'abort')})", collapse_padding=True)
+    table = _table(f"SDO transactions ({d['sdo_transactions']}, "
+                   f"{plural(len(aborts), 'abort')})")
     for col in ("slave", "object", "kind", "transfer", "bytes", "status", "frames", "µs"):
-        table.add_column(col, justify="right" if col in ("bytes", "µs") else "left")
+        table.add_column(col, right=col in ("bytes", "µs"))
     shown = transactions if show_all else transactions[:SDO_ROWS]
     last = None
     for t in shown:
@@ -191,13 +202,13 @@ def _sdo(console: Any, d: dict[str, Any], show_all: bool) -> None:
         dur = "" if t["duration_us"] is None else f"{t['duration_us']:.0f}"
         end = "" if t["end_frame"] is None else t["end_frame"]  # (open: no answer yet)
         # the slave once per run of its transactions
-        who = "" if t["slave"] == last else station(t["slave"])
+        who = "" if t["slave"] == last else _station(t["slave"])
         last = t["slave"]
         table.add_row(who, t["object"], t["kind"], t["transfer"], str(t["size_bytes"]),
                       status, f"{t['start_frame']}–{end}", dur)
-    console.print(table)
+    out.table(table)
     if len(shown) < len(transactions):
-        _say(console, f"… {len(transactions) - len(shown)} more, --all to show")
+        out.say(f"… {len(transactions) - len(shown)} more, --all to show")
     for a in aborts:
-        _say(console, f"SDO abort: slave {station(a['slave'])} 0x{a['index']:04X}:"
+        out.say(f"SDO abort: slave {station(a['slave'])} 0x{a['index']:04X}:"
                       f"{a['subindex']:02X} {a['code_hex']} {a['text']} (frame {a['frame']})")

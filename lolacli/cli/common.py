@@ -147,11 +147,14 @@ def say(console: Any, text: Any, *, hang: int = 2) -> None:
     """Print a paragraph (a ``str``, or a rich ``Text`` for colour) wrapped between words
     at the console's width, continuation lines indented by ``hang``. A word is never split:
     a word wider than the line (a long file path) gets a line of its own."""
+    from rich.cells import cell_len
     from rich.text import Text
+
+    from lolacli.cli.plain import breaks as fill_breaks
 
     text = text if isinstance(text, Text) else Text(str(text))
     for paragraph in text.split("\n"):
-        breaks = _breaks(paragraph.plain, console.width, hang)
+        breaks = fill_breaks(paragraph.plain, console.width, hang, cell_len)
         for i, line in enumerate(paragraph.divide(breaks)):
             line.rstrip()
             console.print(Text(" " * hang) + line if i else line, soft_wrap=True, crop=False)
@@ -178,30 +181,6 @@ def break_long_words(text: str, width: int, after: str = ".") -> str:
         return "\n".join([*lines, line] if line else lines)
 
     return " ".join(pieces(w) for w in text.split(" "))
-
-
-def _breaks(plain: str, width: int, hang: int) -> list[int]:
-    """Offsets of the words that start a new line when ``plain`` is filled greedily."""
-    import re
-
-    from rich.cells import cell_len
-
-    breaks: list[int] = []
-    starts: list[int] = []  # where each word starts
-    start, room = 0, width
-    for word in re.finditer(r"\S+", plain):
-        if word.start() > start and cell_len(plain[start : word.end()]) > room:
-            breaks.append(word.start())
-            start, room = word.start(), width - hang
-        starts.append(word.start())
-    if breaks and starts[-1] == breaks[-1]:  # a last line of one word: take one more
-        before = [w for w in starts if w < breaks[-1]]
-        earlier = breaks[-2] if len(breaks) > 1 else 0
-        if len(before) > 1 and before[-1] > earlier:
-            tail = plain[before[-1] :].rstrip()
-            if cell_len(tail) <= width - hang:
-                breaks[-1] = before[-1]
-    return breaks
 
 
 def stderr_console() -> Any:

@@ -16,26 +16,31 @@ _NOUN = {"failure": "failure", "warning": "warning", "info": "note"}
 def render_verdict(
     console: Any, verdict: str, findings: list[dict[str, Any]], note: str = ""
 ) -> None:
-    """``findings`` as :meth:`lolacli.findings.Finding.to_dict` gives them; ``note`` ends
-    the verdict's line (", of the part read before the stop")."""
-    from rich.table import Table
-    from rich.text import Text
+    """Print :func:`verdict_lines` with a rich ``console``, at its width (80 at most)."""
+    width = min(console.width, 80) if console.width else 80
+    for line in verdict_lines(verdict, findings, note, width):
+        console.print(line, markup=False, soft_wrap=True, crop=False)
 
-    from lolacli.cli.common import say
+
+def verdict_lines(
+    verdict: str, findings: list[dict[str, Any]], note: str = "", width: int = 80
+) -> list[str]:
+    """``findings`` as :meth:`lolacli.findings.Finding.to_dict` gives them; ``note`` ends
+    the verdict's line (", of the part read before the stop"). Each finding's text wraps
+    between words beside its severity."""
+    from lolacli.cli.plain import fill
 
     counts = {s: sum(1 for f in findings if f["severity"] == s) for s in _LABEL}
     parts = [plural(n, _NOUN[s]) for s, n in counts.items() if n]
-    say(console, f"Verdict: {verdict.upper()}" + (f" ({', '.join(parts)})" if parts else "")
-        + note)
-    if not findings:
-        return
-    grid = Table.grid(padding=(0, 1))
-    grid.add_column(no_wrap=True)
-    grid.add_column(overflow="fold")
-    for f in findings:
-        grid.add_row(_LABEL.get(f["severity"], f["severity"]),
-                     Text(f"{f['kind']}: {f['message']}" + _where(f)))
-    console.print(grid, width=min(console.width, 80) if console.width else 80)
+    lines = fill(f"Verdict: {verdict.upper()}" + (f" ({', '.join(parts)})" if parts else "")
+                 + note, width, hang=2)
+    labels = [_LABEL.get(f["severity"], f["severity"]) for f in findings]
+    hang = max((len(label) for label in labels), default=0) + 1
+    for label, f in zip(labels, findings, strict=True):
+        text = fill(f"{f['kind']}: {f['message']}" + _where(f), width - hang)
+        lines.append(f"{label:<{hang - 1}} {text[0]}")
+        lines += [" " * hang + line for line in text[1:]]
+    return lines
 
 
 def _where(f: dict[str, Any]) -> str:
@@ -52,4 +57,4 @@ def _where(f: dict[str, Any]) -> str:
     return out
 
 
-__all__ = ["render_verdict"]
+__all__ = ["render_verdict", "verdict_lines"]
