@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 import typer
 
-from lolacli.cli.common import FormatOption, OutputFormat, emit_json, silence_stdout
+from lolacli.cli.common import FormatOption, OutputFormat, emit_json, json_text, silence_stdout
 from lolacli.cli.options import CaptureArgument, EniCheckOption, MaxLostOption, MaxWkcOption
 from lolacli.errors import UsageError
 
@@ -338,11 +338,11 @@ class _JsonFrames:
 
     def __init__(self, head: dict[str, Any]) -> None:
         self.n = 0
-        text = json.dumps(head, indent=2, ensure_ascii=False)
+        text = json_text(head)
         sys.stdout.write(text[:-2] + ',\n  "frames": [')
 
     def add(self, frame: dict[str, Any]) -> None:
-        body = json.dumps(frame, indent=2, ensure_ascii=False).replace("\n", "\n    ")
+        body = json_text(frame).replace("\n", "\n    ")
         sys.stdout.write(("," if self.n else "") + "\n    " + body)
         self.n += 1
 

@@ -33,10 +33,47 @@ def silence_stdout() -> None:
     os.close(devnull)
 
 
+def json_text(data: Any) -> str:
+    """``data`` as JSON, indented by two spaces, non-ASCII as it is (UTF-8), by orjson:
+    json's own indenting encoder is pure Python, 15 times slower on a large report. An
+    integer wider than 64 bits, which orjson does not take, goes through json, which
+    writes the same text. NaN and infinities, which JSON does not have, are written null
+    either way."""
+    import orjson
+
+    try:
+        return orjson.dumps(data, default=_plain_number, option=orjson.OPT_INDENT_2
+                            | orjson.OPT_NON_STR_KEYS | orjson.OPT_SERIALIZE_NUMPY).decode()
+    except orjson.JSONEncodeError:
+        return json.dumps(_finite(data), indent=2, ensure_ascii=False, default=_plain_number)
+
+
+def _plain_number(value: Any) -> Any:
+    """A subclass of float or int, or a numpy scalar, as the number it is."""
+    if isinstance(value, float):
+        return float(value)
+    if isinstance(value, int):
+        return int(value)
+    item = getattr(value, "item", None)  # a numpy scalar
+    if callable(item):
+        return item()
+    raise TypeError(f"{type(value).__name__} is not JSON")
+
+
+def _finite(data: Any) -> Any:
+    if isinstance(data, float):
+        return data if data - data == 0 else None
+    if isinstance(data, dict):
+        return {k: _finite(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [_finite(v) for v in data]
+    return data
+
+
 def emit_json(data: Any) -> None:
     """Write one JSON document to stdout."""
     try:
-        sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+        sys.stdout.write(json_text(data) + "\n")
         sys.stdout.flush()
     except BrokenPipeError:
         silence_stdout()
