@@ -10,7 +10,10 @@ Two sources, one interface (:class:`Source`), and the scanner walks either the s
   is mapped, so that the file's pages do not pile up in the process (RSS stays about one
   window however large the file). ``MAP_POPULATE`` was measured slower than letting the
   scanner fault pages in (the kernel maps 16 pages a fault): 32 ms against 18 ms to map
-  and touch a 350 MB file.
+  and touch a 350 MB file. Mapping the next window ahead (populated) and unmapping the
+  last one on other threads was slower too (0.44-0.54 s against 0.40 s on a 2 M-frame
+  LOLA capture): the threads contend for the process's memory map lock, and an unmap in
+  a process running on two cores costs TLB shootdowns on the other.
 * :class:`ChunkedSource` reads the file in bounded chunks into one reusable buffer: pipes,
   ``/dev/stdin``, other files that are not regular, and the Python engine (which copies
   its buffer to ``bytes`` anyway).
