@@ -115,21 +115,25 @@ def summarize_chunks(chunks: Iterable[_Chunk]) -> Summary | None:
     if n <= GATHER_MAX:
         # small enough to gather: one array (not thousands of drained chunks), and one
         # partition finds every wanted rank at once
-        gathered = np.concatenate([c.astype(np.int64, copy=False) for c in parts])
+        gathered = np.concatenate(parts, dtype=np.int64)
         parts = [gathered]
     lo = min(int(c.min()) for c in parts)
     hi = max(int(c.max()) for c in parts)
-    s1, s2 = _moments(parts, lo, hi)
     wanted = _ranks(n)
     memo: dict[int, int] = {}
     if gathered is not None and hi - lo < max(BINS, n):
-        # few distinct values possible (round trips, periods): count them, exactly
-        cum = np.cumsum(np.bincount(gathered - lo, minlength=hi - lo + 1))
+        # few distinct values possible (round trips, periods): count them, exactly; the
+        # counts give the sums too
+        counts = np.bincount(gathered - lo, minlength=hi - lo + 1)
+        s1, s2 = _counted_moments(counts)
+        cum = np.cumsum(counts)
         at = np.searchsorted(cum, wanted, side="right")
         memo = {k: lo + int(i) for k, i in zip(wanted, at, strict=True)}
-    elif gathered is not None:  # (a copy of the chunks: partitioned in place)
-        gathered.partition(wanted)
-        memo = {k: int(gathered[k]) for k in wanted}
+    else:
+        s1, s2 = _moments(parts, lo, hi)
+        if gathered is not None:  # (a copy of the chunks: partitioned in place)
+            gathered.partition(wanted)
+            memo = {k: int(gathered[k]) for k in wanted}
     histograms: dict[tuple[int, int], npt.NDArray[np.int64]] = {}
 
     def rank(k: int) -> int:
@@ -247,6 +251,17 @@ def order_statistic(
         below += before
         population = int(counts[b])
         lo, hi = lo + -(-b * span // bins), lo + -(-(b + 1) * span // bins) - 1
+
+
+def _counted_moments(counts: npt.NDArray[np.int64]) -> tuple[int, int]:
+    """:func:`_moments` from the count of each offset (``counts[v]``: how many values
+    are ``lo + v``). Exact in int64: there are at most :data:`GATHER_MAX` (2^20) values
+    and offsets (below ``max(BINS, n)``), so each sum stays below 2^60."""
+    import numpy as np
+
+    offsets = np.arange(counts.size, dtype=np.int64)
+    weighted = counts * offsets
+    return int(weighted.sum()), int(np.dot(weighted, offsets))
 
 
 def _moments(chunks: Sequence[_Chunk], lo: int, hi: int) -> tuple[int, int]:
