@@ -63,6 +63,8 @@ def target_of(cmd: int, adp: int) -> Target | None:
 
 @dataclass(frozen=True, slots=True)
 class FmmuWrite:
+    """One FMMU the master wrote: in which frame, to whom, which one."""
+
     frame: int
     target: Target
     index: int
@@ -71,6 +73,8 @@ class FmmuWrite:
 
 @dataclass(frozen=True, slots=True)
 class AlRequest:
+    """One AL control write: in which frame, to whom, the value written."""
+
     frame: int
     target: Target
     value: int
