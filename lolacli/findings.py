@@ -31,6 +31,9 @@ _ORDER = {Severity.FAILURE: 0, Severity.WARNING: 1, Severity.INFO: 2}
 
 @dataclass(frozen=True, slots=True)
 class Finding:
+    """One thing a check found: its kind, how bad it is, and where (frames, cycles,
+    slave)."""
+
     kind: str
     severity: Severity
     message: str

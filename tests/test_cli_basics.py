@@ -24,6 +24,26 @@ def test_a_group_without_its_command_shows_its_help(cli):
         assert "error:" not in err
 
 
+def test_the_command_named_is_built_alone():
+    """``lolacli capture analyze F`` builds the click command of ``analyze`` alone (its
+    siblings' options cost start-up); the group's help, a misspelt command and the whole
+    app have every command, and the module's app keeps them all."""
+    import typer.main
+
+    from lolacli.cli import capture, main
+
+    def built(command: str | None) -> list[str]:
+        root = typer.main.get_command(main._build(("capture",), command))
+        return sorted(root.commands["capture"].commands)
+
+    every = sorted(str(c.name) for c in capture.app.registered_commands)
+    assert len(every) > 1
+    assert built("analyze") == ["analyze"]
+    assert built("list") == ["list"]
+    assert built("--help") == built(None) == built("analyse") == every
+    assert sorted(str(c.name) for c in capture.app.registered_commands) == every
+
+
 def test_help_does_not_import_heavy_libraries():
     probe = (
         "import sys\n"

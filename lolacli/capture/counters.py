@@ -20,19 +20,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from lolacli.wire.commands import Command
-from lolacli.wire.error_counters import (
-    ERROR_COUNTERS_BYTES,
-    ErrorCounters,
-    Hop,
-    PortRise,
-    SuspectLink,
-    decode_error_counters,
-    locate,
-    rises,
-)
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni
+    from lolacli.wire.error_counters import ErrorCounters, Hop, PortRise, SuspectLink
+
+# lolacli.wire.error_counters (~3 ms of dataclasses) is imported by the first answered
+# read: most captures have none.
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +75,8 @@ class CounterTracker:
         address = self._requests.pop(key, None)
         if wkc != 1 or address is None:
             return
+        from lolacli.wire.error_counters import ERROR_COUNTERS_BYTES
+
         at = ("aprd" if cmd == Command.APRD else "fprd", address)
         raw = data()
         if len(raw) != ERROR_COUNTERS_BYTES:
@@ -93,6 +89,8 @@ class CounterTracker:
         """What the reads say; ``None`` when the capture has no answered read."""
         if not self._last:
             return None
+        from lolacli.wire.error_counters import decode_error_counters, locate, rises
+
         positions, source = _positions(list(self._last), eni)
         first = {positions[k]: decode_error_counters(v) for k, v in self._first.items()
                  if k in positions}
@@ -125,5 +123,7 @@ def line_path(n: int) -> list[Hop]:
     """The hops of a frame through a line of ``n`` slaves: what
     :func:`lolacli.wire.error_counters.frame_path` gives for ``list(range(n))``, without
     its recursion (a damaged capture may read the counters of position 40,000)."""
+    from lolacli.wire.error_counters import Hop
+
     out = [Hop(p, 0, p - 1) for p in range(1, n + 1)]
     return out + [Hop(p, 1, p + 1) for p in range(n - 1, 0, -1)]

@@ -19,23 +19,21 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from lolacli.text import station as station_name
+from lolacli.wire.al import AlState, al_state_name, al_status_text
 from lolacli.wire.commands import Command
-from lolacli.wire.registers import (
-    FMMU_BYTES,
-    AlState,
-    Fmmu,
-    Register,
-    al_state_name,
-    al_status_text,
-    decode_fmmu,
-)
+
+if TYPE_CHECKING:
+    from lolacli.wire.registers import Fmmu
+
+# lolacli.wire.registers (~6 ms: the register map, FMMU, sync-manager and SII types) is
+# imported by the first configuration write: a capture of a running bus has none.
 
 _CONFIGURED = (Command.FPWR, Command.FPRW)
 _AUTO_INCREMENT = (Command.APWR, Command.APRW)
 _BROADCAST = (Command.BWR, Command.BRW)
-_FMMU_END = Register.FMMU + 16 * FMMU_BYTES
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +63,8 @@ def target_of(cmd: int, adp: int) -> Target | None:
 
 @dataclass(frozen=True, slots=True)
 class FmmuWrite:
+    """One FMMU the master wrote: in which frame, to whom, which one."""
+
     frame: int
     target: Target
     index: int
@@ -73,6 +73,8 @@ class FmmuWrite:
 
 @dataclass(frozen=True, slots=True)
 class AlRequest:
+    """One AL control write: in which frame, to whom, the value written."""
+
     frame: int
     target: Target
     value: int
@@ -95,6 +97,8 @@ class MasterLayout:
         target = target_of(cmd, adp)
         if target is None:
             return
+        from lolacli.wire.registers import FMMU_BYTES, Register, decode_fmmu
+
         end = ado + len(data)
         sa = Register.STATION_ADDRESS
         if target.kind == "position" and ado <= sa and end >= sa + 2:
@@ -106,7 +110,7 @@ class MasterLayout:
         first = max(0, -(-(ado - Register.FMMU) // FMMU_BYTES))
         for k in range(first, 16):
             start = Register.FMMU + k * FMMU_BYTES
-            if start + FMMU_BYTES > min(end, _FMMU_END):
+            if start + FMMU_BYTES > min(end, Register.FMMU + 16 * FMMU_BYTES):
                 break
             if start >= ado:
                 self.fmmu_writes.append(FmmuWrite(frame, target, k, decode_fmmu(data, start - ado)))

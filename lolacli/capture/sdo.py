@@ -139,6 +139,8 @@ DESCRIBED_ENTRIES = 1 << 16
 
 @dataclass(slots=True)
 class MailboxStats:
+    """Counts of the mailbox messages seen, by mailbox type and CoE service."""
+
     messages: int = 0
     repeats: int = 0
     undecodable: int = 0

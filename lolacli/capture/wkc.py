@@ -49,6 +49,8 @@ S_DC_SYSTIME = 0x0910
 
 @dataclass(frozen=True, slots=True)
 class Observed:
+    """One working counter a cyclic datagram returned, and how often."""
+
     wkc: int
     count: int
     frames: tuple[int, ...]  # the first (up to three) frames that returned it
@@ -126,6 +128,8 @@ class DatagramVerdict:
 
 @dataclass(slots=True)
 class WkcVerdict:
+    """The WKC verdict of every cyclic datagram, against the ENI or inferred."""
+
     reference: str  # "eni" | "inferred"
     datagrams: list[DatagramVerdict]
 

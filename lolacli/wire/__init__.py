@@ -1,19 +1,52 @@
-"""EtherCAT wire codec: frames, datagrams, mailbox, CoE, SDO. Pure: bytes in, values out."""
+"""EtherCAT wire codec: frames, datagrams, mailbox, CoE, SDO. Pure: bytes in, values out.
 
-from lolacli.wire.commands import Command, mnemonic
-from lolacli.wire.frame import (
-    ETHERTYPE_ECAT,
-    Datagram,
-    EthernetHeader,
-    Frame,
-    decode_any,
-    decode_datagrams,
-    decode_ecat_payload,
-    decode_frame,
-    encode_frame,
-    frame_bytes_on_wire,
-    make_frame,
-)
+The names below are imported from their modules on first use: importing a submodule
+(``lolacli.wire.commands``, as ``capture analyze`` does) does not import
+:mod:`lolacli.wire.frame` (~3 ms of its dataclasses).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from lolacli.wire.commands import Command, mnemonic
+    from lolacli.wire.frame import (
+        ETHERTYPE_ECAT,
+        Datagram,
+        EthernetHeader,
+        Frame,
+        decode_any,
+        decode_datagrams,
+        decode_ecat_payload,
+        decode_frame,
+        encode_frame,
+        frame_bytes_on_wire,
+        make_frame,
+    )
+
+#: each public name and the module that defines it
+_MODULES: dict[str, str] = {
+    "Command": "commands",
+    "mnemonic": "commands",
+    **dict.fromkeys(
+        (
+            "ETHERTYPE_ECAT",
+            "Datagram",
+            "EthernetHeader",
+            "Frame",
+            "decode_any",
+            "decode_datagrams",
+            "decode_ecat_payload",
+            "decode_frame",
+            "encode_frame",
+            "frame_bytes_on_wire",
+            "make_frame",
+        ),
+        "frame",
+    ),
+}
 
 __all__ = [
     "ETHERTYPE_ECAT",
@@ -30,3 +63,17 @@ __all__ = [
     "make_frame",
     "mnemonic",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """A name of :data:`__all__`, imported from its module (then kept here)."""
+    module = _MODULES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
