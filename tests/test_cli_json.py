@@ -45,3 +45,21 @@ def test_values_json_has_no_simple_form_for():
     assert json.loads(json_text(wide)) == {"v": 2**70, "nan": [None], "np": 5}
     with pytest.raises(TypeError):
         json_text({"x": object()})
+
+
+def test_an_undecodable_file_name_is_written_as_valid_utf8(tmp_path, corpus):
+    """A name's bytes that are not UTF-8 (Python holds them as lone surrogates) come out
+    as U+FFFD: the document is valid UTF-8 JSON, for the library and the CLI alike."""
+    import os
+    import subprocess
+    import sys
+
+    assert json.loads(json_text({"file": "bad\udcffname"})) == {"file": "bad\ufffdname"}
+    name = os.fsdecode(b"bad\xffname.pcapng")
+    path = tmp_path / name
+    path.write_bytes((corpus / "pcap" / "ethercrab__replay-sdo-error.pcapng").read_bytes())
+    out = subprocess.run([sys.executable, "-m", "lolacli", "capture", "analyze", "-f", "json",
+                          str(path)], capture_output=True, check=False)
+    assert out.returncode in (0, 1), out.stderr
+    doc = json.loads(out.stdout.decode("utf-8"))  # strict: fails on a raw 0xFF byte
+    assert doc["file"].endswith("bad\ufffdname.pcapng")

@@ -70,8 +70,11 @@ def test_a_table_fits_by_wrapping_names_never_numbers():
 
 
 def test_a_table_that_cannot_fit_is_printed_whole_wider():
-    lines = _table().lines(60)  # (unusable) and the numbers need 61
-    assert any(cells(line) > 60 for line in lines)
+    t = _table()
+    t.title = None
+    t.add_row("x", "1", "2", "3", "4", "5", "6", "1234567890" * 9)  # no 80 columns hold it
+    lines = t.lines(80)
+    assert max(cells(line) for line in lines) > 80
     assert "cyclic round trip (unusable)" in "\n".join(lines)  # natural widths
     assert all(line == line.rstrip() for line in lines)  # no trailing spaces
 
@@ -105,3 +108,16 @@ def test_headers_bold_and_titles_italic_only_on_a_terminal(monkeypatch):
     monkeypatch.setattr(sys, "stdout", io.StringIO())
     monkeypatch.delenv("NO_COLOR")
     assert "\x1b" not in "".join(_table().lines(80))
+
+
+def test_a_table_too_wide_for_a_narrow_terminal_is_laid_out_as_at_80_columns():
+    t = _table()
+    t.add_row("a name of many words that wraps " * 3, "1", "2", "3", "4", "5", "6", "7")
+    natural = max(cells(line) for line in t.lines(400))
+    assert natural > 80
+    for width in (30, 40, 60):
+        lines = t.lines(width)
+        assert max(cells(line) for line in lines) <= 80, width  # not its natural width
+        t.title = None
+        assert t.lines(width) == t.lines(80)
+        t.title = "Timing"

@@ -38,14 +38,15 @@ def json_text(data: Any) -> str:
     json's own indenting encoder is pure Python, 15 times slower on a large report. An
     integer wider than 64 bits, which orjson does not take, goes through json, which
     writes the same text. NaN and infinities, which JSON does not have, are written null
-    either way."""
+    either way; a string that is not valid Unicode (a file name's undecodable bytes, as
+    Python holds them) has U+FFFD in their place, so the output is valid UTF-8."""
     import orjson
 
     try:
         return orjson.dumps(data, default=_plain_number, option=orjson.OPT_INDENT_2
                             | orjson.OPT_NON_STR_KEYS | orjson.OPT_SERIALIZE_NUMPY).decode()
     except orjson.JSONEncodeError:
-        return json.dumps(_finite(data), indent=2, ensure_ascii=False, default=_plain_number)
+        return json.dumps(_valid(data), indent=2, ensure_ascii=False, default=_plain_number)
 
 
 def _plain_number(value: Any) -> Any:
@@ -60,13 +61,16 @@ def _plain_number(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON")
 
 
-def _finite(data: Any) -> Any:
+def _valid(data: Any) -> Any:
+    """``data`` with NaN and infinities None and strings valid Unicode."""
     if isinstance(data, float):
         return data if data - data == 0 else None
+    if isinstance(data, str):
+        return data.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
     if isinstance(data, dict):
-        return {k: _finite(v) for k, v in data.items()}
+        return {_valid(k): _valid(v) for k, v in data.items()}
     if isinstance(data, list | tuple):
-        return [_finite(v) for v in data]
+        return [_valid(v) for v in data]
     return data
 
 

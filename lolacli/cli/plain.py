@@ -93,13 +93,19 @@ def styled() -> bool:
             and os.environ.get("TERM") != "dumb")
 
 
+#: a table that cannot fit a narrower width is laid out at this one, as it would be on
+#: an 80-column terminal, rather than at its natural width (which may be wider)
+NARROWEST_FALLBACK = 80
+
+
 class Table:
     """Rows of text cells; :meth:`lines` lays them out at a width.
 
     Right-aligned (number) columns are never narrower than their widest cell; the others
     wrap between words, a word never split. A table wider than the width gets each
     column its narrowest, then the room left shared out, the columns that need least
-    first; one that cannot fit even so is laid out at its natural width."""
+    first. One that cannot fit even so is laid out as at 80 columns, or, when it cannot
+    fit those either, at its natural width."""
 
     GAP = "  "
 
@@ -139,7 +145,9 @@ class Table:
 
     def lines(self, width: int) -> list[str]:
         widths = self._widths(width)
-        span = 1 + sum(widths) + len(self.GAP) * (len(widths) - 1)
+        if width < NARROWEST_FALLBACK and self._span(widths) > NARROWEST_FALLBACK:
+            widths = self._widths(NARROWEST_FALLBACK)  # never wider than at 80 columns
+        span = self._span(widths)
         bold, italic, plain = ("\x1b[1m", "\x1b[3m", "\x1b[0m") if styled() else ("",) * 3
         out = [f"{italic}{t}{plain}" for t in fill(self.title, width)] if self.title else []
         if self.header:
@@ -149,6 +157,9 @@ class Table:
         for row in self.rows:
             out += self._row(row, widths)
         return out
+
+    def _span(self, widths: list[int]) -> int:
+        return 1 + sum(widths) + len(self.GAP) * (len(widths) - 1)
 
     def _row(self, row: tuple[str, ...] | list[str], widths: list[int]) -> list[str]:
         cols = [fill(cell, w) if cells(cell) > w or "\n" in cell else [cell.replace(KEEP, " ")]
