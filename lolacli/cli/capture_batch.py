@@ -26,7 +26,6 @@ SIGTERM) prints the files done so far, the file being analysed with its partial 
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
@@ -112,20 +111,26 @@ def analyze_batch(files: list[Path], *, json_lines: bool, eni: Any, engine: str,
 
 
 def _line(row: dict[str, Any]) -> None:
-    from lolacli.cli.common import silence_stdout
+    from lolacli.cli.common import json_text, silence_stdout
 
     try:
-        sys.stdout.write(json.dumps({"schema": SCHEMA, **row}, ensure_ascii=False) + "\n")
+        sys.stdout.write(json_text({"schema": SCHEMA, **row}, indent=False) + "\n")
         sys.stdout.flush()
     except BrokenPipeError:
         silence_stdout()
 
 
 def _median(doc: dict[str, Any], key: str) -> str:
+    """The median, or "unusable" where the report says so (quantised or backward
+    timestamps: the single-file report marks the same figure)."""
     from lolacli.text import number
 
     stats = doc.get(key)
-    return "–" if not stats else number(stats["median"], "µs", 1)
+    if not stats:
+        return "–"
+    if key in doc.get("unusable_stats", ()):
+        return "unusable"
+    return number(stats["median"], "µs", 1)
 
 
 def _breakable(name: str, width: int = NAME_WIDTH) -> str:
@@ -149,17 +154,15 @@ def _breakable(name: str, width: int = NAME_WIDTH) -> str:
 
 
 def _table(rows: list[dict[str, Any]]) -> None:
-    from rich import box
-    from rich.table import Table
-
-    from lolacli.cli.common import stdout_console
+    from lolacli.cli.common import text_width
+    from lolacli.cli.plain import Table, fill, write
     from lolacli.text import plural
 
-    table = Table(box=box.SIMPLE_HEAD)
+    table = Table(None)
     table.add_column("File")
     for name in ("Frames", "Verdict", "Round trip", "Cycle", "Lost",
                  "WKC errors"):
-        table.add_column(name, justify="left" if name == "Verdict" else "right")
+        table.add_column(name, right=name != "Verdict")
     for row in rows:
         doc = row["report"]
         name = _breakable(Path(row["file"]).name)
@@ -170,8 +173,8 @@ def _table(rows: list[dict[str, Any]]) -> None:
         table.add_row(name, f"{doc['frames_total']:,}", verdict,
                       _median(doc, "round_trip_us"), _median(doc, "cycle_period_us"),
                       f"{doc['lost_frames']:,}", f"{doc['wkc_mismatches']:,}")
-    console = stdout_console()
-    console.print(table)
     failed = sum(1 for r in rows if r["exit_code"])
-    console.print(f"{plural(len(rows), 'capture')}, {failed} not passing; round trip and "
-                  "cycle period: medians")
+    width = text_width()
+    write([*table.lines(width), *fill(
+        f"{plural(len(rows), 'capture')}, {failed} not passing; round trip and cycle "
+        "period: medians", width)])

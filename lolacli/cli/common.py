@@ -33,20 +33,24 @@ def silence_stdout() -> None:
     os.close(devnull)
 
 
-def json_text(data: Any) -> str:
+def json_text(data: Any, *, indent: bool = True) -> str:
     """``data`` as JSON, indented by two spaces, non-ASCII as it is (UTF-8), by orjson:
     json's own indenting encoder is pure Python, 15 times slower on a large report. An
     integer wider than 64 bits, which orjson does not take, goes through json, which
     writes the same text. NaN and infinities, which JSON does not have, are written null
     either way; a string that is not valid Unicode (a file name's undecodable bytes, as
-    Python holds them) has U+FFFD in their place, so the output is valid UTF-8."""
+    Python holds them) has U+FFFD in their place, so the output is valid UTF-8.
+    ``indent=False``: the document on one line, compact (JSON lines)."""
     import orjson
 
     try:
-        return orjson.dumps(data, default=_plain_number, option=orjson.OPT_INDENT_2
-                            | orjson.OPT_NON_STR_KEYS | orjson.OPT_SERIALIZE_NUMPY).decode()
+        text = orjson.dumps(data, default=_plain_number, option=orjson.OPT_NON_STR_KEYS
+                            | orjson.OPT_SERIALIZE_NUMPY
+                            | (orjson.OPT_INDENT_2 if indent else 0)).decode()
     except orjson.JSONEncodeError:
-        return json.dumps(_valid(data), indent=2, ensure_ascii=False, default=_plain_number)
+        return json.dumps(_valid(data), indent=2 if indent else None, ensure_ascii=False,
+                          default=_plain_number)
+    return text
 
 
 def _plain_number(value: Any) -> Any:

@@ -126,3 +126,18 @@ def test_a_stopped_batch_prints_what_it_did_and_exits_130(tmp_path):
     if len(docs) == 2:
         assert docs[1]["file"] == files[1] and docs[1]["report"]["interrupted"] is True
     assert "stopped" in err
+
+
+def test_the_table_marks_unusable_medians_and_has_no_blank_padding(cli, corpus):
+    """A round trip built on quantised timestamps (TwinCAT's 0 µs) is "unusable" in the
+    table, as in the file's own report, not a measurement of 0 µs; the table starts
+    with its header, and no line ends in spaces."""
+    quantised = corpus / "pcap" / "DERIVED__ethercrab__twincat-run-ek1100-el1004.classic.pcap"
+    doc = analyze_file(quantised).to_dict()
+    assert "round_trip_us" in doc["unusable_stats"]
+    code, out, _ = cli("capture", "analyze", str(quantised), str(CAPTURES[1]))
+    lines = out.splitlines()
+    assert code == 0 and lines[0].split()[:2] == ["File", "Frames"]
+    row = next(line for line in lines if line.startswith(" DERIVED"))
+    assert "unusable" in row and " 0 µs" not in row
+    assert all(line == line.rstrip() for line in lines)
