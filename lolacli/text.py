@@ -38,8 +38,9 @@ def transition_text(code: str) -> str:
 
 
 def plural(n: int, noun: str, nouns: str | None = None) -> str:
-    """``1 slave``, ``0 slaves``, ``2 entries`` (with ``nouns`` given)."""
-    return f"{n} {noun if n == 1 else (nouns or noun + 's')}"
+    """``1 slave``, ``0 slaves``, ``2 entries`` (with ``nouns`` given), ``3,604 frames``
+    (thousands grouped, as :func:`number` groups them)."""
+    return f"{n:,} {noun if n == 1 else (nouns or noun + 's')}"
 
 
 def number(value: float, unit: str, digits: int = 3) -> str:

@@ -57,7 +57,7 @@ def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
     _wkc(out, d)
     _al_status(out, d)
     out.say("Datagrams by command: " + (", ".join(
-        f"{k} {v}" for k, v in d["datagrams_by_cmd"].items()) or "none"))
+        f"{k} {v:,}" for k, v in d["datagrams_by_cmd"].items()) or "none"))
     _dc(out, d["dc"])
     _sdo(out, d, show_all)
     write(out.lines)
@@ -93,7 +93,7 @@ def _frames(out: _Out, d: dict[str, Any]) -> None:
     for right in (False, True, False, True):
         grid.add_column(right=right)
     for a, x, b, y in rows:
-        grid.add_row(a, str(x), b, str(y))
+        grid.add_row(a, f"{x:,}", b, f"{y:,}")
     out.table(grid)
     out.say(f"A frame unanswered for {number(d['timeout_us'], 'µs', 2)} "
                   f"({d['timeout_source']}) is lost, or late when its answer comes later.")
@@ -107,7 +107,7 @@ def _timing(out: _Out, d: dict[str, Any]) -> None:
     for label, key in (("round trip", "round_trip_us"), ("cyclic round trip",
                        "round_trip_cyclic_us"), ("cycle period", "cycle_period_us")):
         s = d[key]
-        cells = ["—"] * 7 if s is None else [str(s["count"])] + [
+        cells = ["—"] * 7 if s is None else [f"{s['count']:,}"] + [
             _us(s[k]) for k in _STATS[1:]]
         table.add_row(label + (" (unusable)" if key in d["unusable_stats"] else ""), *cells)
     out.table(table)
@@ -115,15 +115,16 @@ def _timing(out: _Out, d: dict[str, Any]) -> None:
         out.say("unusable: built on quantised or backward timestamps (see findings)")
     if d["cycle_jitter_us"] and "cycle_period_us" not in d["unusable_stats"]:
         j = d["cycle_jitter_us"]
-        out.say(f"cycle jitter: std {j['std']:.2f} µs, max deviation from median "
-                      f"{j['max_deviation']:.2f} µs")
+        out.say(f"cycle jitter: std {number(j['std'], 'µs', 2)}, max deviation from "
+                f"median {number(j['max_deviation'], 'µs', 2)}")
 
 
 def _us(value: float) -> str:
-    """Two decimals below 1 ms, one below 10 ms, none above: a row of seven fits 80
-    columns whatever the cycle (numbers are rounded, never cut)."""
+    """Two decimals below 1 ms, one below 10 ms, none above, thousands grouped as
+    everywhere: a row of seven fits 80 columns whatever the cycle (numbers are rounded,
+    never cut)."""
     digits = 2 if abs(value) < 1000 else 1 if abs(value) < 10_000 else 0
-    return f"{value:.{digits}f}"
+    return f"{value:,.{digits}f}"
 
 
 def _datagram(g: dict[str, Any]) -> str:
@@ -152,9 +153,10 @@ def _wkc(out: _Out, d: dict[str, Any]) -> None:
                        ("returns", True), ("bad", True), ("seen (WKC ×count)", False)):
         table.add_column(col, right=right)
     for g in w["datagrams"]:
-        seen = ", ".join(f"{o['wkc']}×{o['count']}" for o in g["observed"])
+        seen = ", ".join(f"{o['wkc']}×{o['count']:,}" for o in g["observed"])
         table.add_row(_datagram(g), "?" if g["expected"] is None else str(g["expected"]),
-                      g["basis"] or "cannot tell", str(g["returns"]), str(g["mismatches"]), seen)
+                      g["basis"] or "cannot tell", f"{g['returns']:,}", f"{g['mismatches']:,}",
+                      seen)
     out.table(table)
 
 
@@ -204,7 +206,7 @@ def _sdo(out: _Out, d: dict[str, Any], show_all: bool) -> None:
         # the slave once per run of its transactions
         who = "" if t["slave"] == last else _station(t["slave"])
         last = t["slave"]
-        table.add_row(who, t["object"], t["kind"], t["transfer"], str(t["size_bytes"]),
+        table.add_row(who, t["object"], t["kind"], t["transfer"], f"{t['size_bytes']:,}",
                       status, f"{t['start_frame']}–{end}", dur)
     out.table(table)
     if len(shown) < len(transactions):
