@@ -14,6 +14,7 @@ from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
 from lolacli.errors import InputError, UsageError
+from lolacli.text import number as _number
 
 if TYPE_CHECKING:
     from lolacli.eni.model import Eni
@@ -216,7 +217,8 @@ def calibration_warning(result: Any) -> str | None:
     if result.calibration_plausible is not False:
         return None
     lo, hi = (v / 1000 for v in result.to_dict()["esc_delay_range_ns"])
-    return (f"the calibrated per-slave delay ({result.calibrated_per_slave_delay_ns} ns) is "
+    delay = _number(result.calibrated_per_slave_delay_ns, "ns", 0)
+    return (f"the calibrated per-slave delay ({delay}) is "
             f"outside what ESCs do ({lo:g}-{hi:g} µs): the measured round trip holds more than "
             "the slaves (the master's stack and NIC, a switch; see --host-latency-us), or the "
             "slave count is off")

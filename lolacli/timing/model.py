@@ -59,6 +59,7 @@ from enum import StrEnum
 from math import isfinite
 
 from lolacli.errors import UsageError
+from lolacli.text import number as _number
 from lolacli.wire.frame import MIN_FRAME_BYTES, frame_bytes_on_wire
 
 TIMING_SCHEMA = "lolacli.timing/1"
@@ -273,9 +274,9 @@ def calibrate_per_slave_delay_ns(
     rest = measured_total_ns - fixed
     if rest < 0:
         raise UsageError(
-            f"measured total {measured_total_ns / 1000:g} us is shorter than the wire time "
-            f"plus cable{' and host latency' if host_latency_ns else ''} "
-            f"({fixed / 1000:g} us): not a round trip of this frame"
+            f"measured total {_number(measured_total_ns / 1000, 'µs', 2)} is shorter than the "
+            f"wire time plus cable{' and host latency' if host_latency_ns else ''} "
+            f"({_number(fixed / 1000, 'µs', 2)}): not a round trip of this frame"
         )
     return _div_round(rest, slaves)
 
