@@ -78,3 +78,18 @@ def test_a_reader_that_goes_away_does_not_change_the_exit_code():
     # diff finds differences (exit 1) and says so in ~100 kB
     other = "eni_examples/ek1100_io.xml"
     assert _closed_early("eni", "diff", lola, other, "--format", "json") == (1, "")
+
+
+def test_every_usage_error_has_the_one_prefix_and_one_line():
+    """Wrong arguments at the root, to a command, or a missing argument: one line,
+    "lolacli: error:", exit 2, however the program was started (python -m lolacli)."""
+    import subprocess
+    import sys
+
+    for args in (["--bogus"], ["nosuch"], ["sdo", "read"], ["capture", "list", "x", "-c", "-5"]):
+        done = subprocess.run([sys.executable, "-m", "lolacli", *args], capture_output=True,
+                              text=True, check=False)
+        assert done.returncode == 2 and done.stdout == "", args
+        assert done.stderr.count("\n") == 1, (args, done.stderr)
+        assert done.stderr.startswith("lolacli: error: "), (args, done.stderr)
+        assert len(done.stderr.rstrip("\n")) <= 80, (args, done.stderr)

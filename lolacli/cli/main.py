@@ -55,23 +55,39 @@ class _LolaGroup(TyperGroup):
             sys.stderr.write(f"lolacli: {exc or 'stopped by SIGINT'}\n")
             raise typer.Exit(exit_code(exc)) from None
         except typer.TyperException as exc:
-            if exc.exit_code != 2:  # click's UsageError and its kinds: wrong arguments
-                raise
-            _traceback_if_debug()
-            usage_ctx = getattr(exc, "ctx", None)
-            if usage_ctx is not None and exc.format_message() == usage_ctx.get_help():
-                sys.stderr.write(exc.format_message() + "\n")  # a group without a command:
-                raise typer.Exit(2) from None  # its help, as the root's (no_args_is_help)
-            path = usage_ctx.command_path if usage_ctx is not None else "lolacli"
-            message = " ".join(exc.format_message().split())
-            # click's "Invalid value for '--ke': 'abc' is not…" as "--ke: 'abc' is not…":
-            # the line fits 80 columns
-            if message.startswith("Invalid value for '") and "': " in message:
-                name, _, rest = message.removeprefix("Invalid value for '").partition("': ")
-                name = name.replace("' / '", "/")  # "'-c' / '--count'": -c/--count
-                message = f"{name}: {_short_range(rest)}"
-            sys.stderr.write(f"{path}: error: {message} (see --help)\n")
-            raise typer.Exit(2) from None
+            _usage_error(exc)
+            raise
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        """The root's own options ("lolacli --bogus"): the same one line as a command's."""
+        try:
+            return list(super().parse_args(ctx, args))
+        except typer.TyperException as exc:
+            _usage_error(exc)
+            raise
+
+
+def _usage_error(exc: Any) -> None:
+    """click's usage errors (wrong arguments, exit 2) as one line on stderr, then exit 2;
+    any other click exception is left to click."""
+    if exc.exit_code != 2:  # click's UsageError and its kinds: wrong arguments
+        return
+    _traceback_if_debug()
+    usage_ctx = getattr(exc, "ctx", None)
+    if usage_ctx is not None and exc.format_message() == usage_ctx.get_help():
+        sys.stderr.write(exc.format_message() + "\n")  # a group without a command:
+        raise typer.Exit(2) from None  # its help, as the root's (no_args_is_help)
+    # one prefix for every error, "lolacli: error:", whatever the program was called by
+    # (lolacli, python -m lolacli); the command is the one just typed
+    message = " ".join(exc.format_message().split())
+    # click's "Invalid value for '--ke': 'abc' is not…" as "--ke: 'abc' is not…": the
+    # line fits 80 columns
+    if message.startswith("Invalid value for '") and "': " in message:
+        name, _, rest = message.removeprefix("Invalid value for '").partition("': ")
+        name = name.replace("' / '", "/")  # "'-c' / '--count'": -c/--count
+        message = f"{name}: {_short_range(rest)}"
+    sys.stderr.write(f"lolacli: error: {message} (see --help)\n")
+    raise typer.Exit(2) from None
 
 
 def _short_range(message: str) -> str:
