@@ -136,8 +136,10 @@ def export_cmd(
     `capture analyze` (exit 1 when one is a failure, the file written anyway)."""
     from lolacli.capture.analyze import analyze_file, spool_stream
     from lolacli.capture.export import Stopped, check_target, export_mcap
+    from lolacli.files import check_output_file
     from lolacli.interrupt import stop_signals
 
+    check_output_file(mcap, "--mcap", [("the capture", file)])
     check_target(mcap)  # an unwritable path fails before the capture is read
     result = None
     spool = spool_stream(file)  # a pipe is read twice (analysis, export): copied once
