@@ -221,7 +221,14 @@ def simulate_cmd(
     DC error, CAN sensor ages and the software sections with a verdict (lolacli.simulate/1).
     --iface: the same in real time on a live bus. Exit 1 when the verdict fails, 2 bad
     options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
+    from lolacli.files import check_output_file
     from lolacli.simulate import options_from_cli
+
+    inputs = [("--eni", eni), ("--trajectory", trajectory), ("--joints", joints_file)]
+    if pcap is not None:
+        check_output_file(pcap, "--pcap", inputs)
+    if mcap is not None:
+        check_output_file(mcap, "--mcap", [*inputs, ("--pcap", pcap)])
     options = options_from_cli(
         rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down, bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
