@@ -141,6 +141,9 @@ def _check_outputs(output: Path, inputs: list[tuple[str, Path | None]]) -> None:
     from lolacli.report import json_path
 
     check_output_file(output, "-o", inputs)
+    if json_path(output) == output:
+        raise UsageError(f"-o {output}: the page's JSON is written beside it as "
+                         f"{json_path(output).name}; give -o the page's name (.html, .md)")
     check_output_file(json_path(output), "-o (its JSON)", inputs)
 
 

@@ -315,6 +315,26 @@ def test_an_output_over_an_input_is_refused(tmp_path, cli, corpus):
         assert _left_behind(tmp_path) == ["c.pcapng", "fifo", "r.json"], args
 
 
+@pytest.mark.parametrize("fmt", ["html", "md"])
+def test_a_page_named_as_its_json_is_refused(tmp_path, cli, corpus, fmt):
+    """-o x.json: the page and its JSON would be one file (the JSON written over the
+    page, "wrote x.json" said twice): exit 2, one line naming -o, nothing written."""
+    capture = corpus / "pcap" / "ethercrab__replay-issue-49.pcapng"
+    code, out, err = cli("report", "--capture", capture, "-f", fmt, "-o", tmp_path / "x.json")
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "-o" in err and ".html" in err
+    assert "wrote" not in out and _left_behind(tmp_path) == []
+
+
+def test_the_library_refuses_a_page_named_as_its_json(tmp_path):
+    from lolacli.errors import UsageError
+    from lolacli.report import check_output
+
+    with pytest.raises(UsageError, match="same file"):
+        check_output(tmp_path / "x.json")
+    check_output(tmp_path / "x.html")
+
+
 def test_unwritable_output_leaves_nothing(tmp_path):
     """A folder the report cannot be written into (read-only for a user; /proc even for
     root): exit 3 after the work, and no temporary file left."""
