@@ -24,7 +24,8 @@ app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captu
 
 PlotOption = Annotated[
     Path | None,
-    typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
+    typer.Option("--plot", metavar="FOLDER", help="Write PNG plots (cycle period, round "
+                 "trip) into this folder (created if missing, not its parent)."),
 ]
 TimeoutOption = Annotated[
     str | None,
