@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import os
+import stat
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lolacli.errors import EniError, InputError
+from lolacli.errors import EniError, InputError, UsageError
 
 if TYPE_CHECKING:
     from lolacli.eni.esi import EsiFile
@@ -71,8 +74,54 @@ def load_esi(path: str | Path) -> EsiFile:
     return parse_esi(read_eni_bytes(path), source=str(path))
 
 
+def check_output_file(path: str | Path, option: str,
+                      inputs: Iterable[tuple[str, str | Path | None]] = (),
+                      regular: bool = True) -> None:
+    """UsageError (exit 2, one line) before any work when the file ``option`` names must not
+    be written: no name (an empty path, which a Path spells "."); with ``regular``, a path
+    that exists and is no regular file (a folder, a FIFO, a device: the writers rename a
+    temporary file over their target or cut it to length); or the same file as one of
+    ``inputs`` ((what names it, its path) pairs, such as ("--eni", path)), by any spelling
+    or link. A path that does not exist yet passes: whether its folder takes it is for
+    the writer to say."""
+    name = str(path)
+    if name in ("", "."):
+        raise UsageError(f"{option}: no file name given")
+    try:
+        st: os.stat_result | None = os.stat(path)
+    except OSError:  # not there yet (or not to be looked at: the writer says)
+        st = None
+    if regular and st is not None and not stat.S_ISREG(st.st_mode):
+        raise UsageError(f"{option} {name}: is {_kind(st.st_mode)}, not a regular file; "
+                         "give a file name")
+    for what, other in inputs:
+        if other is None or str(other) in ("", "-"):
+            continue
+        try:
+            same = os.path.samestat(st, os.stat(other)) if st is not None else (
+                Path(path).resolve() == Path(other).resolve())
+        except OSError:
+            same = Path(path).resolve() == Path(other).resolve()
+        if same:
+            raise UsageError(f"{option} {name}: is the same file as {what} {other}; "
+                             "give another file name")
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "a special file"
+
+
 __all__ = [
     "MAX_ENI_BYTES",
+    "check_output_file",
     "joints_path",
     "load_eni",
     "load_esi",

@@ -99,13 +99,22 @@ def write_plots(report: CaptureReport, folder: str | Path) -> list[Path]:
 
 
 def plot_folder(folder: str | Path) -> Path:
-    """``folder``, created if missing; :class:`UsageError` (exit 2) when it is a file or
-    cannot be created. Call it before the analysis so a bad folder fails first."""
+    """``folder``, created if missing (not its parent: a mistyped path is not made into
+    folders); :class:`UsageError` (exit 2) when it is a file, names a PNG, its parent is
+    missing or it cannot be created. Call it before the analysis so a bad folder fails
+    first."""
     out = Path(folder)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--plot {out}: is a file, not a folder")
+    if not out.exists() and out.suffix.lower() == ".png":
+        raise UsageError(f"--plot takes a folder (the PNGs are written into it), not a "
+                         f"file name: {out}")
+    parent = out.parent
+    if not out.exists() and not parent.is_dir():
+        why = "is a file" if parent.exists() else "does not exist"
+        raise UsageError(f"--plot {out}: cannot create the folder: {parent} {why}")
     try:
-        out.mkdir(parents=True, exist_ok=True)
+        out.mkdir(exist_ok=True)
     except OSError as exc:
         raise UsageError(f"--plot {out}: cannot create the folder: {exc.strerror or exc}") from None
     return out

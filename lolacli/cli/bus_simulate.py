@@ -222,6 +222,9 @@ def simulate_cmd(
     --iface: the same in real time on a live bus. Exit 1 when the verdict fails, 2 bad
     options, 3 a bad ENI, 4 no slave answers, 130/143 stopped."""
     from lolacli.simulate import options_from_cli
+
+    _check_recordings(pcap, mcap, [("--eni", eni), ("--trajectory", trajectory),
+                                   ("--joints", joints_file)])
     options = options_from_cli(
         rate_hz=rate, duration=duration, cycles=cycles, link_down=link_down, bad_link=bad_link,
         set_values=set_value or (), stuck_safeop=stuck_safeop or (), watch=watch or (),
@@ -234,6 +237,18 @@ def simulate_cmd(
         can_bitrate=can_bitrate, joints=joints, joints_file=joints_file,
         k_e=ke)  # fmt: skip
     _run(eni, options, quiet or iface is not None, fmt)
+
+
+def _check_recordings(pcap: Path | None, mcap: Path | None,
+                      inputs: list[tuple[str, Path | None]]) -> None:
+    """UsageError (exit 2) when a recording would be written over an input or the other
+    recording, or is no regular file (lolacli.files.check_output_file)."""
+    from lolacli.files import check_output_file
+
+    if pcap is not None:
+        check_output_file(pcap, "--pcap", inputs)
+    if mcap is not None:
+        check_output_file(mcap, "--mcap", [*inputs, ("--pcap", pcap)])
 
 
 def _run(eni: Path | None, options: Any, quiet: bool, fmt: OutputFormat) -> None:

@@ -24,7 +24,8 @@ app = typer.Typer(no_args_is_help=True, help="Analyse and list pcap/pcapng captu
 
 PlotOption = Annotated[
     Path | None,
-    typer.Option("--plot", help="Write PNG plots (cycle period, round trip) here."),
+    typer.Option("--plot", metavar="FOLDER", help="Write PNG plots (cycle period, round "
+                 "trip) into this folder (created if missing, not its parent)."),
 ]
 TimeoutOption = Annotated[
     str | None,
@@ -136,8 +137,10 @@ def export_cmd(
     `capture analyze` (exit 1 when one is a failure, the file written anyway)."""
     from lolacli.capture.analyze import analyze_file, spool_stream
     from lolacli.capture.export import Stopped, check_target, export_mcap
+    from lolacli.files import check_output_file
     from lolacli.interrupt import stop_signals
 
+    check_output_file(mcap, "--mcap", [("the capture", file)])
     check_target(mcap)  # an unwritable path fails before the capture is read
     result = None
     spool = spool_stream(file)  # a pipe is read twice (analysis, export): copied once

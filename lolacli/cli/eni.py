@@ -418,6 +418,9 @@ def generate_cmd(
 
     cycle_ns = _positive_duration(cycle_time, "--cycle-time")
     timeout_ns = _positive_duration(frame_timeout, "--frame-timeout")
+    from lolacli.files import check_output_file
+
+    check_output_file(output, "-o", [("--esi", p) for p in esi or ()])
     _check_output(output)
     esi_files = _esi_files(list(esi or ()))
     options = GenerateOptions(cycle_time_ns=cycle_ns, frame_timeout_ns=timeout_ns,

@@ -45,7 +45,8 @@ BusHzOption = Annotated[
                  help="Bus rate, Hz: a whole multiple of the control rate (bode: the chirp "
                  "is computed each bus cycle); cycles between control updates extrapolate."),
 ]
-PlotOption = Annotated[Path | None, typer.Option("--plot", help="Write a PNG figure here.")]
+PlotOption = Annotated[Path | None, typer.Option("--plot", metavar="FILE",
+                                                  help="Write the figure to this PNG file.")]
 SeriesFlag = Annotated[
     bool,
     typer.Option("--series", help="JSON: each case's error θd − θ every 0.1 ms as well "

@@ -116,6 +116,9 @@ def report_cmd(
                 "host_latency_us": host_latency_us, "forwarding": forwarding,
                 "cable_m": cable_m or (), "moves": move or (), "trajectory": trajectory}
     _simulation_only(simulate, sim_args)
+    _check_outputs(output, [("--eni", eni), *(("--capture", c) for c in captures),
+                            ("--baseline", baseline), ("--joint-track", joint_track),
+                            ("--joint-bode", joint_bode), ("--trajectory", trajectory)])
     check_output(output)  # before any work
     tolerance_percent = parse_tolerance(tolerance)
     base = load_baseline(baseline) if baseline is not None else None
@@ -129,6 +132,19 @@ def report_cmd(
     _write(report, output, fmt)
     if report.verdict == "fail":
         raise typer.Exit(1)
+
+
+def _check_outputs(output: Path, inputs: list[tuple[str, Path | None]]) -> None:
+    """UsageError (exit 2) when the page or its JSON would replace an input or is no
+    regular file (lolacli.files.check_output_file)."""
+    from lolacli.files import check_output_file
+    from lolacli.report import json_path
+
+    check_output_file(output, "-o", inputs)
+    if json_path(output) == output:
+        raise UsageError(f"-o {output}: the page's JSON is written beside it as "
+                         f"{json_path(output).name}; give -o the page's name (.html, .md)")
+    check_output_file(json_path(output), "-o (its JSON)", inputs)
 
 
 #: the simulation's options (their options_from_cli names), flags and defaults

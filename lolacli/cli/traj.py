@@ -41,7 +41,8 @@ def plan_cmd(
     unit: Annotated[str, typer.Option("--unit", help="Unit of position (for the output).")]
     = "m",
     plot: Annotated[Path | None, typer.Option(
-        "--plot", help="Write a PNG of position, velocity, acceleration and jerk here.")]
+        "--plot", metavar="FILE", help="Write a PNG file of position, velocity, acceleration "
+        "and jerk.")]
     = None,
     fmt: FormatOption = OutputFormat.human,
 ) -> None:

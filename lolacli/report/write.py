@@ -10,7 +10,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lolacli.errors import InputError
+from lolacli.errors import InputError, UsageError
 
 if TYPE_CHECKING:
     from lolacli.report.model import Report
@@ -19,7 +19,11 @@ FORMATS = ("html", "md")
 
 
 def check_output(path: Path) -> None:
-    """InputError (exit 3) when ``path`` cannot be written: before any work is done."""
+    """InputError (exit 3) when ``path`` cannot be written, UsageError (exit 2) when it
+    is its own JSON's path: before any work is done."""
+    if json_path(path) == path:
+        raise UsageError(f"{path}: the page and its JSON would be the same file; name "
+                         "the page .html or .md")
     folder = path.parent if str(path.parent) else Path(".")
     if path.is_dir():
         raise InputError("is a directory; give the report's file name", path=str(path))

@@ -158,6 +158,26 @@ def test_plot_never_a_traceback(cli, corpus, tmp_path, name):
                                                            "round-trip-cdf"))
 
 
+@pytest.mark.parametrize(
+    ("plot", "says"),
+    [
+        ("p.png", "--plot takes a folder"),
+        ("missing/x.png", "--plot takes a folder"),
+        ("missing/plots", "cannot create the folder: missing does not exist"),
+    ],
+)
+def test_plot_is_a_folder_whose_parent_exists(cli, corpus, tmp_path, monkeypatch, plot, says):
+    """--plot names a folder: a PNG's name or a folder under a missing one is refused,
+    exit 2, one line, and no folder is made; the last folder itself is made."""
+    capture = PCAP / "ethercrab__replay-issue-49.pcapng"
+    monkeypatch.chdir(tmp_path)
+    code, out, err = cli("capture", "analyze", capture, "--plot", plot)
+    assert code == 2 and says in err and err.count("\n") == 1, err
+    assert out == "" and list(tmp_path.iterdir()) == []
+    code, _, err = cli("capture", "analyze", capture, "--plot", "plots", "-f", "json")
+    assert code in (0, 1) and len(list((tmp_path / "plots").glob("*.png"))) == 3, err
+
+
 def test_plot_without_matplotlib_is_one_line(cli, faulty, tmp_path, monkeypatch):
     import sys
 

@@ -219,7 +219,7 @@ def test_a_truncated_capture_exports_what_it_holds_with_the_findings(tmp_path: P
         (lambda d: _write(d / "x.pcap", b"not a capture at all\n"), "ok", 3, "not a pcap"),
         (lambda d: _write(d / "x.pcapng", b"\x0a\x0d\x0d\x0a\x1c"), "ok", 3, "truncated"),
         (None, "missing-dir", 3, "cannot write"),
-        (None, "a-dir", 3, "is a directory"),
+        (None, "a-dir", 2, "is a directory"),
         (None, "under-a-file", 3, "cannot write"),
     ],
 )
@@ -236,6 +236,48 @@ def test_bad_inputs_one_line_nothing_left(tmp_path: Path, make: Any, target: str
     assert got.stderr.count("\n") == 1 and text in got.stderr and "Traceback" not in got.stderr
     assert got.stdout == ""
     assert [p for p in folder.rglob("*") if p.is_file()] == []
+
+
+@pytest.mark.parametrize(
+    ("target", "says"),
+    [
+        ("in.pcapng", "is the same file as the capture"),
+        ("./sub/../in.pcapng", "is the same file as the capture"),
+        ("link.pcapng", "is the same file as the capture"),
+        ("fifo", "is a FIFO"),
+        ("sub", "is a directory"),
+        ("", "no file name given"),
+    ],
+)
+def test_an_output_that_is_the_input_or_no_file_is_refused(cli, tmp_path: Path, target: str,
+                                                           says: str) -> None:
+    """The MCAP is written under a temporary name and renamed over its target: a target
+    that is the capture itself (any spelling, a link) or no regular file (a FIFO, a
+    folder; a device too, not tried here: without the check, root would replace it) is
+    refused, exit 2, one line, before anything is read or written;
+    the capture and the FIFO are left as they were."""
+    if not CAPTURES:
+        pytest.skip("no corpus captures")
+    capture = tmp_path / "in.pcapng"
+    capture.write_bytes(CAPTURES[0].read_bytes())
+    (tmp_path / "link.pcapng").symlink_to("in.pcapng")
+    (tmp_path / "sub").mkdir()
+    os.mkfifo(tmp_path / "fifo")
+    before = capture.read_bytes()
+    cwd = Path.cwd()
+    os.chdir(tmp_path)
+    try:
+        code, out, err = cli("capture", "export", "in.pcapng", "--mcap", target)
+    finally:
+        os.chdir(cwd)
+    assert code == 2, err
+    assert err.count("\n") == 1 and says in err and "--mcap" in err
+    assert out == ""
+    assert capture.read_bytes() == before
+    assert (tmp_path / "fifo").is_fifo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "in.pcapng", "link.pcapng",
+                                                          "sub"]
+    assert list((tmp_path / "sub").iterdir()) == []
 
 
 def _write(path: Path, data: bytes) -> Path:

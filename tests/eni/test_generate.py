@@ -171,6 +171,23 @@ def test_cli_bad_input(cli, tmp_path: Path, args: list[str], code: int) -> None:
     assert not out.exists()
 
 
+def test_cli_output_over_an_esi_or_a_fifo_is_refused(cli, tmp_path: Path) -> None:
+    """The ENI is renamed over its target: an -o that is an --esi given, a FIFO or a
+    folder is refused, exit 2, one line, before the bus is touched; nothing changed."""
+    import os
+
+    esi = tmp_path / "esi.xml"
+    esi.write_text("<EtherCATInfo/>\n")
+    os.mkfifo(tmp_path / "fifo")
+    for out, args, says in [(esi, ["--esi", str(esi)], "is the same file as --esi"),
+                            (tmp_path / "fifo", [], "is a FIFO"),
+                            (tmp_path, [], "is a directory")]:
+        got, _out, err = cli("eni", "generate", "--iface", "nosuchif0", "-o", str(out), *args)
+        assert got == 2 and says in err and err.count("\n") == 1, err
+        assert esi.read_text() == "<EtherCATInfo/>\n" and (tmp_path / "fifo").is_fifo()
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["esi.xml", "fifo"]
+
+
 def test_cli_output_into_a_missing_folder(cli, tmp_path: Path) -> None:
     out = tmp_path / "nope" / "bus.xml"
     got, _out, err = cli("eni", "generate", "--iface", "nosuchif0", "-o", str(out))

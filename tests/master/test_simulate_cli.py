@@ -170,7 +170,7 @@ def _eni_without_cyclic(tmp_path: Path) -> Path:
         (("--set", "Joint04 L Knee.Outputs.Target position=1.5"), 2, "not a value of type"),
         (("--set", "Joint04 L Knee.Inputs.Statusword=1"), 2, "is an input"),
         (("--pcap", "/nonexistent-dir/x.pcapng"), 2, "cannot write"),
-        (("--mcap", "/"), 2, "cannot write"),
+        (("--mcap", "/"), 2, "is a directory"),
         (("--link-down", "0"), 4, "no answer"),
         (("--rate", "0"), 2, "--rate"),
     ],
@@ -180,6 +180,35 @@ def test_bad_input_is_one_line_with_its_exit_code(args, code: int, words: str) -
     assert r.returncode == code, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (("--eni", "lola.xml", "--pcap", "lola.xml"), "--pcap lola.xml: is the same file as --eni"),
+        (("--eni", "lola.xml", "--mcap", "./link.xml"), "--mcap link.xml: is the same file as"),
+        (("--pcap", "out.x", "--mcap", "out.x"), "--mcap out.x: is the same file as --pcap"),
+        (("--pcap", "fifo"), "--pcap fifo: is a FIFO"),
+    ],
+)
+def test_a_recording_over_an_input_or_a_fifo_is_refused(cli, tmp_path: Path, args, says) -> None:
+    """The recordings are opened for writing and cut to length at the end: one that is
+    an input (the ENI, by a link too), the other recording, or a FIFO is refused, exit 2,
+    one line, before the run; the ENI stays as it was."""
+    eni = tmp_path / "lola.xml"
+    eni.write_bytes(LOLA.read_bytes())
+    (tmp_path / "link.xml").symlink_to("lola.xml")
+    os.mkfifo(tmp_path / "fifo")
+    cwd = Path.cwd()
+    os.chdir(tmp_path)
+    try:
+        code, out, err = cli("bus", "simulate", "--cycles", "10", "--quiet", *args)
+    finally:
+        os.chdir(cwd)
+    assert code == 2, err
+    assert err.count("\n") == 1 and says in err and out == ""
+    assert eni.read_bytes() == LOLA.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "link.xml", "lola.xml"]
 
 
 def test_a_bare_duration_is_seconds_as_in_bus_emulate() -> None:

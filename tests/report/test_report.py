@@ -280,7 +280,7 @@ def test_bad_inputs_one_line_nothing_written(tmp_path, cli):
         (("--simulate", "--duration", "10ms"), tmp_path / "missing" / "r.html", 3,
          "no such folder"),
         (("--simulate", "--duration", "10ms"), not_capture / "r.html", 3, "no such folder"),
-        (("--simulate", "--duration", "10ms"), out_dir, 3, "is a directory"),
+        (("--simulate", "--duration", "10ms"), out_dir, 2, "is a directory"),
         (("--simulate", "--duration", "10ms", "--baseline", bad_eni), out, 3, "not JSON"),
         (("--simulate", "--duration", "10ms", "--tolerance", "ten"), out, 2, "--tolerance"),
         ((), out, 2, "nothing to report"),
@@ -291,6 +291,48 @@ def test_bad_inputs_one_line_nothing_written(tmp_path, cli):
         assert len(err.strip().splitlines()) == 1 and says in err, (args, err)
         assert "Traceback" not in err
         assert _left_behind(out_dir) == [], args
+
+
+def test_an_output_over_an_input_is_refused(tmp_path, cli, corpus):
+    """The page or its JSON would replace an input (a capture, an earlier report's JSON
+    given as --baseline) or a FIFO: exit 2, one line, before any work; nothing changed."""
+    capture = tmp_path / "c.pcapng"
+    capture.write_bytes((corpus / "pcap" / "ethercrab__replay-issue-49.pcapng").read_bytes())
+    baseline = tmp_path / "r.json"
+    baseline.write_text("{}\n")
+    os.mkfifo(tmp_path / "fifo")
+    cases = [
+        (("--capture", capture), tmp_path / "c.pcapng", "-o", "same file as --capture"),
+        (("--capture", capture, "--baseline", baseline), tmp_path / "r.html",
+         "-o (its JSON)", "same file as --baseline"),
+        (("--capture", capture), tmp_path / "fifo", "-o", "is a FIFO"),
+    ]
+    for args, target, option, says in cases:
+        code, out, err = cli("report", *args, "-o", target)
+        assert code == 2, (args, err)
+        assert len(err.strip().splitlines()) == 1 and option in err and says in err, err
+        assert capture.read_bytes()[:4] == b"\x0a\x0d\x0d\x0a" and baseline.read_text() == "{}\n"
+        assert _left_behind(tmp_path) == ["c.pcapng", "fifo", "r.json"], args
+
+
+@pytest.mark.parametrize("fmt", ["html", "md"])
+def test_a_page_named_as_its_json_is_refused(tmp_path, cli, corpus, fmt):
+    """-o x.json: the page and its JSON would be one file (the JSON written over the
+    page, "wrote x.json" said twice): exit 2, one line naming -o, nothing written."""
+    capture = corpus / "pcap" / "ethercrab__replay-issue-49.pcapng"
+    code, out, err = cli("report", "--capture", capture, "-f", fmt, "-o", tmp_path / "x.json")
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "-o" in err and ".html" in err
+    assert "wrote" not in out and _left_behind(tmp_path) == []
+
+
+def test_the_library_refuses_a_page_named_as_its_json(tmp_path):
+    from lolacli.errors import UsageError
+    from lolacli.report import check_output
+
+    with pytest.raises(UsageError, match="same file"):
+        check_output(tmp_path / "x.json")
+    check_output(tmp_path / "x.html")
 
 
 def test_unwritable_output_leaves_nothing(tmp_path):
