@@ -1,4 +1,4 @@
-"""``sdo check FILE``: writes to make, then reads with expected values (docs/sdo-check.md).
+"""``sdo check FILE``: writes to make, then reads with expected values (docs/sdo.md).
 
 The file is YAML or JSON (JSON is YAML here)::
 
