@@ -33,3 +33,16 @@ def test_readme_python_examples_run_as_written(index: int) -> None:
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_every_docs_file_named_exists():
+    """A help text, docstring, README or doc that sends the reader to docs/NAME.md names a
+    file that is there."""
+    named: set[str] = set()
+    sources = [
+        ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "lolacli").rglob("*.py")
+    ]
+    for path in sources:
+        named.update(re.findall(r"\bdocs/[\w./-]+?\.md\b", path.read_text(encoding="utf-8")))
+    assert "docs/cli.md" in named
+    assert sorted(n for n in named if not (ROOT / n).is_file()) == []

@@ -6,12 +6,15 @@ reader: meant for reading a capture, not for throughput (use ``capture analyze``
 Filter syntax (``--filter``): terms separated by spaces or commas, all of which must hold
 for a datagram to be listed (frames with no listed datagram are left out):
 
-* a command mnemonic, or several joined by ``|``: ``LRW``, ``fprd|fpwr``;
-* ``adp=N``, ``ado=N``, ``lad=N`` (logical address), ``idx=N``, ``wkc=N``, ``wkc!=N``
-  (decimal or 0x hex);
+* command mnemonics: ``LRW``; several, joined by ``|`` or as terms of their own
+  (``fprd|fpwr``, ``fprd fpwr``), are one term: the datagram is any of them;
+* ``adp=N``, ``ado=N`` (0..0xFFFF), ``lad=N`` (logical address, 0..0xFFFFFFFF), ``idx=N``
+  (0..0xFF), ``wkc=N``, ``wkc!=N`` (0..0xFFFF), decimal or 0x hex; a value outside its
+  field's range is a usage error;
 * ``mailbox`` (any mailbox message), ``coe``, ``sdo`` (SDO and SDO Information);
-* ``out`` / ``ret``: frame direction.
+* ``out`` or ``ret``: the frame's direction (one: ``out ret`` is a usage error).
 """
+
 
 from __future__ import annotations
 
@@ -155,6 +158,10 @@ def _listed(d: Datagram, returned: bool) -> ListedDatagram:
     )
 
 
+#: the filter's numeric fields and their largest values (the datagram header's widths)
+FIELD_MAX = {"adp": 0xFFFF, "ado": 0xFFFF, "lad": 0xFFFF_FFFF, "idx": 0xFF, "wkc": 0xFFFF}
+
+
 class DatagramFilter:
     """A parsed ``--filter`` expression (see the module docstring)."""
 
@@ -169,18 +176,24 @@ class DatagramFilter:
     def _term(self, term: str) -> None:
         low = term.lower()
         if low in ("out", "ret"):
+            if self.direction not in (None, low):
+                raise UsageError(f"filter terms {self.direction} and {low} contradict: a "
+                                 "frame has one direction")
             self.direction = low
         elif low in ("mailbox", "coe", "sdo"):
             self.kinds.add(low)
         elif "!=" in low or "=" in low:
             op = "!=" if "!=" in low else "="
             name, _, value = low.partition(op)
-            if name not in ("adp", "ado", "lad", "idx", "wkc"):
+            if name not in FIELD_MAX:
                 raise UsageError(f"unknown filter field {name!r} (adp, ado, lad, idx, wkc)")
             try:
-                self.fields.append((name, op, int(value, 0)))
+                number = int(value, 0)
             except ValueError as e:
                 raise UsageError(f"bad number in filter term {term!r}") from e
+            if not 0 <= number <= FIELD_MAX[name]:
+                raise UsageError(f"filter term {term!r}: {name} is 0..0x{FIELD_MAX[name]:X}")
+            self.fields.append((name, op, number))
         else:
             names = {n.upper() for n in low.split("|")}
             known = {c.name for c in Command}

@@ -293,8 +293,10 @@ def list_cmd(
         str | None,
         typer.Option(
             "--filter",
-            help="Terms (all must hold): mnemonics (LRW, fprd|fpwr), adp=N, ado=N, lad=N, "
-            "idx=N, wkc=N, wkc!=N, mailbox, coe, sdo, out, ret.",
+            help="Terms, all of which must hold: commands (LRW; several, as fprd|fpwr or "
+            "fprd fpwr: any of them), adp=N, ado=N (0..0xFFFF), lad=N (0..0xFFFFFFFF), "
+            "idx=N (0..0xFF), wkc=N, wkc!=N (0..0xFFFF), mailbox, coe, sdo, and one "
+            "direction: out or ret.",
         ),
     ] = None,
     fmt: FormatOption = OutputFormat.human,

@@ -439,7 +439,7 @@ def check_cmd(
     file: Annotated[
         Path,
         typer.Argument(
-            help="YAML/JSON file of writes and expected reads (docs/sdo-check.md).",
+            help="YAML/JSON file of writes and expected reads (docs/sdo.md).",
             show_default=False,
         ),
     ],

@@ -24,6 +24,7 @@ from lolacli.eni.model import (
     Variable,
 )
 from lolacli.text import object_entry, station
+from lolacli.wire.al import AlState
 from lolacli.wire.commands import AUTO_INCREMENT, BROADCAST, CONFIGURED, mnemonic
 
 INSPECT_SCHEMA = "lolacli.eni/1"
@@ -47,6 +48,13 @@ def _hex(value: int | None, digits: int = 4) -> str | None:
     return None if value is None else f"0x{value:0{digits}X}"
 
 
+def ordered_states(states: tuple[str, ...]) -> list[str]:
+    """The states a datagram is sent in, a set: each once, in the state machine's order
+    (INIT, PREOP, BOOT, SAFEOP, OP; a name outside it last), whatever order the ENI lists
+    them in, so the same set is written (and compared) the same way everywhere."""
+    return sorted(set(states), key=lambda s: (AlState[s] if s in AlState.__members__ else 99, s))
+
+
 def datagram_dict(c: CyclicCommand) -> dict[str, Any]:
     return {
         "cmd": mnemonic(c.cmd),
@@ -57,7 +65,7 @@ def datagram_dict(c: CyclicCommand) -> dict[str, Any]:
         "expected_wkc": c.expected_wkc,
         "input_offset_bytes": c.input_offset_bytes,
         "output_offset_bytes": c.output_offset_bytes,
-        "states": list(c.states),
+        "states": ordered_states(c.states),
     }
 
 

@@ -44,6 +44,7 @@ switch, each side within its limit - the switch records say by how much.
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -81,24 +82,53 @@ def _reach(v: float, vs: float, ve: float, a: float, d: float, j: float) -> floa
                   + (v + ve) * _ramp_time(abs(v - ve), d, j))
 
 
+#: regula-falsi steps in a row that may fail to halve the bracket before one bisects it
+_SLOW_STEPS = 3
+
+
+def _order(x: float) -> int:
+    """``x`` as an integer in the order of the doubles (0.0 and -0.0 both 0): the midpoint
+    of two of these halves the doubles between them, whatever their magnitudes."""
+    bits: int = struct.unpack("<q", struct.pack("<d", x))[0]
+    return bits if bits >= 0 else -(bits & 0x7FFF_FFFF_FFFF_FFFF)
+
+
+def _double(k: int) -> float:
+    bits = k if k >= 0 else (-k) | -0x8000_0000_0000_0000
+    value: float = struct.unpack("<d", struct.pack("<q", bits))[0]
+    return value
+
+
 def _root(target: float, lo: float, hi: float, vs: float, ve: float, a: float, d: float,
           j: float) -> float:
     """v in [lo, hi] with _reach(v) == target, given _reach(lo) <= target <= _reach(hi)
-    (Illinois regula falsi: a handful of evaluations, bracketed so it cannot diverge)."""
+    (Illinois regula falsi: a handful of evaluations, bracketed so it cannot diverge).
+
+    Safeguarded: after a few steps in a row that do not halve the doubles left in the
+    bracket, one does (their midpoint in :func:`_order`), so a root many decades below
+    the bracket's width (a tiny distance: v ~ distance^(2/3) on [0, vmax]) is found in
+    some 70 steps, not left at the bracket's middle, and the bracket is closed relative
+    to the root's own magnitude, not the bracket's first width."""
     flo = _reach(lo, vs, ve, a, d, j) - target
     fhi = _reach(hi, vs, ve, a, d, j) - target
     if flo >= 0.0:
         return lo
     if fhi <= 0.0:
         return hi
-    side = 0
-    scale = abs(hi - lo)
-    for _ in range(200):
+    side = slow = 0
+    left = _order(hi) - _order(lo)  # doubles in the bracket
+    for _ in range(400):
         x = (lo * fhi - hi * flo) / (fhi - flo)
-        if not lo < x < hi:
-            x = 0.5 * (lo + hi)
+        width = _order(hi) - _order(lo)
+        if width <= 1:
+            break
+        slow = slow + 1 if 2 * width > left else 0
+        if not lo < x < hi or slow >= _SLOW_STEPS:  # the last steps did not halve it
+            x = _double((_order(lo) + _order(hi)) // 2)
+            slow = 0
+        left = width
         fx = _reach(x, vs, ve, a, d, j) - target
-        if fx == 0.0 or hi - lo <= 1e-15 * scale:
+        if fx == 0.0:
             return x
         if fx < 0.0:
             lo, flo = x, fx
@@ -110,7 +140,7 @@ def _root(target: float, lo: float, hi: float, vs: float, ve: float, a: float, d
             if side == 1:
                 flo *= 0.5
             side = 1
-        if hi - lo <= 4e-16 * max(abs(lo), abs(hi), scale):
+        if hi - lo <= 4e-16 * max(abs(lo), abs(hi)):
             break
     return 0.5 * (lo + hi)
 

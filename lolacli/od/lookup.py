@@ -51,6 +51,7 @@ from typing import Any, Protocol
 from lolacli.errors import WireError
 from lolacli.od import OdEntry, OdObject
 from lolacli.od.cia301 import standard_name, standard_object, standard_type
+from lolacli.text import plural
 from lolacli.wire.datatypes import (
     DataType,
     Value,
@@ -208,7 +209,7 @@ def guess_type(raw: bytes) -> DataType:
 
 def guess_note(index: int, subindex: int, guess: int, raw: bytes) -> str:
     """What the guess says on stderr, once."""
-    count = f"{len(raw)} byte" + ("" if len(raw) == 1 else "s")
+    count = plural(len(raw), "byte")
     what = f"its {count}" if guess != DataType.VISIBLE_STRING else f"its {count} of text"
     return (
         f"0x{index:04X}:{subindex:02X}: no dictionary, SDO Information or CiA 301 object "

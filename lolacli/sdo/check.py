@@ -1,4 +1,4 @@
-"""``sdo check FILE``: writes to make, then reads with expected values (docs/sdo-check.md).
+"""``sdo check FILE``: writes to make, then reads with expected values (docs/sdo.md).
 
 The file is YAML or JSON (JSON is YAML here)::
 
@@ -276,10 +276,13 @@ class _Validator:
                 raise self.fail(f"{where}: {value_key}: {exc}", at(value_key)) from None
         tolerance = entry.get("tolerance")
         if tolerance is not None and (
-            isinstance(tolerance, bool) or not isinstance(tolerance, int | float) or tolerance < 0
+            isinstance(tolerance, bool)
+            or not isinstance(tolerance, int | float)
+            or not math.isfinite(tolerance)  # NaN fails every comparison, inf passes them all
+            or tolerance < 0
         ):
             raise self.fail(
-                f"{where}: tolerance: {tolerance!r} is not a number >= 0", at("tolerance")
+                f"{where}: tolerance: {tolerance!r} is not a finite number >= 0", at("tolerance")
             )
         return CheckItem(
             key[:-1],

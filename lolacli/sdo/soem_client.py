@@ -18,6 +18,7 @@ from lolacli.errors import TransportError, UsageError
 from lolacli.od import Dictionary, from_sdo_info
 from lolacli.sdo.address import SlaveRef, resolve_ref
 from lolacli.sdo.client import abort_error
+from lolacli.text import plural
 
 FRAME_TIMEOUT_US = 20_000
 #: SOEM's wait for the broadcast that counts the slaves (its default: 20 ms).
@@ -79,7 +80,7 @@ class SoemBus:
         if not 1 <= position <= len(self.master.slaves):
             raise UsageError(
                 f"no slave at position {position} on {self.iface} "
-                f"({len(self.master.slaves)} slaves)"
+                f"({plural(len(self.master.slaves), 'slave')})"
             )
         return SoemClient(self, position, label)
 

@@ -24,6 +24,7 @@ import struct
 from enum import IntEnum
 
 from lolacli.errors import WireError
+from lolacli.text import plural
 
 Value = int | float | bool | str | bytes
 
@@ -171,7 +172,9 @@ def encode_value(data_type: int, value: Value) -> bytes:
     if isinstance(value, bytes | bytearray):
         size = size_bytes(data_type)
         if size is not None and len(value) != size:
-            raise ValueError(f"{len(value)} bytes given for {type_name(data_type)} ({size} bytes)")
+            raise ValueError(
+                f"{type_name(data_type)} is {plural(size, 'byte')}, not {len(value)} as given"
+            )
         return bytes(value)
     if data_type == DataType.BOOLEAN:
         if value not in (0, 1):  # True/False compare equal to 1/0
@@ -233,7 +236,7 @@ def decode_value(data_type: int, raw: bytes) -> Value:
     """
     size = size_bytes(data_type)
     if size is not None and len(raw) != size:
-        raise WireError(f"{len(raw)} bytes do not fit {type_name(data_type)} ({size} bytes)")
+        raise WireError(f"{type_name(data_type)} is {plural(size, 'byte')}, not {len(raw)}")
     if data_type == DataType.BOOLEAN:
         return raw[0] != 0
     if data_type in _SIGNED:
@@ -250,7 +253,7 @@ def decode_value(data_type: int, raw: bytes) -> Value:
     if data_type == DataType.UNICODE_STRING:
         if len(raw) % 2:
             raise WireError(
-                f"UNICODE_STRING of {len(raw)} bytes (not a whole number of UTF-16 units)"
+                f"UNICODE_STRING of {plural(len(raw), 'byte')} (not a whole number of UTF-16 units)"
             )
         return raw.decode("utf-16-le", "replace").rstrip("\x00")
     if data_type in _OCTETS:

@@ -141,6 +141,46 @@ def test_list_bad_filter_is_usage_error(cli, corpus):
     assert code == 2 and "bogus" in err
 
 
+@pytest.mark.parametrize(
+    ("expr", "said"),
+    [
+        ("adp=-1", "adp is 0..0xFFFF"),
+        ("adp=0x10000", "adp is 0..0xFFFF"),
+        ("ado=65536", "ado is 0..0xFFFF"),
+        ("idx=999999999999999999999", "idx is 0..0xFF"),
+        ("idx=0x100", "idx is 0..0xFF"),
+        ("lad=0x100000000", "lad is 0..0xFFFFFFFF"),
+        ("wkc!=-1", "wkc is 0..0xFFFF"),
+        ("out ret", "out and ret contradict"),
+        ("fprd, ret out", "ret and out contradict"),
+    ],
+)
+def test_list_filter_out_of_range_or_contradicting_is_usage_error(cli, corpus, expr, said):
+    code, out, err = cli("capture", "list", PCAP / "ethercrab__replay-sdo-error.pcapng",
+                         "--filter", expr)
+    assert (code, out) == (2, "") and err.count("\n") == 1 and said in err, err
+
+
+def test_list_filter_commands_are_any_of_them_the_rest_all(cli, corpus):
+    """Several commands, joined by | or as terms of their own, list a datagram of any of
+    them; every other term must hold as well (the help says so)."""
+    path = PCAP / "ethercrab__replay-sdo-error.pcapng"
+
+    def listed(expr: str) -> list[tuple[int, str, str]]:
+        code, out, err = cli("capture", "list", path, "--filter", expr, "-f", "json")
+        assert code == 0, err
+        return [(f["number"], f["direction"], d["cmd"])
+                for f in json.loads(out)["frames"] for d in f["datagrams"]]
+
+    one, other = listed("brd"), listed("fprd")
+    assert one and other
+    assert sorted(listed("brd fprd")) == sorted(listed("brd|fprd")) == sorted(one + other)
+    assert listed("brd fprd ret") == [x for x in listed("brd fprd") if x[1] == "ret"]
+    assert listed("ret ret") == listed("ret")
+    code, out, _ = cli("capture", "list", "--help")
+    assert "any of them" in " ".join(out.split()) and "one direction" in " ".join(out.split())
+
+
 @pytest.mark.parametrize("name", ["ethercrab__twincat-scan-boxes.pcapng",
                                   "ethercrab__soem-sdinfo-no-slaves.pcapng",
                                   "ethercrab__replay-issue-255.pcapng"])

@@ -173,3 +173,32 @@ def test_a_changed_slave_says_each_field(tmp_path):
     lines = [line for c in changes for line in c.describe()]
     assert any("revision 0x00010420 in A, 0x00010421 in B" in line for line in lines), lines
     assert any("auto-increment address 0xFFFF in A, 0xFFFE in B" in line for line in lines)
+
+
+def test_states_are_a_set_in_state_machine_order(cli, tmp_path):
+    """The <State>s a cyclic command is sent in are a set: listed in another order they
+    are the same ENI; a real difference, and inspect, write them in the state machine's
+    order (rocos eni1 lists SAFEOP, PREOP, OP)."""
+    files = corpus_files("eni", "rocos-ethercat__eni1.xml")
+    if not files:
+        pytest.skip("corpus not found")
+    a = files[0]
+    text = a.read_text()
+    listed = "<State>SAFEOP</State>\n\t\t\t\t\t<State>PREOP</State>"
+    assert text.count(listed) == 2
+    swapped = text.replace(listed, "<State>PREOP</State>\n\t\t\t\t\t<State>SAFEOP</State>")
+    code, report = diff_json(cli, a, write(tmp_path, "swapped.xml", swapped))
+    assert (code, report["changes"]) == (0, [])
+
+    no_op = text.replace(listed + "\n\t\t\t\t\t<State>OP</State>", listed, 1)
+    code, out, _ = cli("eni", "diff", str(a), str(write(tmp_path, "no-op.xml", no_op)))
+    assert code == 1
+    assert "states PREOP, SAFEOP, OP in A, PREOP, SAFEOP in B" in " ".join(out.split())
+
+    code, out, _ = cli("eni", "inspect", str(a))
+    assert code == 0
+    rows = [line for line in out.splitlines() if line.startswith(("LRD", "LWR"))]
+    assert len(rows) == 2 and all(row.rstrip().endswith("  PREOP, SAFEOP, OP") for row in rows)
+    code, out, _ = cli("eni", "inspect", str(a), "-f", "json")
+    datagrams = [d for f in json.loads(out)["cyclic_frames"] for d in f["datagrams"]]
+    assert [d["states"] for d in datagrams] == [["PREOP", "SAFEOP", "OP"]] * 2

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lolacli.errors import UsageError
 from lolacli.motion.profile import min_jerk
@@ -284,3 +286,43 @@ def test_growth_search_skips_hopeless_candidates(monkeypatch: pytest.MonkeyPatch
             2.7161942478785157, 1.3415017171851702, 0.001)
     check_profile(*case)
     assert len(calls) < 500
+
+
+# --------------------------------------------------------------------- tiny distances
+
+
+def integrated_end(p) -> float:  # noqa: ANN001
+    """Where the profile's own phases end (the last phase integrated from its start), not
+    the end position the plan states."""
+    d, v, a, j = p.durations[6], p.v0[6], p.a0[6], p.jerks[6]
+    return p.p0[6] + d * (v + d * (a / 2.0 + d * j / 6.0))
+
+
+tiny = st.floats(1e-300, 1e-3)
+limit = st.floats(1e-3, 1e3)
+
+
+@settings(max_examples=200, deadline=None)
+@given(tiny, st.floats(2.0, 1e6), limit, limit, limit)
+def test_a_tiny_distance_is_planned_as_such(d: float, k: float, vmax: float, amax: float,
+                                            jmax: float) -> None:
+    """The peak velocity of a tiny move is many decades below vmax (~d^(2/3)): the profile
+    still covers exactly the distance, and its duration shrinks with it (~d^(1/3))."""
+    d *= vmax
+    p, longer = plan(d, vmax, amax, jmax), plan(d * k, vmax, amax, jmax)
+    assert p.end_position == d
+    assert integrated_end(p) == pytest.approx(d, rel=1e-9, abs=0)
+    assert integrated_end(longer) == pytest.approx(d * k, rel=1e-9, abs=0)
+    assert 0.0 < p.duration < longer.duration
+
+
+def test_cli_tiny_distance(cli) -> None:
+    """1e-200 m at 1 m/s, 1 m/s², 1 m/s³: a triangular profile of 4 (1e-200 / 2)^(1/3) s,
+    not a ~0.7 m move labelled 1e-200."""
+    code, out, err = cli("traj", "plan", "--distance", "1e-200", "--vmax", "1", "--amax",
+                         "1", "--jmax", "1", "-f", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["duration_s"] == pytest.approx(4 * (0.5e-200) ** (1 / 3), rel=1e-9, abs=0)
+    assert doc["end_position"] == 1e-200
+    assert doc["peak_velocity"] == pytest.approx((0.5e-200) ** (2 / 3), rel=1e-9, abs=0)

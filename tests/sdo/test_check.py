@@ -184,7 +184,25 @@ def test_bad_file_is_exit_3_before_any_bus(cli, tmp_path) -> None:
             "bad-key-in-item.yaml",
             "slave: 1\nreads:\n  - object: '0x1000'\n    expect: 1\n    tolerance: -3\n",
             5,
-            "reads[0]: tolerance: -3 is not a number >= 0",
+            "reads[0]: tolerance: -3 is not a finite number >= 0",
+        ),
+        (
+            "tolerance-nan.yaml",
+            "slave: 1\nreads:\n  - object: '0x1000'\n    expect: 1\n    tolerance: .nan\n",
+            5,
+            "reads[0]: tolerance: nan is not a finite number >= 0",
+        ),
+        (
+            "tolerance-inf.yaml",
+            "slave: 1\nreads:\n  - object: '0x1000'\n    expect: 1\n    tolerance: .inf\n",
+            5,
+            "reads[0]: tolerance: inf is not a finite number >= 0",
+        ),
+        (
+            "tolerance-nan.json",
+            '{"slave": 1, "reads": [{"object": "0x1000", "expect": 1,\n  "tolerance": NaN}]}\n',
+            2,
+            "reads[0]: tolerance: 'NaN' is not a finite number >= 0",  # YAML: a string
         ),
         (
             "trailing-comma.json",

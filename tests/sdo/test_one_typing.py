@@ -303,3 +303,27 @@ def _check_file(tmp: Path, obj: str, value: str) -> str:
     }
     path.write_text(json.dumps(checks, ensure_ascii=False), encoding="utf-8")
     return str(path)
+
+
+@pytest.mark.parametrize(
+    ("obj", "given", "said"),
+    [
+        ("0x1008", "u8", "UNSIGNED8 is 1 byte, not 137"),  # the drive's 137-byte name
+        ("0x6061", "u16", "UNSIGNED16 is 2 bytes, not 1"),  # the INTEGER8 mode display
+        ("0x6061", "unicode_string", "UNICODE_STRING of 1 byte (not a whole number"),
+    ],
+)
+def test_a_type_that_does_not_fit_says_its_byte_counts(obj, given, said) -> None:
+    """Bytes read that do not fit ``--type`` are shown as octets, the note counting the
+    bytes in agreement with their number ("1 byte", never "1 bytes")."""
+    code, out, err = _run("sdo", "read", "1", obj, "-t", given)
+    assert code == 0 and "OCTET_STRING = " in out
+    assert said in " ".join(err.split()) and "1 bytes" not in err
+
+
+def test_a_guess_from_one_byte_says_one_byte() -> None:
+    from lolacli.od.lookup import guess_note
+    from lolacli.wire.datatypes import DataType
+
+    note = guess_note(0x2000, 0, DataType.UNSIGNED8, b"\x05")
+    assert "typed as UNSIGNED8 from its 1 byte;" in note

@@ -113,8 +113,12 @@ def test_sizes_and_bits() -> None:
 
 
 def test_wrong_lengths_and_values() -> None:
-    with pytest.raises(WireError, match="3 bytes do not fit UNSIGNED32"):
+    with pytest.raises(WireError, match="UNSIGNED32 is 4 bytes, not 3"):
         decode_value(DataType.UNSIGNED32, b"\x01\x02\x03")
+    with pytest.raises(WireError, match="UNSIGNED8 is 1 byte, not 2"):
+        decode_value(DataType.UNSIGNED8, b"\x01\x02")
+    with pytest.raises(ValueError, match="UNSIGNED16 is 2 bytes, not 1 as given"):
+        encode_value(DataType.UNSIGNED16, b"\x01")
     with pytest.raises(ValueError, match="not an integer"):
         encode_value(DataType.UNSIGNED16, 1.5)
     with pytest.raises(ValueError, match="latin-1"):
