@@ -84,7 +84,7 @@ def _say(result: Any, verb: str, path: Path) -> None:
 
     from lolacli.text import number, plural
 
-    size = number(result.bytes, "bytes", 0)
+    size = plural(result.bytes, "byte")
     rate = result.bytes / result.seconds / 1024 if result.seconds > 0 else 0.0
     how = [number(result.seconds, "s", 2), number(rate, "KiB/s", 1)]
     if result.packets is not None:

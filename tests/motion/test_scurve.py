@@ -70,6 +70,8 @@ def check_profile(d, vmax, amax, jmax, vs, ve, cycle):  # noqa: ANN001, ANN201
         assert abs(j) <= jmax * (1 + tol)
     scale = max(abs(d), vmax * p.duration, 1e-300)
     assert abs(s["position"][-1] - d) <= 1e-9 * scale
+    # (the sampled end is the stated one: where the phases themselves end is checked too)
+    assert abs(integrated_end(p) - d) <= 1e-9 * scale
     assert abs(s["velocity"][-1] - ve) <= 1e-9 * vmax
     # and approached, not jumped to: the last cycle before the end lands next to it
     if cycle is not None and len(s["t"]) > 2:
