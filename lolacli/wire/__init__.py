@@ -26,28 +26,6 @@ if TYPE_CHECKING:
         make_frame,
     )
 
-#: each public name and the module that defines it
-_MODULES: dict[str, str] = {
-    "Command": "commands",
-    "mnemonic": "commands",
-    **dict.fromkeys(
-        (
-            "ETHERTYPE_ECAT",
-            "Datagram",
-            "EthernetHeader",
-            "Frame",
-            "decode_any",
-            "decode_datagrams",
-            "decode_ecat_payload",
-            "decode_frame",
-            "encode_frame",
-            "frame_bytes_on_wire",
-            "make_frame",
-        ),
-        "frame",
-    ),
-}
-
 __all__ = [
     "ETHERTYPE_ECAT",
     "Command",
@@ -63,6 +41,11 @@ __all__ = [
     "make_frame",
     "mnemonic",
 ]
+
+#: each public name and the module that defines it
+_MODULES: dict[str, str] = {
+    name: "commands" if name in ("Command", "mnemonic") else "frame" for name in __all__
+}
 
 
 def __getattr__(name: str) -> Any:
