@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from lolacli.cli.plain import Table, fill, keep, write
 from lolacli.text import number, plural, station
 
 SDO_ROWS = 50
@@ -28,24 +29,14 @@ class _Out:
 
     def say(self, text: str) -> None:
         """A line of prose, wrapped between words."""
-        from lolacli.cli.plain import fill
-
         self.lines += fill(text, self.width)
 
-    def table(self, table: Any) -> None:
+    def table(self, table: Table) -> None:
         """A table, after a blank line."""
         self.lines += ["", *table.lines(self.width)]
 
 
-def _table(title: str, *, header: bool = True) -> Any:
-    from lolacli.cli.plain import Table
-
-    return Table(title, header=header)
-
-
 def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
-    from lolacli.cli.plain import write
-
     out = _Out()
     out.lines.append(d["file"])  # whole, however long
     out.say(f"{d['format']}, {number(d['time_span_us'] / 1e6, 's')}, "
@@ -63,15 +54,9 @@ def render_analysis(d: dict[str, Any], show_all: bool = False) -> None:
     write(out.lines)
 
 
-def _keep(text: str) -> str:
-    from lolacli.cli.plain import keep
-
-    return keep(text)
-
-
 def _station(address: int) -> str:
     """A station address, never broken across lines."""
-    return _keep(station(address))
+    return keep(station(address))
 
 
 def _verdict(out: _Out, d: dict[str, Any]) -> None:
@@ -89,18 +74,18 @@ def _frames(out: _Out, d: dict[str, Any]) -> None:
         ("lost", d["lost_frames"], "late", d["late_frames"]),
         ("in flight at end", d["in_flight_at_end"], "malformed", d["malformed_frames"]),
     ]
-    grid = _table("Frames", header=False)
+    grid = Table("Frames", header=False)
     for right in (False, True, False, True):
         grid.add_column(right=right)
     for a, x, b, y in rows:
         grid.add_row(a, f"{x:,}", b, f"{y:,}")
     out.table(grid)
     out.say(f"A frame unanswered for {number(d['timeout_us'], 'µs', 2)} "
-                  f"({d['timeout_source']}) is lost, or late when its answer comes later.")
+            f"({d['timeout_source']}) is lost, or late when its answer comes later.")
 
 
 def _timing(out: _Out, d: dict[str, Any]) -> None:
-    table = _table(f"Timing (µs), cyclic stream: {d['cyclic_stream']}")
+    table = Table(f"Timing (µs), cyclic stream: {d['cyclic_stream']}")
     table.add_column("")
     for col in _STATS:
         table.add_column(col, right=True)
@@ -137,7 +122,7 @@ def _datagram(g: dict[str, Any]) -> str:
         where = f"0x{g['adp']:04X}:0x{g['ado']:04X}"
     else:
         where = f"0x{g['ado']:04X}"
-    return f"{g['cmd']} {where} {_keep(str(g['length_bytes']) + ' B')}"
+    return f"{g['cmd']} {where} {keep(str(g['length_bytes']) + ' B')}"
 
 
 def _wkc(out: _Out, d: dict[str, Any]) -> None:
@@ -146,9 +131,9 @@ def _wkc(out: _Out, d: dict[str, Any]) -> None:
                f"{plural(d['wkc_mismatches'], 'mismatch', 'mismatches')}")
     if not w["datagrams"]:
         out.say(f"WKC (reference: {d['wkc_reference']}; {checked}): no cyclic "
-                      "datagram came back")
+                "datagram came back")
         return
-    table = _table(f"WKC per cyclic datagram (reference: {d['wkc_reference']}; {checked})")
+    table = Table(f"WKC per cyclic datagram (reference: {d['wkc_reference']}; {checked})")
     for col, right in (("datagram", False), ("expected", True), ("from", False),
                        ("returns", True), ("bad", True), ("seen (WKC ×count)", False)):
         table.add_column(col, right=right)
@@ -193,7 +178,7 @@ def _sdo(out: _Out, d: dict[str, Any], show_all: bool) -> None:
     if not transactions:
         out.say(f"SDO: none ({plural(d['mailbox']['messages'], 'mailbox message')})")
         return
-    table = _table(f"SDO transactions ({d['sdo_transactions']}, "
+    table = Table(f"SDO transactions ({d['sdo_transactions']}, "
                    f"{plural(len(aborts), 'abort')})")
     for col in ("slave", "object", "kind", "transfer", "bytes", "status", "frames", "µs"):
         table.add_column(col, right=col in ("bytes", "µs"))
@@ -212,5 +197,5 @@ def _sdo(out: _Out, d: dict[str, Any], show_all: bool) -> None:
     if len(shown) < len(transactions):
         out.say(f"… {len(transactions) - len(shown)} more, --all to show")
     for a in aborts:
-        out.say(f"SDO abort: slave {station(a['slave'])} 0x{a['index']:04X}:"
-                      f"{a['subindex']:02X} {a['code_hex']} {a['text']} (frame {a['frame']})")
+        out.say(f"SDO abort: slave {_station(a['slave'])} 0x{a['index']:04X}:"
+                f"{a['subindex']:02X} {a['code_hex']} {a['text']} (frame {a['frame']})")

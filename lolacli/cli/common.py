@@ -44,13 +44,12 @@ def json_text(data: Any, *, indent: bool = True) -> str:
     import orjson
 
     try:
-        text = orjson.dumps(data, default=_plain_number, option=orjson.OPT_NON_STR_KEYS
+        return orjson.dumps(data, default=_plain_number, option=orjson.OPT_NON_STR_KEYS
                             | orjson.OPT_SERIALIZE_NUMPY
                             | (orjson.OPT_INDENT_2 if indent else 0)).decode()
     except orjson.JSONEncodeError:
         return json.dumps(_valid(data), indent=2 if indent else None, ensure_ascii=False,
                           default=_plain_number)
-    return text
 
 
 def _plain_number(value: Any) -> Any:

@@ -5,7 +5,8 @@ apart, names wrapped between words, numbers never cut), without rich.
 ``capture analyze`` renders its report with these: importing and running rich's layout
 cost about 50 ms of a 180 ms run on a small capture, for output with no colour. The
 width rule is the one of :mod:`lolacli.cli.common` (the terminal, ``$COLUMNS``, else 80
-columns); a table that cannot fit is printed whole, wider, never cropped. On a terminal
+columns); a table that cannot fit is laid out as at 80 columns, or printed whole,
+wider, when it cannot fit those either, never cropped. On a terminal
 titles are italic and headers bold, as rich prints them (``NO_COLOR`` turns that off).
 """
 
